@@ -1,0 +1,321 @@
+"""Signal-flow graphs: wiring typed ports, exposing ports, nesting graphs as blocks.
+
+Validation happens at wiring time (unknown port, direction, unit, kind or shape mismatch, two
+sources for one input) and at flatten/compile time (unconnected required input, algebraic loop).
+Every error names the blocks and ports involved.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared
+
+
+class WiringError(ModelError):
+    """A connection is invalid (unknown port, wrong direction, unit, kind or shape mismatch)."""
+
+
+class UnconnectedInputError(ModelError):
+    """A required input port has no source."""
+
+
+class AlgebraicLoopError(ModelError):
+    """Direct-feedthrough ports form a cycle; ``cycle`` lists the ports along it."""
+
+    def __init__(self, cycle: list[str]) -> None:
+        self.cycle = cycle
+        super().__init__("algebraic loop: " + " -> ".join(cycle))
+
+
+@dataclass(frozen=True)
+class PortRef:
+    """A port of a block inside a graph, written ``"block.port"``."""
+
+    block: str
+    port: str
+
+    def __str__(self) -> str:
+        return f"{self.block}.{self.port}" if self.block else self.port
+
+
+def parse_ref(ref: str | PortRef) -> PortRef:
+    if isinstance(ref, PortRef):
+        return ref
+    if not isinstance(ref, str) or "." not in ref:
+        raise WiringError(f"port reference {ref!r} must be written 'block.port'")
+    block, port = ref.rsplit(".", 1)
+    return PortRef(block, port)
+
+
+Node = Block | CoSimBlock
+
+
+class Graph(_Declared):
+    """A block diagram. It is itself a block: add it to another graph to nest it.
+
+    >>> g = Graph("net")
+    >>> g.add(VanDerPolNeuron("z1"))           # doctest: +SKIP
+    >>> g.connect("z1.x", "c.x1")               # doctest: +SKIP
+    >>> g.expose_output("x1", "z1.x")           # doctest: +SKIP
+    """
+
+    def __init__(self, name: str, description: str = "") -> None:
+        super().__init__(name)
+        self.description = description
+        self.blocks: dict[str, Node | Graph] = {}
+        self.connections: dict[PortRef, PortRef] = {}  # destination input -> source output
+        self.input_map: dict[str, list[PortRef]] = {}  # graph input -> internal inputs it drives
+        self.output_map: dict[str, PortRef] = {}  # graph output -> internal output
+
+    # -- building ---------------------------------------------------------------------------
+    def add(self, block: Node | Graph) -> Any:
+        """Add a block (or a graph) and return it."""
+        if not isinstance(block, (Block, CoSimBlock, Graph)):
+            raise WiringError(f"graph {self.name!r}: can only add blocks or graphs, got {type(block).__name__}")
+        if block.name in self.blocks:
+            raise WiringError(f"graph {self.name!r} already has a block named {block.name!r}")
+        self.blocks[block.name] = block
+        return block
+
+    def block(self, name: str) -> Node | Graph:
+        try:
+            return self.blocks[name]
+        except KeyError:
+            raise WiringError(
+                f"graph {self.name!r} has no block {name!r} (blocks: {', '.join(self.blocks) or 'none'})"
+            ) from None
+
+    def _port(self, ref: PortRef, direction: str) -> Port:
+        blk = self.block(ref.block)
+        table = blk.outputs if direction == "out" else blk.inputs
+        if ref.port not in table:
+            other = blk.inputs if direction == "out" else blk.outputs
+            if ref.port in other:
+                kind = "an input" if direction == "out" else "an output"
+                raise WiringError(f"graph {self.name!r}: {ref} is {kind}, expected {'an output' if direction == 'out' else 'an input'}")
+            raise WiringError(
+                f"graph {self.name!r}: block {ref.block!r} has no {'output' if direction == 'out' else 'input'} "
+                f"{ref.port!r} (has: {', '.join(table) or 'none'})"
+            )
+        return table[ref.port]
+
+    def connect(self, source: str | PortRef, destination: str | PortRef) -> None:
+        """Wire output ``source`` ("block.port") to input ``destination``."""
+        src, dst = parse_ref(source), parse_ref(destination)
+        sp, dp = self._port(src, "out"), self._port(dst, "in")
+        check_compatible(sp, dp, str(src), str(dst))
+        if dst in self.connections:
+            raise WiringError(f"graph {self.name!r}: input {dst} has two sources: {self.connections[dst]} and {src}")
+        for gin, targets in self.input_map.items():
+            if dst in targets:
+                raise WiringError(f"graph {self.name!r}: input {dst} has two sources: graph input {gin!r} and {src}")
+        self.connections[dst] = src
+
+    def expose_input(self, name: str, *targets: str | PortRef, unit: str | None = None,
+                     description: str = "", default: float | None = None) -> Port:
+        """Make graph input ``name`` that drives the given internal inputs."""
+        refs = [parse_ref(t) for t in targets]
+        if not refs:
+            raise WiringError(f"graph {self.name!r}: input {name!r} drives no port")
+        ports = [self._port(r, "in") for r in refs]
+        first = ports[0]
+        for r, p in zip(refs, ports, strict=True):
+            check_compatible(first, p, f"{self.name}.{name}", str(r))
+            if r in self.connections:
+                raise WiringError(f"graph {self.name!r}: input {r} has two sources: {self.connections[r]} and graph input {name!r}")
+        port = self.add_input(name, first.shape, unit or first.unit, first.kind,
+                              description or first.description, default)
+        self.input_map[name] = refs
+        return port
+
+    def expose_output(self, name: str, source: str | PortRef, description: str = "") -> Port:
+        """Make graph output ``name`` from internal output ``source``."""
+        ref = parse_ref(source)
+        sp = self._port(ref, "out")
+        port = self.add_output(name, sp.shape, sp.unit, sp.kind, description or sp.description)
+        self.output_map[name] = ref
+        return port
+
+    # -- parameters ---------------------------------------------------------------------------
+    def set(self, **values: Any) -> Graph:  # type: ignore[override]
+        """Set parameters by hierarchical path: ``g.set(**{"z1.eps": 0.2})``; ``*`` globs allowed."""
+        for path, value in values.items():
+            self.set_param(path, value)
+        return self
+
+    def set_param(self, path: str, value: Any) -> None:
+        """Set one parameter by ``block.sub.param`` path; a glob (``*.eps``) sets every match."""
+        matches = [p for p in self.parameter_paths() if fnmatch.fnmatchcase(p, path)]
+        if not matches:
+            raise ParameterError(f"graph {self.name!r} has no parameter matching {path!r}")
+        for full in matches:
+            owner_path, pname = full.rsplit(".", 1)
+            self.find(owner_path).set(**{pname: value})
+
+    def parameter_paths(self) -> list[str]:
+        """All parameter paths ``block.param`` (nested graphs: ``sub.block.param``)."""
+        out: list[str] = []
+        for bname, blk in self.blocks.items():
+            if isinstance(blk, Graph):
+                out += [f"{bname}.{p}" for p in blk.parameter_paths()]
+            else:
+                out += [f"{bname}.{p}" for p in blk.parameters]
+        return out
+
+    def find(self, path: str) -> Node | Graph:
+        """The block at hierarchical path ``a.b.c``."""
+        head, _, rest = path.partition(".")
+        blk = self.block(head)
+        if not rest:
+            return blk
+        if not isinstance(blk, Graph):
+            raise WiringError(f"{self.name}: {head!r} is not a graph, cannot look up {rest!r} in it")
+        return blk.find(rest)
+
+    def get_param(self, path: str) -> float:
+        owner_path, pname = path.rsplit(".", 1)
+        owner = self.find(owner_path)
+        if pname not in owner.parameters:
+            raise ParameterError(f"block {owner_path!r} has no parameter {pname!r}")
+        return owner.values[pname]
+
+    # -- flattening -------------------------------------------------------------------------
+    def flatten(self) -> FlatGraph:
+        """Inline nested graphs: leaf blocks named by path, connections between leaf ports."""
+        flat = FlatGraph(self.name)
+        self._flatten_into(flat, prefix="")
+        flat.resolve()
+        flat.check_connected()
+        return flat
+
+    def _flatten_into(self, flat: FlatGraph, prefix: str) -> None:
+        for bname, blk in self.blocks.items():
+            path = prefix + bname
+            if isinstance(blk, Graph):
+                blk._flatten_into(flat, path + ".")
+            else:
+                flat.blocks[path] = blk
+        # local aliases: resolve references into sub-graphs to leaf ports
+        for dst, src in self.connections.items():
+            flat.raw_edges.append((_leaf(self, dst, prefix, "in"), _leaf(self, src, prefix, "out")))
+        flat.aliases_in.update({f"{prefix}{n}": [_leaf(self, r, prefix, "in") for r in refs]
+                                for n, refs in self.input_map.items()})
+        flat.aliases_out.update({f"{prefix}{n}": _leaf(self, r, prefix, "out") for n, r in self.output_map.items()})
+        if prefix == "":
+            flat.inputs = dict(self.inputs)
+            flat.outputs = dict(self.outputs)
+
+    def __repr__(self) -> str:
+        return f"Graph({self.name!r}, blocks={list(self.blocks)})"
+
+
+def _leaf(graph: Graph, ref: PortRef, prefix: str, direction: str) -> str:
+    """Hierarchical name of a port; for a sub-graph port a ``@`` alias resolved later."""
+    blk = graph.blocks[ref.block]
+    if isinstance(blk, Graph):
+        return f"@{prefix}{ref.block}.{ref.port}"
+    return f"{prefix}{ref.block}.{ref.port}"
+
+
+def check_compatible(src: Port, dst: Port, src_name: str, dst_name: str) -> None:
+    """Raise :class:`WiringError` if two ports cannot be connected."""
+    if src.unit != dst.unit:
+        raise WiringError(f"unit mismatch: {src_name} is [{src.unit}] but {dst_name} expects [{dst.unit}]")
+    if src.shape != dst.shape:
+        raise WiringError(f"shape mismatch: {src_name} has shape {src.shape} but {dst_name} expects {dst.shape}")
+    if src.kind != dst.kind:
+        raise WiringError(f"kind mismatch: {src_name} is {src.kind} but {dst_name} expects {dst.kind}")
+
+
+class FlatGraph:
+    """A graph with nested graphs inlined: leaf blocks by path and leaf-to-leaf connections.
+
+    ``sources[dst]`` maps every connected leaf input (``"path.port"``) to either a leaf output
+    (``"path.port"``) or a graph input (``"$name"``).
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.blocks: dict[str, Node] = {}
+        self.raw_edges: list[tuple[str, str]] = []
+        self.aliases_in: dict[str, list[str]] = {}
+        self.aliases_out: dict[str, str] = {}
+        self.inputs: dict[str, Port] = {}
+        self.outputs: dict[str, Port] = {}
+        self.sources: dict[str, str] = {}
+        self.output_sources: dict[str, str] = {}
+
+    def _resolve_out(self, name: str) -> str:
+        seen = set()
+        while name.startswith("@"):
+            if name in seen:
+                raise WiringError(f"cyclic port alias {name}")
+            seen.add(name)
+            key = name[1:]
+            if key not in self.aliases_out:
+                raise WiringError(f"graph output {key} is not exposed")
+            name = self.aliases_out[key]
+        return name
+
+    def _resolve_in(self, name: str) -> list[str]:
+        if not name.startswith("@"):
+            return [name]
+        key = name[1:]
+        out: list[str] = []
+        for target in self.aliases_in.get(key, []):
+            out += self._resolve_in(target)
+        return out
+
+    def resolve(self) -> None:
+        for dst, src in self.raw_edges:
+            s = self._resolve_out(src)
+            for d in self._resolve_in(dst):
+                self.sources[d] = s
+        for name in self.inputs:
+            for d in self._resolve_in("@" + name):
+                self.sources[d] = "$" + name
+        for name in self.outputs:
+            self.output_sources[name] = self._resolve_out("@" + name)
+
+    def check_connected(self) -> None:
+        for path, blk in self.blocks.items():
+            for pname, port in blk.inputs.items():
+                key = f"{path}.{port.name}"
+                if key not in self.sources and port.default is None:
+                    raise UnconnectedInputError(
+                        f"input {key} is not connected (and has no default); "
+                        f"connect it or expose it as a graph input")
+
+    def port(self, ref: str) -> Port:
+        path, pname = ref.rsplit(".", 1)
+        return self.blocks[path].port(pname)
+
+    def equation_blocks(self) -> dict[str, Block]:
+        return {p: b for p, b in self.blocks.items() if isinstance(b, Block)}
+
+    def cosim_blocks(self) -> dict[str, CoSimBlock]:
+        return {p: b for p, b in self.blocks.items() if isinstance(b, CoSimBlock)}
+
+
+def as_graph(item: Block | CoSimBlock | Graph, expose: bool = True) -> Graph:
+    """Wrap a single block in a graph exposing all of its ports (unconnected inputs become inputs)."""
+    if isinstance(item, Graph):
+        return item
+    g = Graph(item.name)
+    g.add(item)
+    if expose:
+        for pname, port in item.inputs.items():
+            g.expose_input(pname, f"{item.name}.{pname}", default=port.default)
+        for pname in item.outputs:
+            g.expose_output(pname, f"{item.name}.{pname}")
+    return g
+
+
+def iter_leaf_ports(flat: FlatGraph) -> Iterable[tuple[str, Port]]:
+    for path, blk in flat.blocks.items():
+        for port in blk.outputs.values():
+            yield f"{path}.{port.name}", port

@@ -1,0 +1,435 @@
+"""Fixed-step simulation and co-simulation master.
+
+Without co-simulation blocks the whole horizon runs inside CasADi (``mapaccum`` over chunks of
+steps, one Python call per chunk). With co-simulation blocks the master calls the compiled step
+once per macro step through a zero-copy CasADi buffer, exchanges signals with the black boxes
+(Jacobi or Gauss-Seidel order) and steps them.
+
+A non-finite state stops the run with :class:`SimulationDiverged`, which names the first
+non-finite state and carries the results recorded up to that step (``exc.results``).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Literal
+
+import casadi as ca
+import numpy as np
+
+from components.core import Block, CoSimBlock, ModelError, ParameterError
+from .compile import CompiledModel, compile_graph
+from .graph import Graph
+from .results import Results
+
+InputValue = float | Sequence[float] | np.ndarray | Callable[[float], Any]
+
+
+class SimulationError(RuntimeError):
+    """A simulation stopped early; ``results`` holds what was recorded until then."""
+
+    def __init__(self, message: str, results: Results | None = None) -> None:
+        super().__init__(message)
+        self.results = results
+
+
+class SimulationDiverged(SimulationError):
+    """A state became NaN or infinite."""
+
+
+class CoSimulationError(SimulationError):
+    """A co-simulation block failed in ``setup``/``do_step``/``get_outputs``."""
+
+
+def jit_options() -> dict:
+    """CasADi options to JIT-compile a function with the system C compiler."""
+    return {"jit": True, "compiler": "shell", "jit_cleanup": True,
+            "jit_options": {"flags": ["-O2"], "verbose": False}}
+
+
+class Simulator:
+    """Compile a graph once and run it (repeatedly) at a fixed macro step.
+
+    ``params`` overrides parameters by path (``{"z1.eps": 0.2}``, globs allowed); ``record`` keeps
+    only the columns matching these glob patterns; ``order`` is the co-simulation order;
+    ``backend`` picks how an equation-only horizon runs: ``"native"`` (the step's C code from
+    CasADi looped in C, :mod:`harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
+    when a C compiler works). ``jit`` compiles the per-step function used by the co-simulation
+    master with the C compiler.
+    """
+
+    def __init__(self, graph: Graph | Block, dt: float = 1e-3, substeps: int = 1,
+                 params: Mapping[str, Any] | None = None, record: Sequence[str] | None = None,
+                 order: Literal["jacobi", "gauss-seidel"] = "jacobi", jit: bool = False,
+                 backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000) -> None:
+        if order not in ("jacobi", "gauss-seidel"):
+            raise ModelError(f"co-simulation order must be 'jacobi' or 'gauss-seidel', got {order!r}")
+        if isinstance(graph, Graph) and params:
+            for path, value in params.items():  # glob expansion + validation on the declaration
+                graph.set_param(path, value)
+        elif params:
+            graph.set(**params)
+        self.model: CompiledModel = compile_graph(graph, dt, substeps)
+        if backend not in ("auto", "native", "casadi"):
+            raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")
+        self.order = order
+        self.backend = backend
+        self._native_runner = None
+        self.jit = jit
+        self.chunk = max(1, int(chunk))
+        self._record_patterns = list(record) if record else None
+        self._chunk_fns: dict[int, ca.Function] = {}
+        self._step_fn = self.model.step
+        if jit:
+            args = self.model.step.sx_in()
+            self._step_fn = ca.Function("step_jit", args, self.model.step.call(args), jit_options())
+
+    @property
+    def dt(self) -> float:
+        return self.model.dt
+
+    # -- public ----------------------------------------------------------------------------------
+    def run(self, t_end: float, inputs: Mapping[str, InputValue] | None = None, t0: float = 0.0,
+            x0: Mapping[str, Any] | None = None, progress: bool = False) -> Results:
+        """Simulate from ``t0`` to ``t_end``; returns results at every macro step, ``t0..t_end``."""
+        m = self.model
+        if not (math.isfinite(t_end) and t_end > t0):
+            raise ModelError(f"t_end must be a finite time after t0={t0}, got {t_end!r}")
+        n = int(round((t_end - t0) / m.dt))
+        times = t0 + m.dt * np.arange(n + 1)
+        x, z = self._initial_states(x0)
+        p = m.p0.copy()
+        u_free = self._free_input_matrix(inputs or {}, times)
+        columns, units, picks = self._record_layout()
+        rec = _Recorder(times, columns, units)
+        cs = m.flat.cosim_blocks()
+        if cs:
+            self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
+        else:
+            self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
+        return rec.results(complete=True, message="")
+
+    # -- setup helpers ---------------------------------------------------------------------------
+    def _initial_states(self, x0: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
+        m = self.model
+        x, z = m.x0.copy(), m.z0.copy()
+        for name, value in (x0 or {}).items():
+            layout, vec = (m.states, x) if name in m.states else (m.dstates, z)
+            if name not in layout:
+                raise ParameterError(f"no state {name!r} (states: {', '.join(m.states.names()[:8])}...)")
+            slot = layout.index(name)
+            arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+            if arr.size != slot.size or not np.all(np.isfinite(arr)):
+                raise ParameterError(f"initial value of {name} must be {slot.size} finite number(s), got {value!r}")
+            vec[slot.slice] = arr
+        return x, z
+
+    def _free_input_matrix(self, inputs: Mapping[str, InputValue], times: np.ndarray) -> np.ndarray:
+        """Free graph inputs on the time grid: ``(n_free, len(times))``."""
+        m = self.model
+        rows = []
+        for name, port in m.free_inputs.items():
+            if name in inputs:
+                rows.append(_input_series(name, inputs[name], port.size, times))
+            elif port.default is not None:
+                rows.append(np.full((port.size, len(times)), port.default))
+            else:
+                raise ModelError(f"graph input {name!r} is free: give a value with inputs={{{name!r}: ...}}")
+        unknown = set(inputs) - set(m.free_inputs)
+        if unknown:
+            raise ModelError(f"unknown graph input(s) {sorted(unknown)}; free inputs: {list(m.free_inputs)}")
+        return np.vstack(rows) if rows else np.zeros((0, len(times)))
+
+    def _record_layout(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
+        """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element)."""
+        m = self.model
+        cols, units, picks = [], [], []
+        for slot in m.signals_layout.slots:
+            for i, name in enumerate(slot.element_names()):
+                cols.append(name)
+                units.append(slot.unit)
+                picks.append(("y", slot.start + i, 0))
+        for path, blk in m.flat.cosim_blocks().items():
+            for port in blk.outputs.values():
+                for i, name in enumerate(port.element_names(path)):
+                    cols.append(name)
+                    units.append(port.unit)
+                    picks.append((f"{path}.{port.name}", i, 0))
+        if self._record_patterns:
+            keep = [j for j, c in enumerate(cols)
+                    if any(fnmatch.fnmatchcase(c, pat) or fnmatch.fnmatchcase(c.split("[")[0], pat)
+                           for pat in self._record_patterns)]
+            if not keep:
+                raise ModelError(f"record patterns {self._record_patterns} match no signal")
+            cols, units, picks = [cols[j] for j in keep], [units[j] for j in keep], [picks[j] for j in keep]
+        return cols, units, picks
+
+    # -- equation-only horizon ---------------------------------------------------------------------
+    def _chunk_fn(self, n: int) -> ca.Function:
+        if n not in self._chunk_fns:
+            self._chunk_fns[n] = self._step_fn.mapaccum(f"horizon{n}", n, [1, 2], [0, 1], {})
+        return self._chunk_fns[n]
+
+    def _native(self):
+        """The C horizon runner, or None when the backend is 'casadi' or no compiler works."""
+        if self.backend == "casadi":
+            return None
+        if self._native_runner is None:
+            from .native import NativeHorizon, NativeUnavailable
+
+            try:
+                self._native_runner = NativeHorizon(self.model.step)
+            except NativeUnavailable:
+                if self.backend == "native":
+                    raise
+                self.backend = "casadi"
+                return None
+        return self._native_runner
+
+    def _run_chunk(self, k: int, c: int, times, x, z, p, u_free):
+        """``c`` steps from step ``k``: ``(X_end, Z_end, Y[c, ny], bad)`` with ``bad`` = first bad step or -1."""
+        native = self._native()
+        if native is not None:
+            return native.run(c, float(times[k]), self.model.dt, x, z, u_free[:, k:k + c], p)
+        fn = self._chunk_fn(c)
+        X, Z, Y = (np.asarray(a) for a in fn(times[k:k + c][None, :], x, z, u_free[:, k:k + c], p))
+        bad = ~np.all(np.isfinite(X), axis=0)
+        if bad.any():
+            j = int(np.argmax(bad))
+            return (X[:, j - 1] if j > 0 else x), (Z[:, j - 1] if j > 0 else z), Y.T, j
+        return X[:, -1].copy(), Z[:, -1].copy(), Y.T, -1
+
+    def _run_horizon(self, times, x, z, p, u_free, picks, rec: _Recorder, progress: bool) -> None:
+        m = self.model
+        n = len(times) - 1
+        y_idx = np.array([i for _, i, _ in picks], dtype=int)
+        bar = _progress(n, progress, m.name)
+        k = 0
+        try:
+            while k < n:
+                c = min(self.chunk, n - k)
+                x_new, z_new, Y, bad = self._run_chunk(k, c, times, x, z, p, u_free)
+                if bad >= 0:
+                    rec.add_block(Y[:bad + 1, y_idx])
+                    x_bad = np.asarray(m.step(times[k + bad], x_new, z_new, u_free[:, k + bad], p)[0]).ravel()
+                    self._diverged(x_bad, x_new, times[k + bad + 1], rec, picks)
+                rec.add_block(Y[:, y_idx])
+                x, z = x_new, z_new
+                k += c
+                bar.update(c)
+            # the last row (t_end): signals after the sampled update at t_end, without committing it
+            xp, zp = m.discrete(times[n], x, z, u_free[:, n], p)
+            y = np.asarray(m.signals(times[n], xp, zp, u_free[:, n], p)).ravel()
+            rec.add_row(y[y_idx])
+        finally:
+            bar.close()
+        self.final_state = (x, z)
+
+    def _diverged(self, x_bad: np.ndarray, x_prev: np.ndarray, t: float, rec: _Recorder, picks) -> None:
+        names = self.model.states.names()
+        i = int(np.argmax(~np.isfinite(x_bad)))
+        raise SimulationDiverged(
+            f"simulation diverged: state {names[i]} became {x_bad[i]} at t={t:.6g} s "
+            f"(last finite value {x_prev[i]:.6g}); results kept up to t={rec.last_time():.6g} s",
+            rec.results(complete=False, message=f"diverged: {names[i]} at t={t:.6g}"))
+
+    # -- co-simulation master ---------------------------------------------------------------------
+    def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
+                   progress: bool) -> None:
+        m = self.model
+        n = len(times) - 1
+        dt = m.dt
+        u = np.zeros(m.inputs.size)
+        y = np.zeros(m.signals_layout.size)
+        x_next, z_next = np.zeros_like(x), np.zeros_like(z)
+        t_arr = np.zeros(1)
+        buf, evaluate = self._step_fn.buffer()
+        for i, arr in enumerate((t_arr, x, z, u, p)):
+            buf.set_arg(i, memoryview(arr))
+        for i, arr in enumerate((x_next, z_next, y)):
+            buf.set_res(i, memoryview(arr))
+        free_slots = [(m.inputs.index("$" + nm).slice, idx) for idx, nm in
+                      zip(_row_slices(m.free_inputs), m.free_inputs, strict=True)]
+        cs_in_slots = [(m.inputs.index(s.name).slice, s.name) for s in m.inputs.slots if not s.name.startswith("$")]
+        feeds = self._cosim_feeds(cs)
+        y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
+        c_picks = [(j, src, i) for j, (src, i, _) in enumerate(picks) if src != "y"]
+        yj = np.array([j for j, _ in y_picks], dtype=int)
+        yi = np.array([i for _, i in y_picks], dtype=int)
+        row = np.zeros(len(picks))
+        bar = _progress(n, progress, m.name)
+        outputs: dict[str, dict[str, np.ndarray]] = {}
+        started: list[CoSimBlock] = []
+        try:
+            for path, blk in cs.items():
+                _guard(path, "setup", lambda b=blk: b.setup(float(times[0])), rec)
+                started.append(blk)
+            for k in range(n + 1):
+                t = float(times[k])
+                for path, blk in cs.items():
+                    outputs[path] = _guard(path, "get_outputs", blk.get_outputs, rec)
+                for sl, rows in free_slots:
+                    u[sl] = u_free[rows, k]
+                for sl, name in cs_in_slots:
+                    path, port = name.rsplit(".", 1)
+                    u[sl] = outputs[path][port]
+                t_arr[0] = t
+                evaluate()
+                if not np.all(np.isfinite(x_next)):
+                    rec.add_row(_fill_row(row, yj, yi, y, c_picks, outputs))
+                    self._diverged(x_next, x, t + dt, rec, picks)
+                rec.add_row(_fill_row(row, yj, yi, y, c_picks, outputs))
+                if k == n:
+                    break
+                for path, blk in cs.items():
+                    values = {port: _source_value(src, y, u_free[:, k], outputs, m) for port, src in feeds[path]}
+                    _guard(path, "set_inputs", lambda b=blk, v=values: b.set_inputs(v), rec)
+                    _guard(path, "do_step", lambda b=blk: b.do_step(t, dt), rec)
+                    if self.order == "gauss-seidel":
+                        outputs[path] = _guard(path, "get_outputs", blk.get_outputs, rec)
+                x[:] = x_next
+                z[:] = z_next
+                if k % 100 == 0:
+                    bar.update(min(100, n - k))
+        except KeyboardInterrupt as exc:
+            raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
+                                  rec.results(False, "interrupted")) from exc
+        finally:
+            bar.close()
+            for blk in started:
+                try:
+                    blk.terminate()
+                except Exception:  # noqa: BLE001 - best effort cleanup must not mask the real error
+                    pass
+        self.final_state = (x, z)
+
+    def _cosim_feeds(self, cs: dict[str, CoSimBlock]) -> dict[str, list[tuple[str, tuple]]]:
+        m = self.model
+        feeds: dict[str, list[tuple[str, tuple]]] = {}
+        free_names = list(m.free_inputs)
+        free_rows = dict(zip(free_names, _row_slices(m.free_inputs), strict=True))
+        for path, blk in cs.items():
+            lst = []
+            for iname, port in blk.inputs.items():
+                src = m.cosim_feeds.get(f"{path}.{iname}")
+                if src is None:
+                    lst.append((iname, ("const", np.full(port.size, port.default))))
+                elif src.startswith("$"):
+                    lst.append((iname, ("free", free_rows[src[1:]])))
+                elif src.rsplit(".", 1)[0] in cs:
+                    lst.append((iname, ("cs", tuple(src.rsplit(".", 1)))))
+                else:
+                    lst.append((iname, ("y", m.signals_layout.index(src).slice)))
+            feeds[path] = lst
+        return feeds
+
+
+def _row_slices(ports: Mapping[str, Any]) -> list[slice]:
+    out, k = [], 0
+    for port in ports.values():
+        out.append(slice(k, k + port.size))
+        k += port.size
+    return out
+
+
+def _source_value(src: tuple, y: np.ndarray, u_free_k: np.ndarray, outputs, m) -> np.ndarray:
+    kind, where = src
+    if kind == "y":
+        return y[where].copy()
+    if kind == "free":
+        return u_free_k[where].copy()
+    if kind == "cs":
+        return np.asarray(outputs[where[0]][where[1]], dtype=float)
+    return where
+
+
+def _fill_row(row, yj, yi, y, c_picks, outputs) -> np.ndarray:
+    row[yj] = y[yi]
+    for j, src, i in c_picks:
+        path, port = src.rsplit(".", 1)
+        row[j] = np.ravel(outputs[path][port])[i]
+    return row
+
+
+def _guard(path: str, what: str, fn: Callable[[], Any], rec: _Recorder) -> Any:
+    try:
+        return fn()
+    except SimulationError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - wrap with the block name, keep partial results
+        raise CoSimulationError(
+            f"co-simulation block {path!r} failed in {what} at t={rec.last_time():.6g} s: "
+            f"{type(exc).__name__}: {exc}",
+            rec.results(False, f"{path}.{what} failed: {exc}")) from exc
+
+
+def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) -> np.ndarray:
+    if callable(value):
+        try:
+            rows = [np.atleast_1d(np.asarray(value(float(t)), dtype=float)).ravel() for t in times]
+        except Exception as exc:  # noqa: BLE001
+            raise ModelError(f"input {name!r}: the function raised {type(exc).__name__}: {exc}") from exc
+        arr = np.array(rows).T
+    else:
+        arr = np.asarray(value, dtype=float)
+        if arr.ndim <= 1:
+            arr = np.repeat(np.atleast_1d(arr).reshape(-1, 1), len(times), axis=1)
+        elif arr.shape[1] != len(times):
+            raise ModelError(f"input {name!r}: time series has {arr.shape[1]} samples, need {len(times)}")
+    if arr.shape[0] != size:
+        raise ModelError(f"input {name!r} needs {size} element(s) per sample, got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise ModelError(f"input {name!r} contains non-finite values")
+    return arr
+
+
+class _Recorder:
+    """Preallocated result rows, truncated to what was written."""
+
+    def __init__(self, times: np.ndarray, columns: list[str], units: list[str]) -> None:
+        self.data = np.full((len(times), len(columns)), np.nan)
+        self.times = times
+        self.n = 0
+        self.columns = columns
+        self.units = units
+
+    def add_row(self, row: np.ndarray) -> None:
+        self.data[self.n] = row
+        self.n += 1
+
+    def add_block(self, rows: np.ndarray) -> None:
+        self.data[self.n:self.n + len(rows)] = rows
+        self.n += len(rows)
+
+    def last_time(self) -> float:
+        return float(self.times[self.n - 1]) if self.n else float(self.times[0])
+
+    def results(self, complete: bool, message: str) -> Results:
+        return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
+                       self.data[:self.n].copy(), complete, message)
+
+
+def _progress(total: int, enabled: bool, name: str):
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=f"simulating {name}", unit="step", unit_scale=True, leave=False)
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def simulate(graph: Graph | Block, t_end: float, dt: float = 1e-3, inputs: Mapping[str, InputValue] | None = None,
+             params: Mapping[str, Any] | None = None, **kw: Any) -> Results:
+    """Compile and run ``graph`` from 0 to ``t_end`` (see :class:`Simulator`)."""
+    progress = kw.pop("progress", False)
+    x0 = kw.pop("x0", None)
+    return Simulator(graph, dt=dt, params=params, **kw).run(t_end, inputs=inputs, x0=x0, progress=progress)

@@ -1,0 +1,414 @@
+"""The DART hexapod as a co-simulation block (the plant of the 1 kHz control loop, SPEC section 2).
+
+Ports (units SI; joint vectors leg-major: leg 0 ``alpha, beta, gamma``, leg 1 ..., leg 5):
+
+============== ===== ===== =========================================================================
+port           dir   shape meaning
+============== ===== ===== =========================================================================
+q_target       in    18    joint position targets of the servos (rad)
+q              out   18    joint angles (rad)
+qd             out   18    joint velocities (rad/s)
+toe_force      out   18    per leg ``(Fx lateral, Fy forward, Fz vertical)`` in the BODY frame: the
+                           force the ground exerts on the foot (``Fz > 0`` when standing), N
+body_position  out   3     body frame origin (centre of the body box) in the world, m
+body_rpy       out   3     ``(roll, pitch, yaw)`` with ``R = Rz(yaw) Rx(pitch) Ry(roll)``, rad
+foot_position  out   18    foot sphere centres in the world frame, m
+============== ===== ===== =========================================================================
+
+Roll turns about the forward axis ``y`` (positive: right side down), pitch about the lateral axis
+``x`` (positive: nose up), yaw about ``z`` (positive: turning left). No output reads an input in
+the same step (no direct feedthrough).
+
+Servos. Each joint is a DART joint spring and damper whose rest position is moved to the target
+(``tau = -kp (q - q_rest) - kd qd``), integrated implicitly by DART: NOTES measured explicit
+Python PD torques at 1 ms to go unstable on light links from ``kp >= 100`` while this scheme stayed
+stable up to ``kp = 1000``. With ``velocity_ff = 1`` the rest position is advanced by
+``(kd/kp) * dq_target/dt`` so the damper acts on the velocity *error* (removes the tracking lag
+``kd/kp * qd`` of a moving target); the target velocity is a backward difference of the inputs,
+so a jump of the target gives a one-step kick -- keep it off for discontinuous targets (default).
+Default gains scale with the robot (:func:`default_gains`). Parameters apply at :meth:`setup`, or
+at once when :meth:`set` is called on a set-up plant.
+
+Contacts. After every world step the contacts of the last collision result are summed per leg;
+each contact's ``force`` acts on ``collisionObject1`` (the sign is flipped when the robot's shape
+is object 2; the order depends on the detector). With ``sense_shank`` (default) a contact on the
+tibia box counts as a toe force too (a leg hitting a step edge with its shank is sensed like a
+toe contact). Contact forces are impulses divided by the step, so touchdowns spike; over a macro
+step ``dt`` longer than the world step the force is averaged over the sub-steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import dartpy as dart
+import numpy as np
+
+from components.core import CoSimBlock, ModelError, ParameterError
+from components.geometry import YU_SIM, RobotGeometry, leg_ik
+
+from .hexapod import JOINT_DOFS, HexapodModel, build_hexapod, tilt_angle
+from .terrain import Terrain, flat
+
+GRAVITY = 9.81
+_cos, _sin = math.cos, math.sin
+_free_to_transform = dart.dynamics.FreeJoint.convertToTransform
+DETECTORS = {
+    "dart": dart.collision.DARTCollisionDetector,
+    "fcl": dart.collision.FCLCollisionDetector,
+    "bullet": dart.collision.BulletCollisionDetector,
+    "ode": dart.collision.OdeCollisionDetector,
+}
+
+
+def default_gains(geometry: RobotGeometry) -> tuple[float, float]:
+    """Servo gains ``(kp, kd)`` scaled to the robot.
+
+    ``kp = 10 m g (L_thigh + L_shank)``: the torque that holds a sixth of the weight at a lever
+    of the leg length gives about 1/60 rad of deflection (YU_SIM: 96 N m/rad; prototype about
+    3.1e4 N m/rad). ``kd = 2 sqrt(kp I)`` with ``I`` the leg's inertia about the beta axis at
+    ``beta = 0, gamma = pi/2``: critical damping of a swinging leg (YU_SIM: about 1.1 N m s/rad).
+    """
+    leg = geometry.leg
+    kp = 10.0 * geometry.mass * GRAVITY * (leg.thigh + leg.shank)
+    inertia = (leg.thigh_mass * (leg.thigh / 2) ** 2 + leg.shank_mass * (leg.thigh**2 + (leg.shank / 2) ** 2)
+               + leg.foot_mass * (leg.thigh**2 + leg.shank**2))
+    kd = 2.0 * math.sqrt(kp * max(inertia, 1e-9))
+    return float(f"{kp:.3g}"), float(f"{kd:.3g}")
+
+
+def standing_posture(geometry: RobotGeometry) -> np.ndarray:
+    """The 18 joint angles with every foot at the stance midpoint (``alpha = 0``), leg-major."""
+    r, h = geometry.nominal_points()["stance_mid"]
+    alpha, beta, gamma = leg_ik(geometry.leg, r, 0.0, h)
+    return np.tile([alpha, beta, gamma], 6)
+
+
+def rpy_from_rotation(R: np.ndarray) -> np.ndarray:
+    """``(roll, pitch, yaw)`` of ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (see the module docstring)."""
+    pitch = math.asin(max(-1.0, min(1.0, float(R[2, 1]))))
+    roll = math.atan2(-R[2, 0], R[2, 2])
+    yaw = math.atan2(-R[0, 1], R[1, 1])
+    return np.array([roll, pitch, yaw])
+
+
+def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Inverse of :func:`rpy_from_rotation`."""
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                              math.cos(yaw), math.sin(yaw))
+    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    Ry = np.array([[cr, 0.0, sr], [0.0, 1.0, 0.0], [-sr, 0.0, cr]])
+    return Rz @ Rx @ Ry
+
+
+class DartHexapod(CoSimBlock):
+    """The hexapod on a terrain in a DART world, stepped by the co-simulation master.
+
+    Constructor arguments (fixed for the block's life; parameters go in ``**params``):
+
+    - ``geometry``: a :class:`~components.geometry.RobotGeometry` (default ``YU_SIM``);
+    - ``terrain``: a :class:`~robots.terrain.Terrain` (default flat ground);
+    - ``q0``: initial joint angles (18, rad; default :func:`standing_posture`);
+    - ``body_height``: initial height of the body frame (m); default: the lowest foot sphere just
+      touches the ground under it (body level, at the world origin, facing ``+y``);
+    - ``detector``: ``'dart'`` (default: exact for spheres and boxes, the fastest measured),
+      ``'fcl'``, ``'bullet'`` or ``'ode'``;
+    - ``time_step``: the DART world step (s, default 1 ms); ``do_step``'s ``dt`` must be a
+      multiple of it;
+    - ``sense_shank``: count tibia contacts as toe forces (default ``True``);
+    - ``settle``: seconds simulated in :meth:`setup` with the targets held at ``q0`` before the
+      clock is set to ``t0`` (so ``t0``'s outputs show a loaded, resting robot); default 0.
+
+    Parameters: ``kp`` (N m/rad, > 0), ``kd`` (N m s/rad, > 0), ``friction`` (Coulomb coefficient
+    of the robot's shapes, > 0; the ground has its terrain's), ``velocity_ff`` (0/1).
+    """
+
+    def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,
+                 q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
+                 time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
+                 **params: float) -> None:
+        if not isinstance(geometry, RobotGeometry):
+            raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
+        if detector not in DETECTORS:
+            raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
+        if not (math.isfinite(time_step) and time_step > 0):
+            raise ParameterError(f"time_step must be > 0, got {time_step!r}")
+        if not (math.isfinite(settle) and settle >= 0):
+            raise ParameterError(f"settle must be >= 0, got {settle!r}")
+        self.geometry = geometry
+        self.terrain = terrain if terrain is not None else flat()
+        q0_arr = standing_posture(geometry) if q0 is None else np.asarray(q0, dtype=float).ravel()
+        if q0_arr.shape != (18,) or not np.all(np.isfinite(q0_arr)):
+            raise ParameterError(f"q0 needs 18 finite joint angles, got shape {q0_arr.shape}")
+        self.q0 = q0_arr
+        self.body_height = body_height
+        self.detector = detector
+        self.time_step = float(time_step)
+        self.sense_shank = bool(sense_shank)
+        self.settle = float(settle)
+        self.world: dart.simulation.World | None = None
+        self.model: HexapodModel | None = None
+        self._q_target = q0_arr.copy()
+        super().__init__(name, **params)
+
+    # -- declaration ------------------------------------------------------------------------------
+    def declare(self) -> None:
+        kp, kd = default_gains(self.geometry)
+        self.add_parameter("kp", kp, "N*m/rad", (0.0, math.inf), "joint servo stiffness", strict=True)
+        self.add_parameter("kd", kd, "N*m*s/rad", (0.0, math.inf), "joint servo damping", strict=True)
+        self.add_parameter("friction", 1.0, "1", (0.0, math.inf), "Coulomb friction of the robot's shapes",
+                           strict=True)
+        self.add_parameter("velocity_ff", 0.0, "1", (0.0, 1.0), "advance the servo rest position by "
+                           "kd/kp * target velocity", kind="boolean")
+        self.add_input("q_target", 18, "rad",
+                       description="joint position targets, leg-major (alpha, beta, gamma)")
+        self.add_output("q", 18, "rad", description="joint angles, leg-major")
+        self.add_output("qd", 18, "rad/s", description="joint velocities, leg-major")
+        self.add_output("toe_force", 18, "N", description="ground force on each foot "
+                        "(Fx lateral, Fy forward, Fz vertical) in the body frame")
+        self.add_output("body_position", 3, "m", description="body origin in the world frame")
+        self.add_output("body_rpy", 3, "rad", description="roll (about y), pitch (about x), yaw (about z)")
+        self.add_output("foot_position", 18, "m", description="foot centres in the world frame, leg-major")
+
+    def set(self, **values: float) -> DartHexapod:
+        """Set parameters (validated); on a set-up plant, gains and friction apply from the next step."""
+        super().set(**values)
+        if self.model is not None:
+            v = self.values
+            for j in self.model.joints:
+                j.setSpringStiffness(0, v["kp"])
+                j.setDampingCoefficient(0, v["kd"])
+            for bodies in [[self.model.body], *self.model.link_bodies]:
+                for bn in bodies:
+                    for sn in bn.getShapeNodes():
+                        sn.getDynamicsAspect().setFrictionCoeff(v["friction"])
+        return self
+
+    # -- lifecycle --------------------------------------------------------------------------------
+    def setup(self, t0: float) -> None:
+        """Build the world (terrain + robot), place the robot, set the servos; clock at ``t0``."""
+        self.terminate()
+        v = self.values
+        world = dart.simulation.World()
+        world.setTimeStep(self.time_step)
+        world.setGravity(np.array([0.0, 0.0, -GRAVITY]))
+        world.setCollisionDetector(DETECTORS[self.detector]())
+        opts = world.getDeactivationOptions()  # NOTES: 6.20 puts resting bodies to sleep otherwise
+        opts.mEnabled = False
+        world.setDeactivationOptions(opts)
+        self._terrain_skel = self.terrain.add_to(world)
+
+        model = build_hexapod(self.geometry, friction=v["friction"])
+        model.set_joint_angles(self.q0)
+        model.set_body_pose([0.0, 0.0, 0.0])
+        z = self.body_height if self.body_height is not None else self._touching_height(model)
+        model.set_body_pose([0.0, 0.0, z])
+        for j, q in zip(model.joints, self.q0, strict=True):
+            j.setSpringStiffness(0, v["kp"])
+            j.setDampingCoefficient(0, v["kd"])
+            j.setRestPosition(0, float(q))
+        world.addSkeleton(model.skeleton)
+        self.world, self.model = world, model
+
+        # collision shape -> leg index (toe), _LINK + leg (other leg links) or _BODY. Shapes are
+        # identified by object identity: pybind11 hands back the registered wrapper of a shape we
+        # keep alive, so id() of collisionObject.getShape() is a cheap, stable key.
+        self._shapes = []  # keep the wrappers alive so id() stays valid
+        self._shape_leg: dict[int, int] = {}
+        for i, foot in enumerate(model.feet):
+            self._register(foot.getShape(), i)
+        for i, bodies in enumerate(model.link_bodies):
+            for k, bn in enumerate(bodies):
+                for sn in bn.getShapeNodes():
+                    if sn.getName().endswith("_foot"):
+                        continue
+                    self._register(sn.getShape(), i if (k == 2 and self.sense_shank) else _LINK + i)
+        for sn in model.body.getShapeNodes():
+            self._register(sn.getShape(), _BODY)
+
+        leg = self.geometry.leg
+        self._leg_c, self._leg_f, self._leg_t = leg.coxa, leg.thigh, leg.shank
+        self._mounts = [(float(mx), float(my), float(self.geometry.side(i)))
+                        for i, (mx, my) in enumerate(self.geometry.mounts)]
+        self._q_target = self.q0.copy()
+        self._q_target_prev = self.q0.copy()
+        self._target_changed = False
+        self._ff_active = False
+        self._n_steps = 0
+        self._force_world = np.zeros((6, 3))
+        self._body_contact = False
+        self._link_contact = np.zeros(6, dtype=bool)
+        if self.settle > 0:
+            for _ in range(int(round(self.settle / self.time_step))):
+                world.step()
+                self._read_contacts()
+        world.setTime(float(t0))
+        self._t = float(t0)
+        self._update_outputs()
+
+    def _register(self, shape: dart.dynamics.Shape, code: int) -> None:
+        self._shapes.append(shape)
+        self._shape_leg[id(shape)] = code
+
+    def _touching_height(self, model: HexapodModel) -> float:
+        feet = model.foot_positions()  # body frame origin at the world origin, level
+        ground = np.asarray(self.terrain.height_at(feet[:, 0], feet[:, 1]), dtype=float)
+        ok = np.isfinite(ground)
+        if not ok.any():
+            raise ModelError("no foot of the initial posture is above ground")
+        return float(np.max(ground[ok] + self.geometry.leg.foot_radius - feet[ok, 2]))
+
+    def terminate(self) -> None:
+        """Drop the world (contacts of a removed world must not be touched again: NOTES)."""
+        self.world = None
+        self.model = None
+        self._shapes = []
+        self._shape_leg = {}
+
+    # -- stepping ---------------------------------------------------------------------------------
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        if "q_target" not in values:
+            return
+        q = np.asarray(values["q_target"], dtype=float).ravel()
+        if q.shape != (18,):
+            raise ModelError(f"{self.name}.q_target needs 18 values, got {q.size}")
+        if not np.all(np.isfinite(q)):
+            raise ModelError(f"{self.name}.q_target is not finite: {q}")
+        if not np.array_equal(q, self._q_target):
+            self._q_target = q
+            self._target_changed = True
+
+    def do_step(self, t: float, dt: float) -> None:
+        """Advance ``[t, t + dt]``: ``dt / time_step`` world steps with the servo targets held."""
+        if self.world is None:
+            raise ModelError(f"{self.name}: do_step before setup")
+        h = self.time_step
+        n = int(round(dt / h))
+        if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
+            raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
+        if abs(t - self._t) > 0.5 * h:
+            raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
+        v = self.values
+        if self._target_changed or self._ff_active:
+            rest = self._q_target
+            if v["velocity_ff"]:
+                vel = (self._q_target - self._q_target_prev) / dt
+                self._ff_active = bool(np.any(vel != 0.0))
+                rest = rest + (v["kd"] / v["kp"]) * vel
+            for j, q in zip(self.model.joints, rest.tolist(), strict=True):
+                j.setRestPosition(0, q)
+            self._q_target_prev = self._q_target
+            self._target_changed = False
+        world = self.world
+        if n == 1:
+            world.step()
+            self._read_contacts()
+        else:
+            total = np.zeros((6, 3))
+            body = False
+            link = np.zeros(6, dtype=bool)
+            for _ in range(n):
+                world.step()
+                self._read_contacts()
+                total += self._force_world
+                body |= self._body_contact
+                link |= self._link_contact
+            self._force_world = total / n
+            self._body_contact = body
+            self._link_contact = link
+        self._t = t + dt
+        self._n_steps += n
+        self._update_outputs()
+
+    def _read_contacts(self) -> None:
+        """Sum the last collision result's contact forces per leg (world frame, force on the robot)."""
+        force = [[0.0, 0.0, 0.0] for _ in range(6)]
+        body = False
+        link = self._link_contact
+        link[:] = False
+        lookup = self._shape_leg.get
+        for c in self.world.getLastCollisionResult().getContacts():
+            code = lookup(id(c.collisionObject1.getShape()))
+            sign = 1.0  # c.force acts on object 1
+            if code is None:
+                code = lookup(id(c.collisionObject2.getShape()))
+                sign = -1.0
+                if code is None:
+                    continue
+            if code < _LINK:
+                fx, fy, fz = c.force.tolist()
+                acc = force[code]
+                acc[0] += sign * fx
+                acc[1] += sign * fy
+                acc[2] += sign * fz
+            elif code == _BODY:
+                body = True
+            else:
+                link[code - _LINK] = True  # a coxa/femur (or unsensed shank) touched something
+        self._force_world = np.array(force)
+        self._body_contact = body
+
+    def _update_outputs(self) -> None:
+        skel = self.model.skeleton
+        pos = skel.getPositions()
+        # the body frame is the FreeJoint's child frame: its transform follows from the 6 coordinates
+        M = _free_to_transform(pos[:6]).matrix()
+        R = M[:3, :3]
+        p = M[:3, 3]
+        self._R = R
+        q = pos[JOINT_DOFS]
+        # foot centres by the leg kinematics of components.geometry (equal to DART's to 1e-15 m, see
+        # tests/test_robot.py); plain floats beat numpy on 6 legs and six getWorldTransform() calls
+        ql = q.tolist()
+        lc, lf, lt = self._leg_c, self._leg_f, self._leg_t
+        local = []
+        for i, (mx, my, side) in enumerate(self._mounts):
+            a, b, g = ql[3 * i], ql[3 * i + 1], ql[3 * i + 2]
+            r = lc + lf * _cos(b) + lt * _cos(b - g)
+            local.append((mx + side * r * _cos(a), my + r * _sin(a), lf * _sin(b) + lt * _sin(b - g)))
+        self._out = {
+            "q": q,
+            "qd": skel.getVelocities()[JOINT_DOFS],
+            "toe_force": (self._force_world @ R).ravel(),  # R^T f per leg
+            "body_position": p.copy(),
+            "body_rpy": rpy_from_rotation(R),
+            "foot_position": (p + np.array(local) @ R.T).ravel(),
+        }
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        if self.world is None:
+            raise ModelError(f"{self.name}: get_outputs before setup")
+        return dict(self._out)
+
+    # -- helpers ----------------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self._t
+
+    def toe_force_world(self) -> np.ndarray:
+        """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
+        return self._force_world.copy()
+
+    def link_contacts(self) -> np.ndarray:
+        """Per leg, whether a coxa or femur (or an unsensed tibia) touched something in the last step."""
+        return self._link_contact.copy()
+
+    def body_contact(self) -> bool:
+        """Whether the body box touched anything in the last step."""
+        return bool(self._body_contact)
+
+    def fell(self, max_tilt: float = math.pi / 4) -> bool:
+        """The robot has fallen: body touched the ground, tilt above ``max_tilt`` or non-finite state."""
+        if self.world is None:
+            return False
+        if self._body_contact:
+            return True
+        if not np.all(np.isfinite(self.model.skeleton.getPositions())):
+            return True
+        return tilt_angle(self._R) > max_tilt
+
+
+_LINK = 10  # code of leg i's unsensed links: _LINK + i
+_BODY = 100

@@ -7,11 +7,21 @@ output unit cannot be derived from its inputs takes it as a constructor argument
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 
 import casadi as ca
 
 from .core import Block, DeclarationError, Equations, Symbols
+
+
+def per_second(unit: str) -> str:
+    """The unit of a time derivative: ``1 -> 1/s``, ``m -> m/s``, ``m/s -> m/s2``, ``1/s2 -> 1/s3``."""
+    m = re.fullmatch(r"(.*)/s(\d*)", unit)
+    if m:
+        power = int(m.group(2) or 1) + 1
+        return f"{m.group(1)}/s{power}"
+    return f"{unit}/s"
 
 
 class Constant(Block):
@@ -150,7 +160,7 @@ class Integrator(Block):
         super().__init__(name, **kw)
 
     def declare(self) -> None:
-        rate = "1/s" if self._unit == "1" else f"{self._unit}/s"
+        rate = per_second(self._unit)
         self.add_input("u", self._size, rate)
         self.add_state("x", [self._x0] * self._size, self._unit)
         self.add_output("y", self._size, self._unit)

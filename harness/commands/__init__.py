@@ -1,0 +1,1 @@
+"""Subcommands of the ``cpgsim`` CLI, discovered automatically (one module each)."""

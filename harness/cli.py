@@ -14,15 +14,10 @@ from collections.abc import Sequence
 
 from components.core import ModelError
 
-from . import commands
+from harness import commands
+from harness.errors import CliError
 
-
-class CliError(Exception):
-    """A user-facing error: printed as one line, exit status ``code``."""
-
-    def __init__(self, message: str, code: int = 2) -> None:
-        super().__init__(message)
-        self.code = code
+__all__ = ["CliError", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
             continue
-        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+        mod = importlib.import_module(f"harness.commands.{info.name}")
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.__doc__ or mod.HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)

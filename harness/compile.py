@@ -197,12 +197,15 @@ class _Compiler:
                 return ca.SX(np.full((port.size, 1), port.default))
             if src.startswith("$") or src in self.inputs:
                 return U[self.inputs.index(src).slice]
-            return signal(src, via=key)
+            active.append(key)
+            value = signal(src)
+            active.pop()
+            return value
 
-        def signal(ref: str, via: str | None = None) -> ca.SX:
+        def signal(ref: str) -> ca.SX:
             if ref in cache:
                 return cache[ref]
-            if ref in active:
+            if ref in active:  # the path alternates output -> input it feeds -> output ...
                 cycle = active[active.index(ref):] + [ref]
                 raise AlgebraicLoopError(cycle)
             active.append(ref)

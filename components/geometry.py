@@ -159,9 +159,13 @@ YU_SIM = RobotGeometry(
     leg=LegGeometry(coxa=0.05, thigh=0.12, shank=0.15, foot_radius=0.01,
                     coxa_mass=0.05, thigh_mass=0.1, shank_mass=0.1, foot_mass=0.02),
     body_length=0.25, body_width=0.15, body_thickness=0.04, body_mass=2.0,
-    height=0.12, clearance=0.04, stance_width=0.17,
+    height=0.12, clearance=0.04, stance_width=0.10,
+    mounts=((-0.075, 0.12), (-0.075, 0.0), (-0.075, -0.12), (0.075, 0.12), (0.075, 0.0), (0.075, -0.12)),
 )
-"""Yu Table 3 (simulation robot). Masses are not in the paper: 2 kg body, 0.27 kg per leg (3.62 kg)."""
+"""Yu Table 3 (simulation robot). Not in the paper, chosen: 2 kg body, 0.27 kg per leg (3.62 kg);
+legs mounted at the body's ends and middle (0.12 m apart) with the stance line 0.10 m out, so the
+stride (2 * 0.10 * tan(pi/6) = 115 mm) is shorter than the mount spacing and neighbouring feet
+never cross in a tripod gait."""
 
 YU_PROTOTYPE = RobotGeometry(
     name="yu-prototype",

@@ -13,6 +13,7 @@ toe_force      out   18    per leg ``(Fx lateral, Fy forward, Fz vertical)`` in 
 body_position  out   3     body frame origin (centre of the body box) in the world, m
 body_rpy       out   3     ``(roll, pitch, yaw)`` with ``R = Rz(yaw) Rx(pitch) Ry(roll)``, rad
 foot_position  out   18    foot sphere centres in the world frame, m
+body_contact   out   1     1 when the body box touched anything during the last step (boolean)
 ============== ===== ===== =========================================================================
 
 Roll turns about the forward axis ``y`` (positive: right side down), pitch about the lateral axis
@@ -171,6 +172,8 @@ class DartHexapod(CoSimBlock):
         self.add_output("body_position", 3, "m", description="body origin in the world frame")
         self.add_output("body_rpy", 3, "rad", description="roll (about y), pitch (about x), yaw (about z)")
         self.add_output("foot_position", 18, "m", description="foot centres in the world frame, leg-major")
+        self.add_output("body_contact", 1, "1", kind="boolean",
+                        description="1 when the body box touched anything during the last step")
 
     def set(self, **values: float) -> DartHexapod:
         """Set parameters (validated); on a set-up plant, gains and friction apply from the next step."""
@@ -375,6 +378,7 @@ class DartHexapod(CoSimBlock):
             "body_position": p.copy(),
             "body_rpy": rpy_from_rotation(R),
             "foot_position": (p + np.array(local) @ R.T).ravel(),
+            "body_contact": np.array([1.0 if self._body_contact else 0.0]),
         }
 
     def get_outputs(self) -> dict[str, np.ndarray]:

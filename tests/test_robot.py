@@ -180,7 +180,8 @@ def test_ports_and_units():
     assert robot.inputs["q_target"].unit == "rad" and robot.inputs["q_target"].size == 18
     units = {k: (p.unit, p.size) for k, p in robot.outputs.items()}
     assert units == {"q": ("rad", 18), "qd": ("rad/s", 18), "toe_force": ("N", 18),
-                     "body_position": ("m", 3), "body_rpy": ("rad", 3), "foot_position": ("m", 18)}
+                     "body_position": ("m", 3), "body_rpy": ("rad", 3), "foot_position": ("m", 18),
+                     "body_contact": ("1", 1)}
 
 
 # -- terrains ------------------------------------------------------------------------------------

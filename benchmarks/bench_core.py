@@ -87,7 +87,8 @@ def main() -> None:
     t_native, res = timed(lambda: native.run(T_END), args.repeat)
     t_casadi, _ = timed(lambda: casadi.run(T_END), args.repeat)
     t_loop, ref = timed(python_rk4, max(1, args.repeat // 2))
-    t_ivp, _ = timed(lambda: solve_ivp(rhs, (0, T_END), initial_state(), rtol=1e-8, atol=1e-10), max(1, args.repeat // 2))
+    t_ivp, _ = timed(lambda: solve_ivp(rhs, (0, T_END), initial_state(), rtol=1e-8, atol=1e-10),
+                     max(1, args.repeat // 2))
     cols = [f"leg{leg + 1}.z{i}.{v}" for leg in range(6) for i in (1, 2, 3) for v in ("x", "y")]
     err = float(np.max(np.abs(np.column_stack([res[c] for c in cols]) - ref)))
     print(f"6-leg network (18 neurons), {T_END:.0f} s at {DT * 1e3:.0f} ms, median of {args.repeat} runs")

@@ -13,7 +13,6 @@ import sys
 from collections.abc import Sequence
 
 from components.core import ModelError
-
 from harness import commands
 from harness.errors import CliError
 

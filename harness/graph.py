@@ -95,8 +95,8 @@ class Graph(_Declared):
         if ref.port not in table:
             other = blk.inputs if direction == "out" else blk.outputs
             if ref.port in other:
-                kind = "an input" if direction == "out" else "an output"
-                raise WiringError(f"graph {self.name!r}: {ref} is {kind}, expected {'an output' if direction == 'out' else 'an input'}")
+                kind, wanted = ("an input", "an output") if direction == "out" else ("an output", "an input")
+                raise WiringError(f"graph {self.name!r}: {ref} is {kind}, expected {wanted}")
             raise WiringError(
                 f"graph {self.name!r}: block {ref.block!r} has no {'output' if direction == 'out' else 'input'} "
                 f"{ref.port!r} (has: {', '.join(table) or 'none'})"
@@ -126,7 +126,8 @@ class Graph(_Declared):
         for r, p in zip(refs, ports, strict=True):
             check_compatible(first, p, f"{self.name}.{name}", str(r))
             if r in self.connections:
-                raise WiringError(f"graph {self.name!r}: input {r} has two sources: {self.connections[r]} and graph input {name!r}")
+                raise WiringError(f"graph {self.name!r}: input {r} has two sources: "
+                                  f"{self.connections[r]} and graph input {name!r}")
         port = self.add_input(name, first.shape, unit or first.unit, first.kind,
                               description or first.description, default)
         self.input_map[name] = refs
@@ -283,7 +284,7 @@ class FlatGraph:
 
     def check_connected(self) -> None:
         for path, blk in self.blocks.items():
-            for pname, port in blk.inputs.items():
+            for port in blk.inputs.values():
                 key = f"{path}.{port.name}"
                 if key not in self.sources and port.default is None:
                     raise UnconnectedInputError(

@@ -102,7 +102,8 @@ class NativeHorizon:
     """A compiled loop over the model's ``step`` function (signature ``(t, x, z, u, p)``)."""
 
     def __init__(self, step: ca.Function) -> None:
-        renamed = ca.Function("cpgsim_step_impl", step.sx_in(), step.call(step.sx_in()), step.name_in(), step.name_out())
+        args = step.sx_in()
+        renamed = ca.Function("cpgsim_step_impl", args, step.call(args), step.name_in(), step.name_out())
         self.nx, self.nz = step.size1_in(1), step.size1_in(2)
         self.nu, self.np_, self.ny = step.size1_in(3), step.size1_in(4), step.size1_out(2)
         path = build_shared_library(renamed, DRIVER, "cpgsim_step")

@@ -20,6 +20,7 @@ import casadi as ca
 import numpy as np
 
 from components.core import Block, CoSimBlock, ModelError, ParameterError
+
 from .compile import CompiledModel, compile_graph
 from .graph import Graph
 from .results import Results
@@ -286,7 +287,7 @@ class Simulator:
                 for path, blk in cs.items():
                     values = {port: _source_value(src, y, u_free[:, k], outputs, m) for port, src in feeds[path]}
                     _guard(path, "set_inputs", lambda b=blk, v=values: b.set_inputs(v), rec)
-                    _guard(path, "do_step", lambda b=blk: b.do_step(t, dt), rec)
+                    _guard(path, "do_step", lambda b=blk, tk=t: b.do_step(tk, dt), rec)
                     if self.order == "gauss-seidel":
                         outputs[path] = _guard(path, "get_outputs", blk.get_outputs, rec)
                 x[:] = x_next

@@ -256,7 +256,7 @@ class Simulator:
         cs_in_slots = [(m.inputs.index(s.name).slice, s.name) for s in m.inputs.slots if not s.name.startswith("$")]
         feeds = self._cosim_feeds(cs)
         y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
-        c_picks = [(j, src, i) for j, (src, i, _) in enumerate(picks) if src != "y"]
+        c_picks = _group_cosim_picks(picks)
         yj = np.array([j for j, _ in y_picks], dtype=int)
         yi = np.array([i for _, i in y_picks], dtype=int)
         row = np.zeros(len(picks))
@@ -346,11 +346,21 @@ def _source_value(src: tuple, y: np.ndarray, u_free_k: np.ndarray, outputs, m) -
     return where
 
 
+def _group_cosim_picks(picks) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """Recorded co-simulation outputs grouped per port: (path, port, row columns, element indices)."""
+    groups: dict[str, tuple[list[int], list[int]]] = {}
+    for j, (src, i, _) in enumerate(picks):
+        if src != "y":
+            cols, elems = groups.setdefault(src, ([], []))
+            cols.append(j)
+            elems.append(i)
+    return [(*src.rsplit(".", 1), np.array(c), np.array(e)) for src, (c, e) in groups.items()]
+
+
 def _fill_row(row, yj, yi, y, c_picks, outputs) -> np.ndarray:
     row[yj] = y[yi]
-    for j, src, i in c_picks:
-        path, port = src.rsplit(".", 1)
-        row[j] = np.ravel(outputs[path][port])[i]
+    for path, port, cols, elems in c_picks:
+        row[cols] = np.asarray(outputs[path][port]).ravel()[elems]
     return row
 
 

@@ -54,6 +54,7 @@ class AutonomousSystem:
     f: ca.Function
     rtol: float = 1e-11
     atol: float = 1e-12
+    u: np.ndarray | None = None  # the constant input vector f was built with (for signal evaluation)
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -250,7 +251,7 @@ def _tarjan(n: int, succ: dict[int, set[int]]) -> list[list[int]]:
     return out
 
 
-def up_crossings(t: np.ndarray, s: np.ndarray, level: float, hysteresis: float) -> np.ndarray:
+def up_crossings(s: np.ndarray, level: float, hysteresis: float) -> np.ndarray:
     """Indices ``k`` with ``s[k] < level <= s[k+1]``, counted only after ``s`` went below
     ``level - hysteresis`` (so noise around the level does not count as extra crossings)."""
     below = s < level
@@ -263,7 +264,6 @@ def up_crossings(t: np.ndarray, s: np.ndarray, level: float, hysteresis: float) 
         if j >= 0 and low[j] > last:
             out.append(k)
             last = k
-    del t
     return np.asarray(out, dtype=int)
 
 

@@ -1,0 +1,1080 @@
+"""Symbolic limit-cycle verification of autonomous graphs (``cpgsim verify``).
+
+:func:`verify` takes any graph of equation blocks whose free inputs are absent or held constant,
+compiles it (:func:`harness.compile.compile_graph`: its ``ode(t, x, z, u, p)`` is the only source
+of the equations, e.g. Yu Y2 for a Van der Pol neuron, Y5 for the leader-follower network, Y13 for
+its searching mode) and:
+
+1. integrates a transient from the given initial states (CasADi CVODES) until the motion settles,
+   diverges or reaches an equilibrium, and estimates each state's period from its up-crossings;
+2. splits the states into strongly connected components of the dependency graph and shoots the
+   periodic orbit of every *primary* oscillating component (one with no oscillating driver, e.g.
+   the leader z1 of Yu Y5, or in Yu Y13 both the leader and the decoupled follower pair);
+3. if the primary periods are commensurate (ratio ``p/q`` with ``q <= max_denominator`` within
+   ``ratio_tol``) it shoots the orbit of the whole system, period unknown, with a phase condition,
+   and computes the monodromy matrix from the integrator's sensitivities and its eigenvalues, the
+   Floquet multipliers; otherwise it reports every sub-cycle and the measured ratio instead of
+   forcing a common period ("no-common-period");
+4. reports period, per-state amplitude, mean, own period, frequency ratio and phase lag, the Yu Y4
+   analytic amplitude and period beside the numeric ones for every Van der Pol neuron, and the time
+   until coupled identical neurons agree (the "followers synchronize within about 2 s" claim of Yu
+   Sec. 3.2) from the given and from random initial states.
+
+Conventions (stated in the report too):
+
+- *Discrete states* are held at their start values ``z0`` and sampled resets are not applied: an
+  autonomous graph for verification has constant discrete states (a note is added when the discrete
+  update would change a state on the orbit).
+- *Phase lag* of state ``i``: the time from an up-crossing of the reference state through its orbit
+  mean to the next up-crossing of state ``i`` through its own orbit mean, in seconds and in radians
+  of state ``i``'s own cycle (``2 pi lag / T_i``) and of the reference cycle (``2 pi lag / T_ref``).
+  For Van der Pol states the orbit mean is 0 (odd symmetry), so these are zero up-crossings.
+- *Amplitude*: ``(max - min) / 2`` over the orbit.
+- *Verdict*: a stable limit cycle has exactly one multiplier near 1 (the trivial one, flow
+  direction) and all others with ``|mu| < 1 - margin``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from components.core import Block, ModelError
+
+from .compile import CompiledModel, compile_graph
+from .graph import Graph
+from .verify_system import AutonomousSystem, IntegrationFailed, interp_crossing, up_crossings
+
+N_ORBIT = 2520  # orbit samples per period: divisible by 1..10 and 12 (exact sub-period shifts)
+
+STATUS_TEXT = {
+    "stable-cycle": "stable limit cycle",
+    "unstable-cycle": "periodic orbit found but not asymptotically stable",
+    "no-common-period": "no stable cycle: the parts oscillate with incommensurate periods",
+    "equilibrium": "no stable cycle: converges to an equilibrium",
+    "diverges": "no stable cycle: diverges",
+    "period-not-found": "no stable cycle: period not found",
+}
+
+
+class VerifyInputError(ModelError):
+    """The graph cannot be verified as given (free inputs, co-simulation blocks, time dependence)."""
+
+
+@dataclass
+class VerifyOptions:
+    """Tuning of :func:`verify` (defaults suit the Yu networks; all times in seconds)."""
+
+    t_max: float = 400.0  # longest transient / convergence simulation
+    rtol: float = 1e-11  # CVODES tolerances
+    atol: float = 1e-12
+    margin: float = 1e-3  # non-trivial multipliers must satisfy |mu| < 1 - margin
+    ratio_tol: float = 1e-6  # relative tolerance of a rational period ratio
+    max_denominator: int = 12
+    sync_tol: float = 0.01  # follower agreement, relative to the orbit amplitude
+    sync_samples: int = 8  # random initial states for the convergence statistics
+    seed: int = 0
+    reference: str | None = None  # reference state of the phase lags (default: first primary state)
+    sync_pairs: list[tuple[str, str]] | None = None  # block pairs whose states must agree
+    compute_sync: bool = True
+
+    def validate(self) -> None:
+        for name in ("t_max", "rtol", "atol", "margin", "ratio_tol", "sync_tol"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise VerifyInputError(f"option {name} must be a positive number, got {v!r}")
+        if self.margin >= 1 or self.sync_tol >= 1:
+            raise VerifyInputError("options margin and sync_tol must be below 1")
+        if self.max_denominator < 1 or self.sync_samples < 0:
+            raise VerifyInputError("max_denominator must be >= 1 and sync_samples >= 0")
+
+
+@dataclass
+class Cycle:
+    """A periodic orbit with its Floquet analysis (of the whole graph or of a sub-system)."""
+
+    name: str
+    states: list[str]
+    period: float
+    x0: np.ndarray  # orbit point at the reference up-crossing
+    orbit: np.ndarray  # (n, N_ORBIT + 1) samples over one period from x0
+    monodromy: np.ndarray
+    multipliers: np.ndarray  # complex, sorted by decreasing modulus
+    trivial_index: int
+    amplitudes: dict[str, float]
+    means: dict[str, float]
+    state_periods: dict[str, float | None]
+    crossing_intervals: dict[str, list[float]]
+    reference: str
+    phase_lags: dict[str, dict[str, float]]
+    residual: float
+    flow_invariance: float  # |M f(x0) - f(x0)| / |f(x0)| (0 for an exact orbit)
+    margin: float
+    role: str = "whole graph"
+
+    @property
+    def nontrivial(self) -> np.ndarray:
+        return np.delete(self.multipliers, self.trivial_index)
+
+    @property
+    def max_nontrivial(self) -> float:
+        rest = self.nontrivial
+        return float(np.max(np.abs(rest))) if rest.size else 0.0
+
+    @property
+    def trivial_error(self) -> float:
+        return float(abs(self.multipliers[self.trivial_index] - 1.0))
+
+    @property
+    def stable(self) -> bool:
+        return self.max_nontrivial < 1.0 - self.margin
+
+    def verdict(self) -> str:
+        if self.stable:
+            return (f"stable: trivial multiplier {_c(self.multipliers[self.trivial_index])} "
+                    f"(|mu - 1| = {self.trivial_error:.1e}), all others |mu| <= {self.max_nontrivial:.6f} "
+                    f"< 1 - {self.margin:g}")
+        bad = [m for m in self.nontrivial if abs(m) >= 1 - self.margin]
+        text = (f"not asymptotically stable: {len(bad)} non-trivial multiplier(s) with |mu| >= 1 - "
+                f"{self.margin:g}: " + ", ".join(_c(m) for m in bad))
+        if all(abs(m) < 1 - 1e-6 for m in bad):
+            rate = min(-math.log(abs(m)) / self.period for m in bad)
+            text += (f" (inside the unit circle but within the margin: the slowest mode contracts at {rate:.3g} 1/s, "
+                     "which is too little per cycle; lower --margin to accept it)")
+        return text
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name, "role": self.role, "states": self.states, "period": self.period,
+            "frequency_hz": 1.0 / self.period, "orbit_start": dict(zip(self.states, map(float, self.x0), strict=True)),
+            "amplitudes": self.amplitudes, "means": self.means, "state_periods": self.state_periods,
+            "crossing_intervals": self.crossing_intervals,
+            "frequency_ratios": _freq_ratios(self.state_periods, self.reference),
+            "phase_lags": {"reference": self.reference, "definition": PHASE_LAG_DEFINITION,
+                           "lags": self.phase_lags},
+            "floquet_multipliers": [_cjson(m, i == self.trivial_index) for i, m in enumerate(self.multipliers)],
+            "trivial_multiplier_error": self.trivial_error, "max_nontrivial_multiplier": self.max_nontrivial,
+            "stable": self.stable, "verdict": self.verdict(), "shooting_residual": self.residual,
+            "flow_invariance_error": self.flow_invariance, "monodromy": self.monodromy.tolist(),
+        }
+
+
+PHASE_LAG_DEFINITION = (
+    "'seconds': time from an up-crossing of the reference state through its orbit mean to the next up-crossing "
+    "of the state through its own orbit mean; 'rad' = 2*pi*seconds/T_state (the state's own cycle), "
+    "'rad_reference' = 2*pi*seconds/T_reference; the 'peak_*' values use the time from the reference's "
+    "maximum to the state's next maximum instead")
+
+
+@dataclass
+class VerifyReport:
+    """Everything :func:`verify` found; ``status`` is a key of :data:`STATUS_TEXT`."""
+
+    graph: str
+    states: list[str]
+    status: str
+    reason: str
+    x_init: np.ndarray
+    cycle: Cycle | None = None
+    subcycles: list[Cycle] = field(default_factory=list)
+    ratios: list[dict[str, Any]] = field(default_factory=list)
+    analytic: dict[str, Any] = field(default_factory=dict)
+    sync: dict[str, Any] | None = None
+    equilibrium: dict[str, Any] | None = None
+    inputs: dict[str, float] = field(default_factory=dict)
+    discrete_states: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    transient: tuple[np.ndarray, np.ndarray] | None = None  # (t, X) for plots
+    transient_start: np.ndarray | None = None  # where that transient started, when not x_init
+    options: VerifyOptions = field(default_factory=VerifyOptions)
+
+    @property
+    def stable(self) -> bool:
+        return self.status == "stable-cycle"
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.stable else 1
+
+    def to_json(self) -> dict[str, Any]:
+        c = self.cycle
+        out: dict[str, Any] = {
+            "graph": self.graph, "states": self.states, "status": self.status, "stable": self.stable,
+            "verdict": STATUS_TEXT[self.status], "reason": self.reason,
+            "initial_state": dict(zip(self.states, map(float, self.x_init), strict=True)),
+            "transient_initial_state": dict(zip(self.states, map(float, self.transient_start
+                                                                  if self.transient_start is not None
+                                                                  else self.x_init), strict=True)),
+            "period": c.period if c else None,
+            "amplitudes": c.amplitudes if c else _merge(s.amplitudes for s in self.subcycles),
+            "state_periods": c.state_periods if c else _merge(s.state_periods for s in self.subcycles),
+            "frequency_ratios": _freq_ratios(c.state_periods, c.reference) if c else None,
+            "phase_lags": ({"reference": c.reference, "definition": PHASE_LAG_DEFINITION, "lags": c.phase_lags}
+                           if c else None),
+            "floquet_multipliers": ([_cjson(m, i == c.trivial_index) for i, m in enumerate(c.multipliers)]
+                                    if c else None),
+            "cycle": c.to_json() if c else None,
+            "subcycles": [s.to_json() for s in self.subcycles],
+            "period_ratios": self.ratios,
+            "analytic": self.analytic,
+            "sync_time": self.sync.get("sync_time") if self.sync else None,
+            "sync": self.sync,
+            "equilibrium": self.equilibrium,
+            "held_inputs": self.inputs,
+            "held_discrete_states": self.discrete_states,
+            "notes": self.notes,
+            "options": {k: v for k, v in vars(self.options).items()},
+        }
+        return _jsonable(out)
+
+
+# -- public API ------------------------------------------------------------------------------------
+
+def autonomous_system(model: CompiledModel, inputs: Mapping[str, Any] | None = None, rtol: float = 1e-11,
+                      atol: float = 1e-12) -> tuple[AutonomousSystem, dict[str, float]]:
+    """``dx/dt = f(x)`` from ``model.ode`` with ``z = z0``, constant inputs and ``p = p0``.
+
+    Free graph inputs take the value in ``inputs`` or their declared default; an input with neither,
+    an unknown input name, a co-simulation block or an explicit time dependence raises
+    :class:`VerifyInputError`.
+    """
+    inputs = dict(inputs or {})
+    cs = model.flat.cosim_blocks()
+    if cs:
+        raise VerifyInputError(f"graph has co-simulation block(s) {', '.join(cs)}: verification needs "
+                               "equation blocks only")
+    if model.states.size == 0:
+        raise VerifyInputError("graph has no continuous states: nothing can oscillate")
+    unknown = sorted(set(inputs) - set(model.free_inputs))
+    if unknown:
+        raise VerifyInputError(f"unknown graph input(s) {unknown}; free inputs: {sorted(model.free_inputs) or 'none'}")
+    u = np.zeros(model.inputs.size)
+    held: dict[str, float] = {}
+    for name, port in model.free_inputs.items():
+        if name in inputs:
+            val = np.atleast_1d(np.asarray(inputs[name], dtype=float)).ravel()
+        elif port.default is not None:
+            val = np.full(port.size, float(port.default))
+        else:
+            raise VerifyInputError(f"graph input {name!r} is free: verification needs an autonomous graph; "
+                                   f"hold it constant with --input {name}=VALUE")
+        if val.size != port.size or not np.all(np.isfinite(val)):
+            raise VerifyInputError(f"input {name!r} needs {port.size} finite value(s), got {inputs.get(name)!r}")
+        u[model.inputs.index("$" + name).slice] = val
+        held[name] = float(val[0]) if val.size == 1 else val.tolist()
+    t, X = ca.SX.sym("t"), ca.SX.sym("x", model.states.size)
+    xdot = model.ode(t, X, ca.DM(model.z0), ca.DM(u), ca.DM(model.p0))
+    if ca.depends_on(xdot, t):
+        raise VerifyInputError("the equations depend explicitly on time (a time-varying source?): the graph is "
+                               "not autonomous")
+    system = AutonomousSystem.from_expression(model.states.names(), X, xdot, rtol, atol)
+    system.u = u
+    return system, held
+
+
+def verify(graph: Graph | Block, params: Mapping[str, Any] | None = None,
+           inputs: Mapping[str, Any] | None = None, x0: Mapping[str, Any] | None = None,
+           options: VerifyOptions | None = None) -> VerifyReport:
+    """Find and classify the periodic orbit of ``graph`` (see the module docstring).
+
+    ``params`` sets parameters by path (validated: ``{"*.eps": 0}`` raises), ``inputs`` holds free
+    graph inputs constant, ``x0`` overrides initial states by name (``{"z1.x": 1.0}``).
+    """
+    opts = options or VerifyOptions()
+    opts.validate()
+    if params:
+        if isinstance(graph, Graph):
+            for path, value in params.items():
+                graph.set_param(path, value)
+        else:
+            graph.set(**params)
+    model = compile_graph(graph)
+    system, held = autonomous_system(model, inputs, opts.rtol, opts.atol)
+    x_init = model.x0.copy()
+    for name, value in (x0 or {}).items():
+        if name not in model.states:
+            raise VerifyInputError(f"no continuous state {name!r} (states: {', '.join(model.states.names())})")
+        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        slot = model.states.index(name)
+        if arr.size != slot.size or not np.all(np.isfinite(arr)):
+            raise VerifyInputError(f"initial value of {name} must be {slot.size} finite number(s)")
+        x_init[slot.slice] = arr
+    if opts.reference is not None and opts.reference not in system.names:
+        raise VerifyInputError(f"reference {opts.reference!r} is not a state ({', '.join(system.names)})")
+    return _Verifier(model, system, x_init, opts, held).run()
+
+
+# -- implementation --------------------------------------------------------------------------------
+
+class _Diverged(Exception):
+    pass
+
+
+class _Transient:
+    """A trajectory integrated chunk by chunk, with the classification of its last chunk.
+
+    The last few chunks are kept at full resolution (for the classification), older ones decimated
+    (for the plot), so a long transient of a fast system does not grow without bound.
+    """
+
+    N_CHUNK = 4000
+    KEEP = 3
+
+    def __init__(self, system: AutonomousSystem, x_init: np.ndarray, t_max: float) -> None:
+        self.system = system
+        self.t_max = t_max
+        self.ts = [np.array([0.0])]
+        self.xs = [x_init.reshape(-1, 1).copy()]
+        self.archive_t: list[np.ndarray] = []
+        self.archive_x: list[np.ndarray] = []
+        self.lo = x_init.copy()
+        self.hi = x_init.copy()
+        lam = np.linalg.eigvals(system.jacobian(x_init)) if system.n else np.array([])
+        w = float(np.max(np.abs(lam))) if lam.size else 0.0
+        tau = 2 * math.pi / w if w > 1e-9 else 1.0
+        self.chunk = min(20.0 * tau, t_max)
+        self.bound = 1e6 * (1.0 + float(np.max(np.abs(x_init))))
+
+    @property
+    def t_end(self) -> float:
+        return float(self.ts[-1][-1])
+
+    @property
+    def x_end(self) -> np.ndarray:
+        return self.xs[-1][:, -1].copy()
+
+    @property
+    def scale(self) -> np.ndarray:
+        """``1 + max |x|`` per state over the whole transient."""
+        return 1.0 + np.maximum(np.abs(self.lo), np.abs(self.hi))
+
+    @property
+    def max_range(self) -> float:
+        return float(np.max(self.hi - self.lo))
+
+    def advance(self) -> None:
+        dur = min(self.chunk, self.t_max - self.t_end) if self.t_end < self.t_max else self.chunk
+        try:
+            X = self.system.trajectory(self.x_end, dur, self.N_CHUNK)
+        except IntegrationFailed as exc:
+            raise _Diverged(f"the integration failed after t = {self.t_end:.4g} s ({exc})") from exc
+        t = self.t_end + np.linspace(0.0, dur, self.N_CHUNK + 1)
+        bad = ~np.all(np.isfinite(X), axis=0) | (np.max(np.abs(X), axis=0) > self.bound)
+        if bad.any():
+            k = int(np.argmax(bad))
+            i = int(np.argmax(np.abs(np.nan_to_num(X[:, k], nan=np.inf))))
+            raise _Diverged(f"state {self.system.names[i]} exceeds {self.bound:.3g} at t = {t[k]:.4g} s")
+        self.ts.append(t[1:])
+        self.xs.append(X[:, 1:])
+        self.lo = np.minimum(self.lo, X.min(axis=1))
+        self.hi = np.maximum(self.hi, X.max(axis=1))
+        while len(self.ts) > self.KEEP:
+            self.archive_t.append(self.ts.pop(0)[::10])
+            self.archive_x.append(self.xs.pop(0)[:, ::10])
+
+    def window(self, length: float) -> tuple[np.ndarray, np.ndarray]:
+        t, X = np.concatenate(self.ts), np.hstack(self.xs)
+        k = int(np.searchsorted(t, t[-1] - length))
+        return t[k:], X[:, k:]
+
+    def all(self) -> tuple[np.ndarray, np.ndarray]:
+        """The whole transient (older chunks decimated by 10)."""
+        return np.concatenate(self.archive_t + self.ts), np.hstack(self.archive_x + self.xs)
+
+
+def _state_period(t: np.ndarray, s: np.ndarray) -> tuple[float | None, int]:
+    """Period of a sampled signal from its up-crossings of its mean (``None`` if < 3 crossings)."""
+    lo, hi = float(np.min(s)), float(np.max(s))
+    level = float(np.mean(s))
+    k = up_crossings(s, level, 0.1 * (hi - lo))
+    if k.size < 3:
+        return None, int(k.size)
+    c = np.array([interp_crossing(t, s, j, level) for j in k])
+    iv = np.diff(c)[-8:]
+    for lag in (1, 2, 3, 4):  # a waveform may cross its mean more than once per period
+        if iv.size < lag:
+            break
+        sums = np.array([iv[j:j + lag].sum() for j in range(0, iv.size - lag + 1, lag)])
+        if sums.size and np.ptp(sums) <= 1e-2 * np.mean(sums):
+            return float(np.mean(sums)), int(k.size)
+    return float(np.mean(iv)), int(k.size)
+
+
+def _rational(r: float, max_den: int, tol: float) -> tuple[int, int] | None:
+    """``(p, q)`` with ``|r - p/q| <= tol * r`` and the smallest ``q <= max_den``, else ``None``."""
+    for q in range(1, max_den + 1):
+        p = round(r * q)
+        if p >= 1 and abs(r - p / q) <= tol * r:
+            return p, q
+    return None
+
+
+class _Verifier:
+    def __init__(self, model: CompiledModel, system: AutonomousSystem, x_init: np.ndarray,
+                 opts: VerifyOptions, held: dict[str, float]) -> None:
+        self.model, self.system, self.x_init, self.opts = model, system, x_init, opts
+        self.report = VerifyReport(model.name, system.names, "period-not-found", "", x_init.copy(),
+                                   inputs=held, options=opts,
+                                   discrete_states=dict(zip(model.dstates.names(), map(float, model.z0),
+                                                            strict=True)))
+        if model.dstates.size:
+            self.report.notes.append("discrete states are held at their start values z0 (an autonomous graph "
+                                     "for verification has constant discrete states)")
+
+    # -- driver ----------------------------------------------------------------------------------
+    def run(self) -> VerifyReport:
+        rep = self.report
+        tr = _Transient(self.system, self.x_init, self.opts.t_max)
+        try:
+            self._run(tr)
+            saddle = rep.cycle if rep.status == "unstable-cycle" else None
+            unstable_eq = rep.status == "equilibrium" and rep.equilibrium and not rep.equilibrium["stable"]
+            if (saddle is not None and saddle.max_nontrivial > 1 + self.opts.margin) or unstable_eq:
+                # a forward transient reaches a saddle cycle or an unstable equilibrium only from a
+                # non-generic initial state (on it, or on a symmetric invariant subspace): say so and look
+                # again from a slightly perturbed one
+                rng = np.random.default_rng(self.opts.seed)
+                if saddle is not None:
+                    scale = max([*saddle.amplitudes.values(), 1e-3])
+                    what = (f"an UNSTABLE periodic orbit (period {saddle.period:.8g} s; {saddle.verdict()})")
+                else:
+                    scale = max(1.0, float(np.max(np.abs(self.x_init))))
+                    what = f"an UNSTABLE equilibrium ({rep.reason})"
+                x_pert = self.x_init + 1e-3 * scale * rng.uniform(-1, 1, self.x_init.size)
+                rep.notes.append(
+                    f"from the given initial state the transient reached {what}, which happens only from non-generic "
+                    "initial states (on it, or on a symmetric invariant subspace, e.g. identical followers started "
+                    "in exact anti-phase); the result is from the initial state perturbed by 1e-3 x "
+                    f"{scale:.3g} (uniform, seed {self.opts.seed})")
+                rep.cycle, rep.subcycles, rep.ratios, rep.equilibrium = None, [], [], None
+                rep.status, rep.reason = "period-not-found", ""
+                rep.transient_start = x_pert
+                tr = _Transient(self.system, x_pert, self.opts.t_max)
+                self._run(tr)
+        except _Diverged as exc:
+            rep.status, rep.reason = "diverges", str(exc)
+        t, X = tr.all()
+        step = max(1, len(t) // 20000)
+        rep.transient = (t[::step], X[:, ::step])
+        if rep.cycle is not None or rep.subcycles:
+            self._analytic()
+            self._check_discrete()
+            if self.opts.compute_sync:
+                self._sync()
+        return rep
+
+    def _run(self, tr: _Transient) -> None:
+        rep = self.report
+        attempts = 0
+        while True:
+            tr.advance()
+            state, info = self._classify(tr)
+            if state == "equilibrium":
+                self._equilibrium(tr, info)
+                return
+            if state == "settled" or (tr.t_end >= self.opts.t_max and state == "oscillating"):
+                done = self._find_cycles(tr, info)
+                attempts += 1
+                if done or tr.t_end >= self.opts.t_max or attempts >= 4:
+                    return
+                continue
+            if tr.t_end >= self.opts.t_max:
+                if state == "decaying" and self._equilibrium(tr, info, require_stable=True):
+                    return
+                rep.status = "diverges" if state == "growing" else "period-not-found"
+                rep.reason = (f"the oscillation amplitude is still {state} at t_max = {self.opts.t_max:g} s "
+                              f"({info.get('detail', '')})")
+                return
+
+    def _classify(self, tr: _Transient) -> tuple[str, dict[str, Any]]:
+        t, X = tr.window(tr.chunk)
+        half = len(t) // 2
+        r1 = np.ptp(X[:, :half], axis=1)
+        r2 = np.ptp(X[:, half:], axis=1)
+        scale, max_range = tr.scale, tr.max_range
+        if np.all(r2 <= 1e-9 * scale) or np.max(r2) <= 1e-7 * max_range:
+            return "equilibrium", {"detail": "the state stopped moving"}
+        osc = np.nonzero(r2 > 1e-6 * scale)[0]
+        change = (r2[osc] - r1[osc]) / r2[osc]
+        info: dict[str, Any] = {"osc": osc, "detail": f"relative range change per half chunk "
+                                                      f"{float(np.max(np.abs(change))):.2e}"}
+        periods: dict[int, float] = {}
+        counts = []
+        for i in osc:
+            per, cnt = _state_period(t[half:], X[i, half:])
+            counts.append(cnt)
+            if per is not None:
+                periods[int(i)] = per
+        info["periods"] = periods
+        if counts and min(counts) < 3:
+            tr.chunk = min(2 * tr.chunk, self.opts.t_max)  # too few cycles in a window: look longer
+        if np.all(change < -1e-3):
+            return "decaying", info
+        if np.all(change > 1e-3):
+            return "growing", info
+        if np.all(np.abs(change) <= 1e-3) and len(periods) == len(osc):
+            return "settled", info
+        return "oscillating" if len(periods) == len(osc) and periods else "unsettled", info
+
+    def _equilibrium(self, tr: _Transient, info: dict[str, Any], require_stable: bool = False) -> bool:
+        rep = self.report
+        sysm = self.system
+        xs = ca.SX.sym("x", sysm.n)
+        rf = ca.rootfinder("eq", "newton", ca.Function("g", [xs], [sysm.f(xs)]),
+                           {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False})
+        t, X = tr.window(tr.chunk)
+        try:
+            xe = np.asarray(rf(X[:, -1])).ravel()
+        except RuntimeError:
+            xe = X[:, -1]
+        ok = np.all(np.isfinite(xe)) and np.max(np.abs(sysm.rhs(xe))) < 1e-8 * (1 + np.max(np.abs(xe)))
+        lam = np.linalg.eigvals(sysm.jacobian(xe)) if ok else np.array([])
+        stable = bool(ok and np.all(lam.real < 0))
+        if require_stable and not stable:
+            return False
+        where = ", ".join(f"{n}={v:.4g}" for n, v in zip(sysm.names, xe, strict=True))
+        rep.status = "equilibrium"
+        rep.reason = (f"converges to an equilibrium at {where}" +
+                      (f" (Jacobian eigenvalues: max real part {float(np.max(lam.real)):.3g})" if lam.size else "")
+                      + f"; {info.get('detail', '')} by t = {tr.t_end:.4g} s")
+        rep.equilibrium = {"x": dict(zip(sysm.names, map(float, xe), strict=True)),
+                           "eigenvalues": [_cjson(v) for v in lam], "stable": stable, "t": tr.t_end}
+        return True
+
+    # -- cycles ----------------------------------------------------------------------------------
+    def _find_cycles(self, tr: _Transient, info: dict[str, Any]) -> bool:
+        """Shoot the primary components, then the whole system if they are commensurate.
+
+        Returns ``False`` when a shooting solve failed (the caller extends the transient and retries).
+        """
+        rep, sysm, opts = self.report, self.system, self.opts
+        periods: dict[int, float] = info["periods"]
+        comps, edges = sysm.components()
+        osc_comps = [c for c, comp in enumerate(comps) if any(i in periods for i in comp)]
+        ancestors = _ancestors(len(comps), edges)
+        primary = [c for c in osc_comps if not (ancestors[c] & set(osc_comps))]
+        x_end = tr.x_end
+        subs: list[Cycle] = []
+        for c in primary:
+            idx = sorted(set(comps[c]).union(*[comps[a] for a in ancestors[c]]))
+            T_guess = max(periods[i] for i in comps[c] if i in periods)
+            cyc = self._shoot(idx, x_end, T_guess, role="primary: no oscillating driver")
+            if cyc is None:
+                rep.status, rep.reason = "period-not-found", (
+                    f"shooting for the sub-cycle of {self._label(idx)} (period guess {T_guess:.6g} s) "
+                    f"did not converge by t = {tr.t_end:.4g} s")
+                return False
+            subs.append(cyc)
+        subs.sort(key=lambda c: -round(c.period, 9))  # slowest (e.g. the leader) first; stable for ties
+        rep.subcycles = subs
+        base = subs[0]
+        rep.ratios = []
+        common = base.period
+        ok_common = True
+        for other in subs[1:]:
+            r = other.period / base.period  # <= 1
+            pq = _rational(r, opts.max_denominator, opts.ratio_tol)
+            rep.ratios.append({"a": base.name, "b": other.name, "period_a": base.period, "period_b": other.period,
+                               "frequency_ratio": 1.0 / r, "rational": f"{pq[1]}/{pq[0]}" if pq else None,
+                               "definition": "frequency_ratio = f_b / f_a = T_a / T_b"})
+            if pq is None:
+                ok_common = False
+            else:
+                common = _lcm_period(common, base.period, pq)
+        if not ok_common:
+            rep.status = "no-common-period"
+            rep.reason = "; ".join(
+                f"frequency ratio {d['a']} : {d['b']} = 1 : {d['frequency_ratio']:.8f} (periods "
+                f"{d['period_a']:.8g} s and {d['period_b']:.8g} s) is not rational with denominator <= "
+                f"{opts.max_denominator} within {opts.ratio_tol:g}" for d in rep.ratios if d["rational"] is None)
+            rep.reason += ": the graph has no common period (its motion is quasi-periodic); sub-cycles reported"
+            return True
+        # whole-system period: the smallest multiple of the common period that every state's period divides
+        T_full = None
+        for k in range(1, opts.max_denominator + 1):
+            cand = k * common
+            if all(abs(cand / p - round(cand / p)) <= 2e-3 * cand / p for p in periods.values()):
+                T_full = cand
+                break
+        if T_full is None:
+            worst = {sysm.names[i]: p for i, p in periods.items()}
+            rep.status = "no-common-period"
+            rep.reason = (f"driven states do not lock to the common period {common:.6g} s of the primary "
+                          f"cycles (transient periods {_fmt_dict(worst)})")
+            return True
+        if len(primary) == 1 and len(subs[0].states) == sysm.n:
+            cyc = subs[0]
+            cyc.role = "whole graph"
+        else:
+            cyc = self._shoot(list(range(sysm.n)), x_end, T_full, role="whole graph")
+        if cyc is None:
+            rep.status, rep.reason = "period-not-found", (
+                f"shooting for the whole graph (period guess {T_full:.6g} s) did not converge by "
+                f"t = {tr.t_end:.4g} s")
+            return False
+        rep.cycle = cyc
+        if cyc.stable:
+            rep.status, rep.reason = "stable-cycle", cyc.verdict()
+        else:
+            rep.status, rep.reason = "unstable-cycle", cyc.verdict()
+            n_one = int(np.sum(np.abs(cyc.multipliers - 1.0) < 1e-6))
+            if len(subs) > 1 and n_one == len(subs):
+                rep.reason += (f" -- the {len(subs)} multipliers at 1 belong to {len(subs)} uncoupled primary "
+                               "oscillators with a common period: their relative phases are neutral, not attracting")
+        if cyc.trivial_error > 1e-4:
+            rep.notes.append(f"the trivial multiplier differs from 1 by {cyc.trivial_error:.1e}: the orbit is "
+                             "inaccurate (tighten rtol/atol)")
+        return True
+
+    def _label(self, idx: Sequence[int]) -> str:
+        names = [self.system.names[i] for i in idx]
+        blocks = list(dict.fromkeys(n.rsplit(".", 1)[0] if "." in n else n for n in names))
+        return "+".join(blocks)
+
+    def _shoot(self, idx: list[int], x_end: np.ndarray, T_guess: float, role: str) -> Cycle | None:
+        full = len(idx) == self.system.n
+        sub = self.system if full else self.system.subsystem(idx, x_end)
+        res = sub.shoot(x_end[idx], T_guess)
+        if not res.converged:
+            return None
+        return self._analyse(sub, self._label(idx), res.x0, res.period, res.residual, role)
+
+    def _analyse(self, sub: AutonomousSystem, name: str, x_star: np.ndarray, T: float, residual: float,
+                 role: str) -> Cycle:
+        """Floquet multipliers, amplitudes, own periods, crossings and phase lags of an orbit."""
+        names = sub.names
+        orb = sub.trajectory(x_star, T, N_ORBIT)
+        means = orb[:, :-1].mean(axis=1)
+        ranges = np.ptp(orb, axis=1)
+        osc = [i for i in range(sub.n) if ranges[i] > 1e-8 * (1 + abs(means[i]))]
+        ref = self.opts.reference if self.opts.reference in names else (names[osc[0]] if osc else names[0])
+        iref = names.index(ref)
+        if iref in osc:  # start the orbit at the reference's up-crossing of its mean
+            t0 = self._crossings(sub, orb, T, iref, means[iref], ranges[iref])
+            if t0:
+                x_star = sub.flow(x_star, t0[0])
+                orb = sub.trajectory(x_star, T, N_ORBIT)
+        xT, M = sub.monodromy(x_star, T)
+        mu = np.linalg.eigvals(M)
+        mu = mu[np.argsort(-np.abs(mu), kind="stable")]
+        trivial = int(np.argmin(np.abs(mu - 1.0)))
+        f0 = sub.rhs(x_star)
+        inv = float(np.linalg.norm(M @ f0 - f0) / max(np.linalg.norm(f0), 1e-300))
+        amps: dict[str, float] = {}
+        own: dict[str, float | None] = {}
+        intervals: dict[str, list[float]] = {}
+        lags: dict[str, dict[str, float]] = {}
+        crossings: dict[int, list[float]] = {}
+        for i, nm in enumerate(names):
+            amps[nm] = 0.5 * (_extremum(orb[i, :-1], max) - _extremum(orb[i, :-1], min))
+            own[nm] = T / _min_period_divisor(orb[i, :-1]) if i in osc else None
+            if i in osc:
+                crossings[i] = self._crossings(sub, orb, T, i, means[i], ranges[i])
+                c = crossings[i]
+                intervals[nm] = [float(b - a) for a, b in zip(c, [*c[1:], c[0] + T], strict=True)] if c else []
+        T_ref = own.get(ref) or T
+        t_peak_ref = _peak_time(orb[iref, :-1], T)
+        for i in osc:
+            c = crossings.get(i) or []
+            Ti = own[names[i]] or T
+            if not c:
+                continue
+            lag = min(x % Ti for x in c)
+            if Ti - lag < 1e-9 * Ti:
+                lag = 0.0
+            pk = (_peak_time(orb[i, :-1], T) - t_peak_ref) % Ti
+            if Ti - pk < 1e-9 * Ti:
+                pk = 0.0
+            lags[names[i]] = {"seconds": lag, "rad": 2 * math.pi * lag / Ti, "rad_reference": 2 * math.pi * lag / T_ref,
+                              "peak_seconds": pk, "peak_rad": 2 * math.pi * pk / Ti,
+                              "peak_rad_reference": 2 * math.pi * pk / T_ref}
+        return Cycle(name=name, states=list(names), period=float(T), x0=np.asarray(x_star), orbit=orb, monodromy=M,
+                     multipliers=mu, trivial_index=trivial, amplitudes=amps,
+                     means={n: float(m) for n, m in zip(names, means, strict=True)}, state_periods=own,
+                     crossing_intervals=intervals, reference=ref, phase_lags=lags, residual=residual,
+                     flow_invariance=inv, margin=self.opts.margin, role=role)
+
+    @staticmethod
+    def _crossings(sub: AutonomousSystem, orb: np.ndarray, T: float, i: int, level: float,
+                   rng: float) -> list[float]:
+        """Up-crossing times of state ``i`` through ``level`` in ``[0, T)`` (Newton-refined on the flow)."""
+        s2 = np.concatenate([orb[i, :-1], orb[i, :-1], orb[i, :1]])
+        h = T / N_ORBIT
+        tt = h * np.arange(s2.size)
+        out = []
+        for k in up_crossings(s2, level, 0.1 * rng):
+            if not (N_ORBIT <= k < 2 * N_ORBIT):
+                continue
+            kk = k - N_ORBIT
+            d0 = interp_crossing(tt, s2, k, level) - tt[k]
+            d = sub.refine_crossing(orb[:, kk], i, level, d0)
+            out.append((kk * h + d) % T)
+        return sorted(out)
+
+    # -- analytic values (Yu Y4) -----------------------------------------------------------------
+    def _analytic(self) -> None:
+        from components.neurons import VanDerPolNeuron
+
+        rep = self.report
+        cycles = ([rep.cycle] if rep.cycle else []) + rep.subcycles
+        for path, blk in self.model.flat.equation_blocks().items():
+            if not isinstance(blk, VanDerPolNeuron):
+                continue
+            sx, sy = f"{path}.x", f"{path}.y"
+            home = next((c for c in rep.subcycles if sx in c.states and len(c.states) == 2), None)
+            cyc = rep.cycle or next((c for c in cycles if sx in c.states), None)
+            if cyc is None:
+                continue
+            scale = self._input_value(path, "omega_scale", blk, cyc)
+            rate = self._input_value(path, "rate", blk, cyc)
+            eps, b, omega = blk.values["eps"], blk.values["b"], blk.values["omega"]
+            coupled = f"{path}.u" in self.model.flat.sources
+            entry: dict[str, Any] = {"equation": "Yu Y4 (first order in eps)", "eps": eps, "b": b, "omega": omega,
+                                     "coupled": coupled}
+            if scale is None or rate is None or rate <= 0:
+                entry["note"] = "omega_scale or rate is not constant on the orbit: no analytic value"
+                rep.analytic[path] = entry
+                continue
+            w = omega * scale * rate
+            ana_T, ana_A, ana_Ay = 2 * math.pi / w, 2 / math.sqrt(b), 2 * omega * scale / math.sqrt(b)
+            num_T = cyc.state_periods.get(sx)
+            num_A, num_Ay = cyc.amplitudes[sx], cyc.amplitudes[sy]
+            entry.update({
+                "period": ana_T, "period_numeric": num_T,
+                "period_rel_error": (num_T - ana_T) / ana_T if num_T else None,
+                "amplitude": ana_A, "amplitude_numeric": num_A, "amplitude_rel_error": (num_A - ana_A) / ana_A,
+                "amplitude_y": ana_Ay, "amplitude_y_numeric": num_Ay,
+                "amplitude_y_rel_error": (num_Ay - ana_Ay) / ana_Ay,
+            })
+            if not coupled:
+                # not in Yu: second-order Lindstedt-Poincare terms, mu = eps/omega (reference only)
+                mu2 = (eps / (omega * scale)) ** 2
+                entry.update({"period_second_order": ana_T * (1 + mu2 / 16),
+                              "amplitude_second_order": ana_A * (1 + mu2 / 192),
+                              "second_order_note": "Lindstedt-Poincare: T = 2pi/omega (1 + mu^2/16), A = 2/sqrt(b) "
+                                                   "(1 + mu^2/192), mu = eps/omega (not in Yu)"})
+            if home is not None and not coupled:
+                mult = math.exp(-eps * rate * home.period)
+                num = home.nontrivial[0] if home.nontrivial.size else float("nan")
+                entry.update({"multiplier": mult, "multiplier_note": "exp(-eps*T): first-order Floquet multiplier",
+                              "multiplier_numeric": float(np.real(num)),
+                              "multiplier_rel_error": float((np.real(num) - mult) / mult)})
+            if coupled:
+                entry["note"] = "coupled neuron: Y4 describes the isolated neuron and is given for reference"
+            rep.analytic[path] = entry
+
+    def _input_value(self, path: str, port: str, blk: Block, cyc: Cycle) -> float | None:
+        m = self.model
+        src = m.flat.sources.get(f"{path}.{port}")
+        if src is None:
+            return float(blk.inputs[port].default)
+        if src.startswith("$"):
+            return float(np.atleast_1d(self.report.inputs[src[1:]])[0])
+        slot = m.signals_layout.index(src)
+        vals = []
+        for k in (0, N_ORBIT // 3, 2 * N_ORBIT // 3):
+            x = self._full_state(cyc, cyc.orbit[:, k])
+            y = np.asarray(m.signals(0.0, x, m.z0, self.system.u, m.p0)).ravel()
+            vals.append(float(y[slot.start]))
+        return vals[0] if np.ptp(vals) <= 1e-12 * (1 + abs(vals[0])) else None
+
+    def _full_state(self, cyc: Cycle, x_sub: np.ndarray) -> np.ndarray:
+        x = self.x_init.copy() if self.report.transient is None else self.report.transient[1][:, -1].copy()
+        for j, nm in enumerate(cyc.states):
+            x[self.system.names.index(nm)] = x_sub[j]
+        return x
+
+    def _check_discrete(self) -> None:
+        m, rep = self.model, self.report
+        cyc = rep.cycle or rep.subcycles[0]
+        worst = 0.0
+        for k in range(0, N_ORBIT, N_ORBIT // 12):
+            x = self._full_state(cyc, cyc.orbit[:, k])
+            xp, zp = m.discrete(0.0, x, m.z0, self.system.u, m.p0)
+            worst = max(worst, float(np.max(np.abs(np.asarray(xp).ravel() - x), initial=0.0)),
+                        float(np.max(np.abs(np.asarray(zp).ravel() - m.z0), initial=0.0)))
+        if worst > 1e-12:
+            rep.notes.append(f"the sampled discrete updates/resets would change the state on the orbit (by up to "
+                             f"{worst:.3g}); they are not applied: discrete states are held at z0")
+
+    # -- convergence / synchronisation -----------------------------------------------------------
+    def _sync_pairs(self) -> list[tuple[str, str]]:
+        from components.neurons import VanDerPolNeuron
+
+        if self.opts.sync_pairs is not None:
+            return list(self.opts.sync_pairs)
+        comps, _ = self.system.components()
+        names = self.system.names
+        pairs = []
+        for comp in comps:
+            blocks = list(dict.fromkeys(names[i].rsplit(".", 1)[0] for i in comp))
+            vdp = [b for b in blocks if isinstance(self.model.flat.blocks.get(b), VanDerPolNeuron)]
+            for a_i, a in enumerate(vdp):
+                for b in vdp[a_i + 1:]:
+                    va, vb = self.model.flat.blocks[a].values, self.model.flat.blocks[b].values
+                    if all(va[k] == vb[k] for k in ("eps", "b", "omega")):
+                        pairs.append((a, b))
+        return pairs
+
+    def _loose_system(self) -> AutonomousSystem:
+        """The same ``f`` with looser tolerances (1e-9) for the long convergence simulations."""
+        if not hasattr(self, "_loose"):
+            s = self.system
+            self._loose = AutonomousSystem(s.names, s.f, rtol=max(s.rtol, 1e-9), atol=max(s.atol, 1e-10))
+        return self._loose
+
+    def _sync(self) -> None:
+        rep, opts, sysm = self.report, self.opts, self.system
+        names = sysm.names
+        pairs = self._sync_pairs()
+        amp = {}
+        for c in ([rep.cycle] if rep.cycle else rep.subcycles):
+            amp.update(c.amplitudes)
+        idx_pairs: list[tuple[int, int, float]] = []
+        for a, b in pairs:
+            sa = [n for n in names if n.startswith(a + ".")]
+            if not sa:
+                raise VerifyInputError(f"sync pair {a},{b}: {a!r} has no states")
+            for n in sa:
+                other = b + n[len(a):]
+                if other not in names:
+                    raise VerifyInputError(f"sync pair {a},{b}: {b!r} has no state {other[len(b) + 1:]!r}")
+                scale = max(amp.get(n, 0.0), amp.get(other, 0.0)) or 1.0
+                idx_pairs.append((names.index(n), names.index(other), scale))
+        periods = [c.period for c in ([rep.cycle] if rep.cycle else rep.subcycles)]
+        T_long = max(periods)
+        tols = sorted({0.1, 0.05, opts.sync_tol}, reverse=True)
+        from scipy.spatial import cKDTree
+
+        trees = []  # distance to the cycle, or to each sub-cycle (the torus of a quasi-periodic graph)
+        for cyc in ([rep.cycle] if rep.cycle else rep.subcycles):
+            sub = sysm if cyc is rep.cycle else sysm.subsystem([names.index(n) for n in cyc.states],
+                                                               self._full_state(cyc, cyc.x0))
+            dense = sub.trajectory(cyc.x0, cyc.period, 4 * N_ORBIT)[:, :-1]
+            idx = np.array([names.index(n) for n in cyc.states])
+            scale = np.array([cyc.amplitudes[n] or 1.0 for n in cyc.states])
+            trees.append((idx, scale, cKDTree((dense / scale[:, None]).T)))
+        tree = trees
+
+        def measure(x0: np.ndarray) -> tuple[dict[str, Any], np.ndarray, np.ndarray, np.ndarray]:
+            t, d_sync, d_cyc, x_last = self._distances(x0, idx_pairs, tree, T_long)
+            out: dict[str, Any] = {"horizon": float(t[-1])}
+            if idx_pairs:
+                out["sync_time"] = {f"{tol:g}": _settle_time(t, d_sync, tol) for tol in tols}
+                # do the pairs agree while oscillating, or only because they came to rest?
+                X_end = self._loose_system().trajectory(x_last, T_long, 400)
+                out["pair_amplitude_at_end"] = min(float(np.ptp(X_end[a]) / (2 * sc)) for a, _, sc in idx_pairs)
+            if tree:
+                out["cycle_time"] = {f"{tol:g}": _settle_time(t, d_cyc, tol) for tol in tols}
+            return out, t, d_sync, d_cyc
+
+        main, t, d_sync, d_cyc = measure(self.x_init)
+        key = f"{opts.sync_tol:g}"
+        sync: dict[str, Any] = {
+            "pairs": [list(p) for p in pairs], "tolerance": opts.sync_tol,
+            "definition": ("sync_time: earliest time after which every state of each pair differs by less than "
+                           "tolerance x the orbit amplitude for the rest of the horizon; cycle_time: the same for "
+                           "the distance to the orbit (max over states, relative to each amplitude)"),
+            "initial_state": dict(zip(names, map(float, self.x_init), strict=True)),
+            "sync_time": main.get("sync_time", {}).get(key), "cycle_time": main.get("cycle_time", {}).get(key),
+            "pair_amplitude_at_end": main.get("pair_amplitude_at_end"), "horizon": main["horizon"],
+            "by_tolerance": main, "trace": (t, d_sync, d_cyc),
+        }
+        if opts.sync_samples:
+            rng = np.random.default_rng(opts.seed)
+            center = np.array([np.mean([c.means.get(n, 0.0) for c in ([rep.cycle] if rep.cycle else rep.subcycles)
+                                        if n in c.means] or [0.0]) for n in names])
+            spread = np.array([1.5 * (amp.get(n) or 1.0) for n in names])
+            samples = []
+            for _ in range(opts.sync_samples):
+                x0 = center + spread * rng.uniform(-1, 1, size=len(names))
+                res, *_ = measure(x0)
+                samples.append({"x0": x0.tolist(), "sync_time": res.get("sync_time", {}).get(key),
+                                "cycle_time": res.get("cycle_time", {}).get(key)})
+            sync["samples"] = samples
+            for k in ("sync_time", "cycle_time"):
+                vals = [s[k] for s in samples if s[k] is not None]
+                if vals:
+                    sync[f"{k}_samples"] = {"min": min(vals), "median": float(np.median(vals)), "max": max(vals),
+                                            "n": len(vals), "not_reached": len(samples) - len(vals)}
+        rep.sync = sync
+
+    def _distances(self, x0: np.ndarray, idx_pairs, tree, T_long: float):
+        """Sync and orbit distances along a trajectory from ``x0``, until they stay small for a while."""
+        sysm, opts = self._loose_system(), self.opts
+        dt = T_long / 100.0
+        ts, ds, dc = [np.array([0.0])], [], []
+        x = x0.copy()
+        chunk = 20 * T_long
+        t_now = 0.0
+        X0 = x0.reshape(-1, 1)
+
+        def dist(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            d1 = (np.max(np.stack([np.abs(X[a] - X[b]) / s for a, b, s in idx_pairs]), axis=0)
+                  if idx_pairs else np.zeros(X.shape[1]))
+            d2 = np.zeros(X.shape[1])
+            for idx, scale, tr in tree:
+                d2 = np.maximum(d2, _orbit_distance(tr, (X[idx] / scale[:, None]).T))
+            return d1, d2
+
+        a, b = dist(X0)
+        ds.append(a)
+        dc.append(b)
+        tol = opts.sync_tol
+        while t_now < opts.t_max:
+            dur = min(chunk, opts.t_max - t_now)
+            n = max(1, int(round(dur / dt)))
+            try:
+                X = sysm.trajectory(x, dur, n)[:, 1:]
+            except IntegrationFailed:
+                break
+            a, b = dist(X)
+            ts.append(t_now + np.linspace(0, dur, n + 1)[1:])
+            ds.append(a)
+            dc.append(b)
+            t_now += dur
+            x = X[:, -1]
+            d_all = np.maximum(np.concatenate(ds), np.concatenate(dc))
+            t_all = np.concatenate(ts)
+            st = _settle_time(t_all, d_all, tol)
+            if st is not None and t_all[-1] - st >= 3 * T_long:
+                break
+        return np.concatenate(ts), np.concatenate(ds), np.concatenate(dc), x
+
+
+# -- helpers ---------------------------------------------------------------------------------------
+
+def _orbit_distance(tree: Any, Q: np.ndarray) -> np.ndarray:
+    """Max-norm distance of the points ``Q`` to the closed polyline of the tree's points (an orbit)."""
+    P = tree.data
+    n = P.shape[0]
+    _, k = tree.query(Q, p=np.inf)
+    best = np.full(Q.shape[0], np.inf)
+    for nb in (-1, 1):  # project on both segments adjacent to the nearest sample
+        A, B = P[k], P[(k + nb) % n]
+        AB = B - A
+        den = np.einsum("ij,ij->i", AB, AB)
+        lam = np.clip(np.einsum("ij,ij->i", Q - A, AB) / np.where(den > 0, den, 1.0), 0.0, 1.0)
+        best = np.minimum(best, np.max(np.abs(Q - (A + lam[:, None] * AB)), axis=1))
+    return best
+
+
+def _settle_time(t: np.ndarray, d: np.ndarray, tol: float) -> float | None:
+    """Earliest time after which ``d < tol`` until the end (``None`` if the last sample is not)."""
+    above = np.nonzero(d >= tol)[0]
+    if above.size == 0:
+        return 0.0
+    k = int(above[-1])
+    if k == len(t) - 1:
+        return None
+    a, b = d[k], d[k + 1]
+    return float(t[k] + (a - tol) / (a - b) * (t[k + 1] - t[k])) if a != b else float(t[k + 1])
+
+
+def _ancestors(n: int, edges: set[tuple[int, int]]) -> list[set[int]]:
+    parents: dict[int, set[int]] = {i: set() for i in range(n)}
+    for a, b in edges:
+        parents[b].add(a)
+    out = []
+    for c in range(n):
+        seen: set[int] = set()
+        todo = list(parents[c])
+        while todo:
+            a = todo.pop()
+            if a not in seen:
+                seen.add(a)
+                todo += parents[a]
+        out.append(seen)
+    return out
+
+
+def _lcm_period(common: float, base: float, pq: tuple[int, int]) -> float:
+    """Least common multiple of ``common`` (a multiple of ``base``) and ``base * p / q``."""
+    k_common = round(common / base)
+    p, q = pq
+    # common = k*base, other = (p/q)*base: lcm over the grid base/q
+    a, b = k_common * q, p
+    return math.lcm(a, b) * base / q
+
+
+def _min_period_divisor(s: np.ndarray) -> int:
+    """The largest ``k <= 12`` such that the sampled periodic signal repeats after ``N/k`` samples."""
+    n = s.size
+    tol = 1e-6 * (np.ptp(s) + 1e-300)
+    for k in (12, 10, 9, 8, 7, 6, 5, 4, 3, 2):
+        if n % k == 0 and np.max(np.abs(np.roll(s, -n // k) - s)) <= tol:
+            return k
+    return 1
+
+
+def _peak_time(s: np.ndarray, T: float) -> float:
+    """Time of the maximum of a periodic signal sampled uniformly over ``[0, T)`` (parabolic refinement)."""
+    k = int(np.argmax(s))
+    a, b, c = s[k - 1], s[k], s[(k + 1) % s.size]
+    den = a - 2 * b + c
+    d = 0.5 * (a - c) / den if den != 0 else 0.0
+    return float(((k + d) * T / s.size) % T)
+
+
+def _extremum(s: np.ndarray, which) -> float:
+    """Maximum or minimum of a periodic sampled signal, refined by a parabola through 3 samples."""
+    k = int(np.argmax(s) if which is max else np.argmin(s))
+    a, b, c = s[k - 1], s[k], s[(k + 1) % s.size]
+    den = a - 2 * b + c
+    if den == 0:
+        return float(b)
+    d = 0.5 * (a - c) / den
+    return float(b - 0.25 * (a - c) * d)
+
+
+def _freq_ratios(periods: Mapping[str, float | None], ref: str) -> dict[str, float | None]:
+    Tr = periods.get(ref)
+    return {n: (Tr / p if (p and Tr) else None) for n, p in periods.items()}
+
+
+def _merge(dicts) -> dict:
+    out: dict = {}
+    for d in dicts:
+        out.update(d)
+    return out
+
+
+def _c(m: complex) -> str:
+    m = complex(m)
+    return f"{m.real:.6f}" if abs(m.imag) < 1e-9 else f"{m.real:.6f}{m.imag:+.6f}j"
+
+
+def _cjson(m: complex, trivial: bool | None = None) -> dict[str, Any]:
+    m = complex(m)
+    out: dict[str, Any] = {"re": m.real, "im": m.imag, "abs": abs(m)}
+    if trivial is not None:
+        out["trivial"] = trivial
+    return out
+
+
+def _fmt_dict(d: Mapping[str, float]) -> str:
+    return ", ".join(f"{k}: {v:.6g}" for k, v in d.items())
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items() if k != "trace"}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, complex):
+        return _cjson(obj)
+    return obj

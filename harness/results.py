@@ -39,6 +39,7 @@ class Results:
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "time":
             return self.time
+        name = self.meta.get("aliases", {}).get(name, name)
         if name in self._index:
             return self.data[:, self._index[name]]
         matches = [c for c in self.columns if c.startswith(name + "[")]
@@ -47,6 +48,7 @@ class Results:
         raise ResultsError(f"no column {name!r} in results (have e.g. {', '.join(self.columns[:6])}...)")
 
     def __contains__(self, name: str) -> bool:
+        name = self.meta.get("aliases", {}).get(name, name)
         return name in self._index or any(c.startswith(name + "[") for c in self.columns)
 
     def unit(self, name: str) -> str:

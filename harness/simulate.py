@@ -105,6 +105,8 @@ class Simulator:
         u_free = self._free_input_matrix(inputs or {}, times)
         columns, units, picks = self._record_layout()
         rec = _Recorder(times, columns, units)
+        rec.aliases = {a: leaf for a, leaf in self.aliases.items()
+                       if any(c == leaf or c.startswith(leaf + "[") for c in columns)}
         cs = m.flat.cosim_blocks()
         if cs:
             self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
@@ -143,6 +145,14 @@ class Simulator:
             raise ModelError(f"unknown graph input(s) {sorted(unknown)}; free inputs: {list(m.free_inputs)}")
         return np.vstack(rows) if rows else np.zeros((0, len(times)))
 
+    @property
+    def aliases(self) -> dict[str, str]:
+        """Exposed graph outputs (nested ``sub.out`` and top-level ``out``) -> the leaf port they show."""
+        flat = self.model.flat
+        out = {name: flat._resolve_out("@" + name) for name in flat.aliases_out}
+        out.update(self.model.graph_outputs)
+        return {k: v for k, v in out.items() if k != v}
+
     def _record_layout(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
         """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element)."""
         m = self.model
@@ -159,8 +169,11 @@ class Simulator:
                     units.append(port.unit)
                     picks.append((f"{path}.{port.name}", i, 0))
         if self._record_patterns:
+            wanted = {leaf for alias, leaf in self.aliases.items()
+                      if any(fnmatch.fnmatchcase(alias, pat) for pat in self._record_patterns)}
             keep = [j for j, c in enumerate(cols)
-                    if any(fnmatch.fnmatchcase(c, pat) or fnmatch.fnmatchcase(c.split("[")[0], pat)
+                    if c.split("[")[0] in wanted
+                    or any(fnmatch.fnmatchcase(c, pat) or fnmatch.fnmatchcase(c.split("[")[0], pat)
                            for pat in self._record_patterns)]
             if not keep:
                 raise ModelError(f"record patterns {self._record_patterns} match no signal")
@@ -255,6 +268,7 @@ class Simulator:
                       zip(_row_slices(m.free_inputs), m.free_inputs, strict=True)]
         cs_in_slots = [(m.inputs.index(s.name).slice, s.name) for s in m.inputs.slots if not s.name.startswith("$")]
         feeds = self._cosim_feeds(cs)
+        ft_paths = [path for path, blk in cs.items() if any(blk.feedthrough.values())]
         y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
         c_picks = _group_cosim_picks(picks)
         yj = np.array([j for j, _ in y_picks], dtype=int)
@@ -278,6 +292,15 @@ class Simulator:
                     u[sl] = outputs[path][port]
                 t_arr[0] = t
                 evaluate()
+                for _ in range(len(ft_paths)):  # direct feedthrough: inputs at t before outputs at t
+                    for path in ft_paths:
+                        values = {port: _source_value(src, y, u_free[:, k], outputs, m) for port, src in feeds[path]}
+                        _guard(path, "set_inputs", lambda b=cs[path], v=values: b.set_inputs(v), rec)
+                        outputs[path] = _guard(path, "get_outputs", cs[path].get_outputs, rec)
+                    for sl, name in cs_in_slots:
+                        path, port = name.rsplit(".", 1)
+                        u[sl] = outputs[path][port]
+                    evaluate()
                 if not np.all(np.isfinite(x_next)):
                     rec.add_row(_fill_row(row, yj, yi, y, c_picks, outputs))
                     self._diverged(x_next, x, t + dt, rec, picks)
@@ -405,6 +428,7 @@ class _Recorder:
         self.n = 0
         self.columns = columns
         self.units = units
+        self.aliases: dict[str, str] = {}
 
     def add_row(self, row: np.ndarray) -> None:
         self.data[self.n] = row
@@ -419,7 +443,7 @@ class _Recorder:
 
     def results(self, complete: bool, message: str) -> Results:
         return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
-                       self.data[:self.n].copy(), complete, message)
+                       self.data[:self.n].copy(), complete, message, {"aliases": dict(self.aliases)})
 
 
 def _progress(total: int, enabled: bool, name: str):

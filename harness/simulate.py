@@ -25,6 +25,11 @@ from .compile import CompiledModel, compile_graph
 from .graph import Graph
 from .results import Results
 
+NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
+"""Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM (a six-leg
+Yu controller step is ~11k instructions: its C took gcc 16 s at -O3 on the loaded 2-core machine, while
+the CasADi VM runs it at tens of us per step)."""
+
 InputValue = float | Sequence[float] | np.ndarray | Callable[[float], Any]
 
 
@@ -189,6 +194,9 @@ class Simulator:
     def _native(self):
         """The C horizon runner, or None when the backend is 'casadi' or no compiler works."""
         if self.backend == "casadi":
+            return None
+        if self.backend == "auto" and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS:
+            self.backend = "casadi"  # gcc on very large generated C takes longer than the run saves
             return None
         if self._native_runner is None:
             from .native import NativeHorizon, NativeUnavailable

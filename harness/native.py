@@ -50,6 +50,36 @@ done:
   free(arg); free(res); free(iw); free(w);
   return rc;
 }
+
+/* One step on bound buffers (for the co-simulation master): bind once, then call with t only. */
+typedef struct { const double **arg; double **res; casadi_int *iw; double *w; double t; } cpgsim_ctx;
+
+void *cpgsim_bind(double *x, double *z, const double *u, const double *p, double *xn, double *zn, double *y) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  cpgsim_ctx *c = malloc(sizeof(cpgsim_ctx));
+  if (!c) return 0;
+  cpgsim_step_impl_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  c->arg = malloc(sizeof(double *) * (sz_arg + 5));
+  c->res = malloc(sizeof(double *) * (sz_res + 3));
+  c->iw = malloc(sizeof(casadi_int) * (sz_iw + 1));
+  c->w = malloc(sizeof(double) * (sz_w + 1));
+  if (!c->arg || !c->res || !c->iw || !c->w) return 0;
+  c->arg[0] = &c->t; c->arg[1] = x; c->arg[2] = z; c->arg[3] = u; c->arg[4] = p;
+  c->res[0] = xn; c->res[1] = zn; c->res[2] = y;
+  return c;
+}
+
+int cpgsim_step1(void *ctx, double t) {
+  cpgsim_ctx *c = (cpgsim_ctx *)ctx;
+  c->t = t;
+  return cpgsim_step_impl(c->arg, c->res, c->iw, c->w, 0);
+}
+
+void cpgsim_unbind(void *ctx) {
+  cpgsim_ctx *c = (cpgsim_ctx *)ctx;
+  if (!c) return;
+  free(c->arg); free(c->res); free(c->iw); free(c->w); free(c);
+}
 """
 
 
@@ -67,7 +97,12 @@ def compiler() -> str | None:
     return os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
 
 
-def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] = ("-O3",)) -> Path:
+def optimization_flags(source: str) -> tuple[str, ...]:
+    """-O3 for ordinary steps; -O1 above 150 kB of C (gcc's time grows fast, the run gains little)."""
+    return ("-O1",) if len(source) > 150_000 else ("-O3",)
+
+
+def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
     """Generate C for ``fn`` (renamed ``step``-style by its own name), append ``driver``, compile."""
     cc = compiler()
     if cc is None:
@@ -83,6 +118,7 @@ def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[st
         finally:
             os.chdir(cwd)
         source = (Path(tmp) / f"{tag}.c").read_text() + driver
+        flags = flags or optimization_flags(source)
         digest = hashlib.sha256((source + " ".join(flags)).encode()).hexdigest()[:16]
         lib = cache_dir() / f"{tag}_{digest}.so"
         if lib.exists():
@@ -96,6 +132,26 @@ def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[st
             raise NativeUnavailable(f"C compiler failed: {proc.stderr.strip()[:500]}")
         shutil.move(str(out), lib)  # same filesystem in the common case; atomic enough for a cache
         return lib
+
+
+class BoundStep:
+    """Calls the compiled step on buffers bound once (keeps the arrays alive)."""
+
+    def __init__(self, lib: ctypes.CDLL, ctx: int, keep: list[np.ndarray]) -> None:
+        self._lib, self._ctx, self._keep = lib, ctx, keep
+        self._call = lib.cpgsim_step1
+
+    def __call__(self, t: float) -> None:
+        if self._call(self._ctx, t):
+            raise RuntimeError("compiled step function reported an evaluation error")
+
+    def close(self) -> None:
+        if self._ctx:
+            self._lib.cpgsim_unbind(self._ctx)
+            self._ctx = None
+
+    def __del__(self) -> None:
+        self.close()
 
 
 class NativeHorizon:
@@ -114,6 +170,22 @@ class NativeHorizon:
                       ctypes.c_int, ctypes.c_int, ctypes.c_int, dp, dp]
         f.restype = ctypes.c_int
         self._fn = f
+        vp = ctypes.c_void_p
+        self._lib.cpgsim_bind.argtypes = [dp] * 7
+        self._lib.cpgsim_bind.restype = vp
+        self._lib.cpgsim_step1.argtypes = [vp, ctypes.c_double]
+        self._lib.cpgsim_step1.restype = ctypes.c_int
+        self._lib.cpgsim_unbind.argtypes = [vp]
+
+    def bind(self, x: np.ndarray, z: np.ndarray, u: np.ndarray, p: np.ndarray, x_next: np.ndarray,
+             z_next: np.ndarray, y: np.ndarray) -> BoundStep:
+        """A single-step caller on these (contiguous float64) arrays: ``step(t)`` fills the outputs."""
+        arrays = [a if a.size else np.zeros(1) for a in (x, z, u, p, x_next, z_next, y)]
+        ptrs = [a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)) for a in arrays]
+        ctx = self._lib.cpgsim_bind(*ptrs)
+        if not ctx:
+            raise MemoryError("cpgsim_bind: allocation failed")
+        return BoundStep(self._lib, ctx, arrays)
 
     def run(self, n: int, t0: float, dt: float, x: np.ndarray, z: np.ndarray, U: np.ndarray,
             p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:

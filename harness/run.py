@@ -91,7 +91,9 @@ def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, set
     t_end = float(t_end if t_end is not None else setup.t_end)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record)
+    setup_wall0 = time.perf_counter()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record).prepare()
+    setup_wall = time.perf_counter() - setup_wall0
     error: SimulationError | None = None
     wall0 = time.perf_counter()
     try:
@@ -106,6 +108,7 @@ def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, set
     res.save(out / "results.csv")
     res.save(out / "results.npz")
     summary = summarize(name, setup, res, wall)
+    summary["setup_time_s"] = setup_wall
     if error is not None:
         summary.update({"complete": False, "error": str(error)})
     if plots:

@@ -97,6 +97,11 @@ class Simulator:
         return self.model.dt
 
     # -- public ----------------------------------------------------------------------------------
+    def prepare(self) -> Simulator:
+        """Build the compiled C step now (otherwise the first :meth:`run` does it)."""
+        self._native(always=bool(self.model.flat.cosim_blocks()))
+        return self
+
     def run(self, t_end: float, inputs: Mapping[str, InputValue] | None = None, t0: float = 0.0,
             x0: Mapping[str, Any] | None = None, progress: bool = False) -> Results:
         """Simulate from ``t0`` to ``t_end``; returns results at every macro step, ``t0..t_end``."""
@@ -191,13 +196,32 @@ class Simulator:
             self._chunk_fns[n] = self._step_fn.mapaccum(f"horizon{n}", n, [1, 2], [0, 1], {})
         return self._chunk_fns[n]
 
-    def _native(self):
-        """The C horizon runner, or None when the backend is 'casadi' or no compiler works."""
+    def _step_caller(self, t_arr, x, z, u, p, x_next, z_next, y) -> Callable[[], None]:
+        """``evaluate()``: one step at ``t_arr[0]`` from the given arrays into the outputs (no copies).
+
+        The compiled C step (bound once) when a compiler works, else CasADi's zero-copy buffer. In
+        a co-simulation the step runs every macro step, so it is compiled whatever its size.
+        """
+        native = self._native(always=True)
+        if native is not None:
+            bound = native.bind(x, z, u, p, x_next, z_next, y)
+            self._bound = bound  # keep alive for the run
+            return lambda: bound(t_arr[0])
+        buf, evaluate = self._step_fn.buffer()
+        for i, arr in enumerate((t_arr, x, z, u, p)):
+            buf.set_arg(i, memoryview(arr))
+        for i, arr in enumerate((x_next, z_next, y)):
+            buf.set_res(i, memoryview(arr))
+        self._bound = buf
+        return evaluate
+
+    def _native(self, always: bool = False):
+        """The C step library, or None when the backend is 'casadi' or no compiler works."""
         if self.backend == "casadi":
             return None
-        if self.backend == "auto" and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS:
-            self.backend = "casadi"  # gcc on very large generated C takes longer than the run saves
-            return None
+        if (not always and self.backend == "auto"
+                and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS):
+            return None  # gcc on very large generated C takes longer than a horizon run saves
         if self._native_runner is None:
             from .native import NativeHorizon, NativeUnavailable
 
@@ -267,11 +291,7 @@ class Simulator:
         y = np.zeros(m.signals_layout.size)
         x_next, z_next = np.zeros_like(x), np.zeros_like(z)
         t_arr = np.zeros(1)
-        buf, evaluate = self._step_fn.buffer()
-        for i, arr in enumerate((t_arr, x, z, u, p)):
-            buf.set_arg(i, memoryview(arr))
-        for i, arr in enumerate((x_next, z_next, y)):
-            buf.set_res(i, memoryview(arr))
+        evaluate = self._step_caller(t_arr, x, z, u, p, x_next, z_next, y)
         free_slots = [(m.inputs.index("$" + nm).slice, idx) for idx, nm in
                       zip(_row_slices(m.free_inputs), m.free_inputs, strict=True)]
         cs_in_slots = [(m.inputs.index(s.name).slice, s.name) for s in m.inputs.slots if not s.name.startswith("$")]

@@ -25,6 +25,10 @@ BUILTIN: dict[str, tuple[str, str]] = {
     "hexapod-network": ("components.library:hexapod_network", "six Y5 networks (18 neurons), legs 1-6"),
     "damped-oscillator": ("components.library:damped_oscillator",
                           "damped linear oscillator from generic blocks (no limit cycle)"),
+    "leg": ("components.yu_leg:leg", "Yu single-leg controller: network, sensory neurons, reflexes, converter "
+            "(input toe_force)"),
+    "hexapod-controller": ("components.yu_leg:hexapod_controller", "Yu six-leg controller + gait FSM "
+                           "(in: toe_force[18] N; out: q_target[18] rad)"),
 }
 
 
@@ -43,7 +47,11 @@ def _import_target(target: str) -> Callable[[], Any]:
 
 
 def load_graph(spec: str) -> Graph | Block:
-    """Resolve a built-in name or ``path/to/module.py:function`` to a graph (or block)."""
+    """Resolve a built-in name, ``path/to/module.py:function`` or an ``.fmu``/``.ssp`` file to a graph (or block)."""
+    if spec.lower().endswith((".fmu", ".ssp")):
+        from fmus.fmu_import import load_fmu_graph
+
+        return load_fmu_graph(spec)
     if spec in BUILTIN:
         builder = _import_target(BUILTIN[spec][0])
     elif ":" in spec:

@@ -1,0 +1,257 @@
+"""Yu reflex logic of one leg (Sec. 4, Y10-Y15, SPEC 1.2-1.4) and a settable neuron.
+
+:class:`YuReflexLogic` turns the sensory flags and the leader's state into the leg's reflex mode,
+the network's mode inputs (Y10, Y12, Y13), state resets and the converter mode. Everything is
+sampled at the macro step (discrete states updated with ``casadi.if_else``).
+
+Modes (same numbers as :mod:`components.yu_converter`): 0 nominal, 1 elevator retraction,
+2 elevator forward stroke, 3 searching, 4 return to the AEP after a failed search.
+
+Events at a sample ``t_k`` (``half``: the leader protracts, ``y1 > 0``; ``rate > 0``: the FSM lets
+the leg's clock run):
+
+=========== =================================================================================
+event       condition -> effect
+=========== =================================================================================
+ERT         mode 0, ``half``, ``rate > 0``, ``x1_ob_min < x1 < x1_ob_max`` and a rising edge of
+            ``lambda_ob`` (of the flag gated by these conditions) -> mode 1; leader reset
+            ``y1 = -1`` keeping ``x1`` (Y10, through the neuron's ``y_reset``); followers frozen
+            (rate 0) and cut from the leader (``lead_gain = 0``) while the leader retracts.
+E1 end      mode 1 and ``y1 > 0`` (the leader turns forward at its new PEP) -> mode 2; followers
+            set to their maximum ``(m, 0)`` and run at half speed (one half period ``m -> a``
+            over the leader's forward stroke).
+E2 end      mode 2, ``y1 <= 0``, ``x1 > 0`` (new AEP) -> network set to the AEP state of the
+            limit cycle ``(x1_peak, 0; a, y2_aep)`` (undoes the amplitude change of Y10);
+            mode 0, or 3 if ``lambda_td = 0`` (SRT).
+swing end   mode 0 and ``half`` falls (``x1 > 0``, ``y1`` crosses zero downward); with
+            ``lambda_td = 0`` -> SRT: mode 3 (network in searching mode: omega x (0.5, 1.5, 1.5),
+            ``lead_gain = 0``, Y12, Y13; converter Y14, Y15).
+early TD    ``early_td``, mode 0 with ``half`` or mode 2, ``rate > 0``,
+            ``x1_td_min < x1 < x1_td_max`` (default 0 .. 0.95), the foot (input ``foot_h``,
+            forward kinematics of the joint targets) at least ``early_h_min`` (10 mm) above the
+            nominal ground ``ground_h = -H`` and a rising edge of ``lambda_td`` (the foot lands
+            on something higher, e.g. a step) -> the swing ends here: network set to the AEP
+            state, converter ``capture`` (the posture difference is kept through the stance,
+            see the converter). The window and the
+            height gate keep ordinary contacts out: on the DART robot the body sags a few mm
+            and the feet touch down before the swing ends; freezing them at that first light
+            contact made a diagonal leg lose its load and the FSM wait for ATD for ever.
+found (sTD) mode 3 and ``lambda_td`` -> network set to the AEP state, ``capture``, mode 0.
+give up     mode 3 and the searching leader completes its period (``half`` falls again, 10 s on
+            Table 1) without touchdown -> network set to the AEP state, mode 4 (the converter
+            returns to the AEP angles within ``T_return`` and the leg waits); ``gaveup = 1``
+            until the leg touches down or its next swing ends (the FSM counts it as supported).
+return end  mode 4 and the leader's stance ends (``half`` rises) -> mode 0.
+=========== =================================================================================
+
+The outputs feeding the network (gains, frequency scales, rates) are functions of the mode
+*state*, so they are constant over the integration of a step; reset requests, the converter
+command ``mode_cmd`` and ``swing`` are evaluated with this sample's events (the converter sees
+the mode change at the very sample the network is reset, and holds its last output; the FSM sees
+a swing end at once). ``mode``, ``reflex``, ``active`` and ``gaveup`` are the committed states
+(recorded values never show an event before it happens).
+
+Status outputs: ``landed`` (latched touchdown: set by ``lambda_td`` while the leg is not swinging
+-- swing ended or stance -- and by an early touchdown or a found foothold; cleared when the foot
+has no contact while the leg swings (``x1 > x1_lift``, past its PEP) or runs a reflex, i.e. at
+lift-off; the FSM's ATD uses it, see
+:mod:`components.yu_fsm`), ``swing`` (1 while the leg is in a swing, including the whole elevator
+reflex), ``active`` (1 while a reflex runs: modes 1-3; from the mode state, so that the FSM's
+clock rate, which reads it, does not feed back into the same sample), ``reflex`` (0 none,
+1 elevator, 2 searching, 3 returning), ``gaveup``, ``mode``; event counters ``n_ert``, ``n_srt``,
+``n_found``, ``n_early``, ``n_giveup`` (discrete states, so each event is visible in recorded
+results).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from .core import Block, Equations, Symbols
+from .neurons import VanDerPolNeuron
+from .yu_converter import (
+    ELEV_FORWARD,
+    ELEV_RETRACT,
+    NOMINAL,
+    RETURNING,
+    SEARCHING,
+    LockedOrbit,
+    locked_orbit,
+    swing_half,
+)
+
+
+class SettableVanDerPolNeuron(VanDerPolNeuron):
+    """:class:`~components.neurons.VanDerPolNeuron` plus a state reset: ``set = 1`` puts
+    ``(x, y) = (x_set, y_set)`` at the sampled update (used to restart a leg's network on its limit
+    cycle after a reflex). Inputs ``set`` (boolean), ``x_set`` (1), ``y_set`` (1/s), default 0.
+    ``set`` takes precedence over ``y_reset``.
+    """
+
+    def declare(self) -> None:
+        super().declare()
+        self.add_input("set", unit="1", kind="boolean", default=0.0, description="set (x, y) to (x_set, y_set)")
+        self.add_input("x_set", unit="1", default=0.0, description="x after a set")
+        self.add_input("y_set", unit="1/s", default=0.0, description="y after a set")
+
+    def define(self, v: Symbols) -> Equations:
+        eq = super().define(v)
+        s = v.u["set"] > 0.5
+        eq.resets = {"x": ca.if_else(s, v.u["x_set"], v.x["x"]),
+                     "y": ca.if_else(s, v.u["y_set"], eq.resets.get("y", v.x["y"]))}
+        return eq
+
+
+def _b(expr):
+    """SX boolean as 0/1."""
+    return ca.if_else(expr, 1, 0)
+
+
+def _eq(mode, value: int):
+    return ca.fabs(mode - value) < 0.5
+
+
+class YuReflexLogic(Block):
+    """Elevator and searching reflex logic of one leg (module docstring).
+
+    Constructor: ``orbit`` (the network's :class:`~components.yu_converter.LockedOrbit`, default
+    Table 1) gives the defaults of ``x1_peak``, ``x2_aep``, ``y2_aep``, ``x2_apex``; ``height`` (the
+    robot's ``H``, m) the default of ``ground_h = -H``.
+    """
+
+    def __init__(self, name: str = "reflex", orbit: LockedOrbit | None = None, height: float = 0.12,
+                 **params) -> None:
+        self.orbit = orbit or locked_orbit()
+        self._ground = float(height)
+        super().__init__(name, **params)
+
+    def declare(self) -> None:
+        o = self.orbit
+        self.add_parameter("x1_peak", o.x1_peak, "1", (0, float("inf")), "leader amplitude (AEP state)", strict=True)
+        self.add_parameter("x2_aep", o.x2_switch, "1", description="followers at the AEP state (a)")
+        self.add_parameter("y2_aep", o.y2_switch, "1/s", description="followers' rate at the AEP state")
+        self.add_parameter("x2_apex", o.x2_max, "1", description="followers' maximum (m)")
+        self.add_parameter("x1_ob_min", -0.98, "1", (-2, 2), "elevator window: x1 above (no trigger at liftoff)")
+        self.add_parameter("x1_ob_max", 0.9, "1", (-2, 2), "elevator window: x1 below (no trigger at touchdown)")
+        self.add_parameter("x1_lift", -0.98, "1", (-2, 2), "a swing without contact above this x1 is a lift-off")
+        self.add_parameter("x1_td_min", 0.0, "1", (-2, 2), "early touchdown window: x1 above this")
+        self.add_parameter("x1_td_max", 0.95, "1", (-2, 2), "early touchdown window: x1 below this")
+        self.add_parameter("ground_h", -self._ground, "m", description="nominal ground height from the alpha joint")
+        self.add_parameter("early_h_min", 0.01, "m", (0, float("inf")),
+                           "early touchdown only with the foot this far above the nominal ground")
+        self.add_parameter("elevator", 1.0, "1", (0, 1), "enable the elevator reflex", kind="boolean")
+        self.add_parameter("searching", 1.0, "1", (0, 1), "enable the searching reflex", kind="boolean")
+        self.add_parameter("early_td", 1.0, "1", (0, 1), "end a swing at an early touchdown", kind="boolean")
+        self.add_parameter("search_scale1", 0.5, "1", (0, float("inf")), "leader omega scale when searching (Y12)",
+                           strict=True)
+        self.add_parameter("search_scale23", 1.5, "1", (0, float("inf")), "follower omega scale when searching (Y12)",
+                           strict=True)
+        self.add_input("x1", unit="1", description="leader output")
+        self.add_input("y1", unit="1/s", description="leader rate")
+        self.add_input("lambda_ob", unit="1", description="obstacle flag (Y8)")
+        self.add_input("lambda_td", unit="1", description="touchdown flag (Y9)")
+        self.add_input("rate", unit="1", default=1.0, description="clock rate from the FSM (0 holds the leg)")
+        self.add_input("foot_h", unit="m", default=0.0, description="foot height from the alpha joint (FK of q)")
+        self.add_discrete_state("mode", float(NOMINAL), description="reflex mode 0..4")
+        self.add_discrete_state("half_prev", 0.0, description="leader protracting at the last sample")
+        self.add_discrete_state("ob_prev", 0.0, description="gated obstacle flag at the last sample")
+        self.add_discrete_state("td_prev", 1.0, description="touchdown flag at the last sample")
+        self.add_discrete_state("gaveup", 0.0, description="1 after a failed search until touchdown/next swing end")
+        self.add_discrete_state("landed", 0.0, description="touched down since the last swing ended")
+        for c in ("n_ert", "n_srt", "n_found", "n_early", "n_giveup"):
+            self.add_discrete_state(c, 0.0, description=f"event counter {c[2:]}")
+        outs = [
+            ("lead_gain", "1", "leader coupling gain (0: Y13)"), ("omega_scale1", "1", "leader omega scale (Y12)"),
+            ("omega_scale23", "1", "follower omega scale (Y12)"), ("rate1", "1", "leader time scale"),
+            ("rate23", "1", "follower time scale"), ("x1_set", "1", "leader x after a set"),
+            ("y1_set", "1/s", "leader y after a set"), ("x23_set", "1", "followers' x after a set"),
+            ("y23_set", "1/s", "followers' y after a set"), ("mode_cmd", "1", "converter mode (this sample's events)"),
+            ("mode", "1", "reflex mode (committed state)"),
+            ("capture", "1", "store the touchdown offset"), ("swing", "1", "1 while the leg swings"),
+            ("active", "1", "1 while a reflex runs"), ("reflex", "1", "0 none, 1 elevator, 2 searching, 3 return"),
+            ("gaveup", "1", "failed search, waiting"),
+            ("landed", "1", "touched down since the last swing ended (latched)"),
+        ]
+        for name, unit, desc in outs:
+            self.add_output(name, unit=unit, description=desc)
+        for name, desc in (("y1_reset", "Y10 leader reversal"), ("set1", "set the leader state"),
+                           ("set23", "set the followers' state")):
+            self.add_output(name, unit="1", kind="boolean", description=desc)
+        for c in ("n_ert", "n_srt", "n_found", "n_early", "n_giveup"):
+            self.add_output(c, unit="1", description=f"number of {c[2:]} events so far")
+
+    def define(self, v: Symbols) -> Equations:
+        p, u, z = v.p, v.u, v.z
+        x1, y1, lob, ltd = u["x1"], u["y1"], u["lambda_ob"] > 0.5, u["lambda_td"] > 0.5
+        mode = z["mode"]
+        m0, m1, m2, m3, m4 = (_eq(mode, k) for k in (NOMINAL, ELEV_RETRACT, ELEV_FORWARD, SEARCHING, RETURNING))
+        half = swing_half(x1, y1)
+        half_prev = z["half_prev"] > 0.5
+        running = u["rate"] > 0
+        fell = ca.logic_and(half_prev, ca.logic_not(half))
+        rose = ca.logic_and(ca.logic_not(half_prev), half)
+
+        ob_gate = ca.logic_and(ca.logic_and(ca.logic_and(m0, half), ca.logic_and(running, lob)),
+                               ca.logic_and(ca.logic_and(x1 > p["x1_ob_min"], x1 < p["x1_ob_max"]),
+                                            p["elevator"] > 0.5))
+        ert = ca.logic_and(ob_gate, z["ob_prev"] < 0.5)
+        td_edge = ca.logic_and(ltd, z["td_prev"] < 0.5)
+        high = u["foot_h"] > p["ground_h"] + p["early_h_min"]
+        window = ca.logic_and(x1 > p["x1_td_min"], x1 < p["x1_td_max"])
+        early = ca.logic_and(ca.logic_and(p["early_td"] > 0.5, running),
+                             ca.logic_and(ca.logic_and(ca.logic_and(td_edge, high), window),
+                                          ca.logic_or(ca.logic_and(m0, half), m2)))
+        e1_end = ca.logic_and(m1, y1 > 0)
+        e2_end = ca.logic_and(ca.logic_and(m2, y1 <= 0), ca.logic_and(x1 > 0, ca.logic_not(early)))
+        nat_end = ca.logic_and(m0, fell)
+        srt = ca.logic_and(ca.logic_and(ca.logic_or(nat_end, e2_end), ca.logic_not(ltd)), p["searching"] > 0.5)
+        found = ca.logic_and(m3, ltd)
+        giveup = ca.logic_and(ca.logic_and(m3, fell), ca.logic_not(found))
+        ret_end = ca.logic_and(m4, rose)
+        to_aep = ca.logic_or(ca.logic_or(e2_end, early), ca.logic_or(found, giveup))
+
+        new_mode = ca.if_else(ert, ELEV_RETRACT,
+                   ca.if_else(e1_end, ELEV_FORWARD,
+                   ca.if_else(srt, SEARCHING,
+                   ca.if_else(ca.logic_or(ca.logic_or(e2_end, early), ca.logic_or(found, ret_end)), NOMINAL,
+                   ca.if_else(giveup, RETURNING, mode)))))
+        n0, n12 = _eq(new_mode, NOMINAL), ca.logic_or(_eq(new_mode, ELEV_RETRACT), _eq(new_mode, ELEV_FORWARD))
+        n4 = _eq(new_mode, RETURNING)
+        swing_now = ca.logic_or(n12, ca.logic_and(ca.logic_or(n0, n4), ca.logic_and(half, ca.logic_not(to_aep))))
+        active = ca.logic_or(ca.logic_or(m1, m2), m3)  # from the state: no feedthrough from ``rate``
+        gaveup = ca.if_else(giveup, 1,
+                            ca.if_else(ca.logic_or(ltd, ca.logic_or(ca.logic_or(nat_end, e2_end), early)), 0,
+                                       z["gaveup"]))
+        # network commands from the mode state (constant over the step's integration)
+        lead = _b(ca.logic_or(m0, m4))
+        os1 = ca.if_else(m3, p["search_scale1"], 1)
+        os23 = ca.if_else(m3, p["search_scale23"], 1)
+        rate23 = u["rate"] * ca.if_else(m1, 0, ca.if_else(m2, 0.5, 1))
+        set23 = ca.logic_or(to_aep, e1_end)
+        outputs = {
+            "lead_gain": lead, "omega_scale1": os1, "omega_scale23": os23, "rate1": u["rate"], "rate23": rate23,
+            "y1_reset": _b(ert), "set1": _b(to_aep), "x1_set": p["x1_peak"], "y1_set": 0,
+            "set23": _b(set23), "x23_set": ca.if_else(e1_end, p["x2_apex"], p["x2_aep"]),
+            "y23_set": ca.if_else(e1_end, 0, p["y2_aep"]),
+            "mode_cmd": new_mode, "mode": mode, "capture": _b(ca.logic_or(early, found)), "swing": _b(swing_now),
+            "active": _b(active),
+            "reflex": ca.if_else(ca.logic_or(m1, m2), 1, ca.if_else(m3, 2, ca.if_else(m4, 3, 0))),
+            "gaveup": z["gaveup"], "landed": z["landed"],
+        }
+        counters = {"n_ert": ert, "n_srt": srt, "n_found": found, "n_early": early, "n_giveup": giveup}
+        m04 = ca.logic_or(m0, m4)
+        lifted = ca.logic_and(half, x1 > p["x1_lift"])  # swinging, past the PEP (not waiting on it)
+        updates = {
+            "mode": new_mode,
+            "half_prev": ca.if_else(to_aep, 0, _b(half)),
+            "ob_prev": _b(ob_gate),
+            "td_prev": _b(ltd),
+            "gaveup": gaveup,
+            "landed": ca.if_else(ca.logic_or(early, found), 1,
+                      ca.if_else(ca.logic_and(ca.logic_not(ltd), ca.logic_or(lifted, ca.logic_not(m04))), 0,
+                      ca.if_else(ca.logic_and(ca.logic_and(ltd, ca.logic_not(half)), m04), 1, z["landed"]))),
+        }
+        for c, ev in counters.items():
+            updates[c] = z[c] + _b(ev)
+            outputs[c] = z[c] + _b(ev)
+        return Equations(outputs=outputs, updates=updates)

@@ -1,0 +1,92 @@
+"""Yu linear converter (Y6): coefficients from the geometry by IK on the locked network orbit, and the
+nominal foot path of the Table 3 robot (AEP/PEP within 2 mm, apex within 2 mm of the clearance).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from components.core import ParameterError
+from components.geometry import YU_PROTOTYPE, YU_SIM, leg_ik_plane
+from components.yu_converter import YuConverter, converter_coefficients, locked_orbit
+from components.yu_leg import foot_positions, leg, nominal_targets
+from harness.simulate import Simulator
+
+MM = 1e-3
+
+
+@pytest.fixture(scope="module")
+def nominal_runs():
+    """12 s of the leg with the default toe force (in contact, no obstacle), both robots."""
+    return {geo.name: Simulator(leg(geometry=geo)).run(12.0) for geo in (YU_SIM, YU_PROTOTYPE)}
+
+
+def test_locked_orbit_of_table1():
+    """The orbit the converter is matched on: leader amplitude ~1, followers at their minimum at the
+    swing/stance switches and at their maximum near mid-swing, half period T/2 = 2.5 s."""
+    o = locked_orbit()
+    assert o.x1_peak == pytest.approx(1.0, abs=1e-3)
+    assert o.x2_switch == pytest.approx(-1.0003, abs=2e-4)
+    assert o.x2_min <= o.x2_switch < o.x2_min + 1e-3
+    assert o.x2_max == pytest.approx(0.9993, abs=2e-4)
+    assert abs(o.x1_at_max) < 0.05
+    assert o.half_period == pytest.approx(2.5, abs=0.01)
+
+
+@pytest.mark.parametrize("geometry", [YU_SIM, YU_PROTOTYPE], ids=lambda g: g.name)
+def test_coefficients_come_from_inverse_kinematics(geometry):
+    """Y6 evaluated at the matching points gives the IK angles of the geometry's nominal points."""
+    o = locked_orbit()
+    c = converter_coefficients(geometry, o)
+    pts = geometry.nominal_points()
+    b_end, g_end = leg_ik_plane(geometry.leg, *pts["AEP"])
+    b_mid, g_mid = leg_ik_plane(geometry.leg, *pts["stance_mid"])
+    assert c["g_alpha"] * o.x1_peak + c["h_alpha"] == pytest.approx(geometry.alpha_max, abs=1e-12)
+    for st in ("sw", "st", "el"):  # every set hits the AEP/PEP angles at the switches: continuity
+        assert c[f"g_beta_{st}"] * o.x2_switch + c[f"h_beta_{st}"] == pytest.approx(b_end, abs=1e-12)
+        assert c[f"g_gamma_{st}"] * o.x2_switch + c[f"h_gamma_{st}"] == pytest.approx(g_end, abs=1e-12)
+    assert c["g_beta_st"] * o.x2_max + c["h_beta_st"] == pytest.approx(b_mid, abs=1e-12)
+    assert c["g_gamma_st"] * o.x2_max + c["h_gamma_st"] == pytest.approx(g_mid, abs=1e-12)
+
+
+def test_coefficients_follow_the_geometry_and_are_parameters():
+    a, b = YuConverter("c1", geometry=YU_SIM), YuConverter("c2", geometry=YU_SIM.with_(height=0.10))
+    assert a.values["h_beta_st"] != pytest.approx(b.values["h_beta_st"], abs=1e-3)
+    assert a.values["g_alpha"] == pytest.approx(math.pi / 6 / locked_orbit().x1_peak)
+    a.set(g_beta_sw=0.2)  # tunable like any parameter
+    assert a.values["g_beta_sw"] == 0.2
+    with pytest.raises(ParameterError):
+        YuConverter("c3", geometry=YU_SIM, clearance_elevator=-0.01)
+    with pytest.raises(ParameterError):
+        YuConverter("c4", geometry="yu-sim")
+
+
+@pytest.mark.parametrize("name", ["yu-sim", "yu-prototype"])
+def test_nominal_foot_path_hits_aep_pep_and_apex(nominal_runs, name):
+    """Must show: the foot reaches the specified AEP and PEP within 2 mm and the swing apex is within 2 mm of
+    the clearance (Table 3 robot; the prototype too). Measured: < 0.01 mm on both."""
+    geo = {"yu-sim": YU_SIM, "yu-prototype": YU_PROTOTYPE}[name]
+    res = nominal_runs[name]
+    tg = nominal_targets(geo)
+    t, y1 = res.time, res["network.z1.y"]
+    foot = foot_positions(res["converter.q"], geo)
+    assert np.allclose(foot, res["fk.foot"], atol=1e-12)  # the LegFK block agrees with geometry.leg_fk
+    aep = np.where((y1[:-1] > 0) & (y1[1:] <= 0))[0] + 1
+    pep = np.where((y1[:-1] <= 0) & (y1[1:] > 0))[0] + 1
+    assert len(aep) >= 2 and len(pep) >= 2
+    for i in aep:
+        assert np.linalg.norm(foot[i] - tg["AEP"]) < 2 * MM
+    for i in pep:
+        assert np.linalg.norm(foot[i] - tg["PEP"]) < 2 * MM
+    swing = res["converter.swing"] > 0.5
+    edges = np.flatnonzero(np.diff(swing.astype(int))) + 1
+    for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)], strict=True):
+        if swing[a] and b - a > 2000:  # complete swings
+            assert abs(foot[a:b, 2].max() - tg["apex_h"]) < 2 * MM
+        elif not swing[a]:  # stance: the foot stays on the ground line (Y6 is linear in joint space)
+            assert np.abs(foot[a:b, 2] - (-geo.height)).max() < 1 * MM
+    # joint targets are continuous at every swing/stance switch (largest change per 1 ms step)
+    assert np.abs(np.diff(res["converter.q"], axis=0)).max() < 2e-3

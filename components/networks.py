@@ -61,17 +61,19 @@ def leader_follower_network(name: str = "network", eps: float = 0.1, b: float = 
                             omega: Sequence[float] = TABLE1_OMEGA, k: float = 0.1,
                             leader_start: Sequence[float] = (-1.0, 0.0),
                             follower_starts: Sequence[Sequence[float]] = ((0.5, 0.0), (-0.5, 0.0)),
-                            expose_modes: bool = False) -> Graph:
+                            expose_modes: bool = False,
+                            neuron: type[VanDerPolNeuron] = VanDerPolNeuron) -> Graph:
     """Yu Y5 network as a graph; defaults are Yu Table 1 (legs 1, 3, 5 leader start ``[-1, 0]``).
 
     Outputs ``x1, y1, x2, y2, x3, y3``. With ``expose_modes`` the graph also has inputs
     ``lead_gain`` (1 nominal, 0 searching) and ``omega_scale1``/``omega_scale23``, ``rate`` and
-    ``y1_reset`` for the reflexes of Yu Y10-Y13.
+    ``y1_reset`` for the reflexes of Yu Y10-Y13. ``neuron`` is the neuron class (a subclass of
+    :class:`VanDerPolNeuron` with extra inputs, e.g. a state reset, keeps the same wiring).
     """
     g = Graph(name, "Yu Y5 leader-follower CPG network")
     starts = [leader_start, *follower_starts]
     for i in range(3):
-        g.add(VanDerPolNeuron(f"z{i + 1}", eps=eps, b=b, omega=omega[i],
+        g.add(neuron(f"z{i + 1}", eps=eps, b=b, omega=omega[i],
                               start={"x": starts[i][0], "y": starts[i][1]}))
     g.add(LeaderDrive("drive"))
     g.add(FollowerCoupling("c2", k_lead=k, k_mutual=k))

@@ -120,11 +120,7 @@ def leg_network(name: str = "network", leader_start: Sequence[float] = (-1.0, 0.
     orbit = orbit or locked_orbit(eps, b, tuple(omega), k)
     fs = (orbit.x2_switch, orbit.y2_switch)
     g = leader_follower_network(name, eps=eps, b=b, omega=omega, k=k, leader_start=leader_start,
-                                follower_starts=(fs, fs), expose_modes=False)
-    for zname in ("z1", "z2", "z3"):
-        old = g.blocks[zname]
-        new = SettableVanDerPolNeuron(zname, start={s: old.states[s].start for s in ("x", "y")}, **old.values)
-        g.blocks[zname] = new  # same name and ports (plus the set inputs): the wiring is unchanged
+                                follower_starts=(fs, fs), expose_modes=False, neuron=SettableVanDerPolNeuron)
     g.expose_input("lead_gain", "c2.lead_gain", "c3.lead_gain", default=1.0)
     g.expose_input("omega_scale1", "z1.omega_scale", default=1.0)
     g.expose_input("omega_scale23", "z2.omega_scale", "z3.omega_scale", default=1.0)

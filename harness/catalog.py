@@ -29,6 +29,9 @@ BUILTIN: dict[str, tuple[str, str]] = {
             "(input toe_force)"),
     "hexapod-controller": ("components.yu_leg:hexapod_controller", "Yu six-leg controller + gait FSM "
                            "(in: toe_force[18] N; out: q_target[18] rad)"),
+    "fukuhara-controller": ("components.fukuhara_controller:fukuhara_controller",
+                            "Fukuhara 2022 six-leg controller, rules 1-4 + Appendix A (in: toe_force[18] N; "
+                            "out: q_target[18] rad)"),
 }
 
 

@@ -1,7 +1,7 @@
 """Simulate a graph at a fixed macro step and write its results (CSV or npz).
 
-GRAPH is a built-in name (see `cpgsim simulate --list`) or path/to/module.py:function returning a
-Graph. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.csv
+GRAPH is a built-in name (see `cpgsim simulate --list`), path/to/module.py:function returning a
+Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.csv
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ HELP = "simulate a graph and write results"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("graph", nargs="?", help="built-in graph name or path/to/module.py:function")
+    p.add_argument("graph", nargs="?", help="built-in graph name, path/to/module.py:function, FILE.fmu or FILE.ssp")
     p.add_argument("--t-end", type=positive_float, default=10.0, help="end time in s (default 10)")
     p.add_argument("--dt", type=positive_float, default=1e-3, help="macro step in s (default 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
@@ -29,6 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
+    p.add_argument("--isolate", action="store_true",
+                   help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
     add_set_argument(p)
 
 
@@ -43,6 +45,10 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
     graph = catalog.load_graph(args.graph)
+    if args.isolate:
+        from fmus.fmu_import import set_isolation
+
+        set_isolation(graph)
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):
         graph.set(**params)

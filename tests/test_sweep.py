@@ -1,0 +1,103 @@
+"""Sweeps: a 4-trial sweep on a LocalCluster gives the same per-trial results as the serial loop
+(determinism by seed); crashed trials are recorded and the sweep goes on; the CLI's bad input exits 2."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import cloudpickle
+import numpy as np
+import pytest
+
+from harness.cli import main
+from harness.results import Results
+from harness.sweep import parse_vary, run_sweep, run_trial
+
+SETS = {"setting": 1.0}
+T_END = 3.0
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                           silence_logs=40)
+    c = Client(cluster)
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # so workers can run _flaky_trial
+    yield c
+    c.close()
+    cluster.close()
+
+
+def test_localcluster_sweep_matches_serial(tmp_path, client):
+    par = run_sweep("fukuhara-gaits", 4, 7, tmp_path / "par", sets=SETS, t_end=T_END, progress=False,
+                    client=client)
+    ser = run_sweep("fukuhara-gaits", 4, 7, tmp_path / "ser", sets=SETS, t_end=T_END, progress=False, serial=True)
+    assert par["n_workers"] == 2 and ser["executor"] == "serial"
+    tp, ts = par["groups"][0]["trials"], ser["groups"][0]["trials"]
+    assert [t["seed"] for t in tp] == [t["seed"] for t in ts] == [7, 8, 9, 10]
+    for a, b in zip(tp, ts, strict=True):
+        assert a["status"] == b["status"] == "ok"
+        oa = {k: v for k, v in a["outcome"].items() if k != "wall_time_s"}
+        ob = {k: v for k, v in b["outcome"].items() if k != "wall_time_s"}
+        assert oa == ob
+        ra, rb = Results.load(f"{a['dir']}/results.npz"), Results.load(f"{b['dir']}/results.npz")
+        assert ra.columns == rb.columns and np.array_equal(ra.data, rb.data)  # bit for bit
+    distances = [t["outcome"]["distance_m"] for t in tp]
+    assert len(set(distances)) == 4  # different seeds, different trials
+    doc = json.loads((tmp_path / "par" / "sweep.json").read_text())
+    assert doc["groups"][0]["n"] == 4 and len(doc["groups"][0]["ci95"]) == 2
+    assert (tmp_path / "par" / "sweep.png").stat().st_size > 0
+
+
+def _flaky_trial(scenario, seed, sets, out_dir, t_end=None, plots=False):
+    if seed == 1:
+        raise RuntimeError("boom in trial 1")
+    if seed == 2:
+        import os
+
+        os._exit(3)  # the worker process dies
+    return {"seed": seed, "dir": out_dir, "status": "ok", "error": None, "outcome": {"success": seed == 0}}
+
+
+def test_crashed_trials_are_recorded_and_the_sweep_goes_on(tmp_path, client):
+    doc = run_sweep("fukuhara-gap", 4, 0, tmp_path, progress=False, client=client, trial_fn=_flaky_trial)
+    trials = doc["groups"][0]["trials"]
+    assert [t["status"] for t in trials] == ["ok", "failed", "failed", "ok"]
+    assert "boom in trial 1" in trials[1]["error"]
+    assert trials[2]["error"]  # KilledWorker (or similar) from the master
+    g = doc["groups"][0]
+    assert g["successes"] == 1 and g["failed"] == 2 and g["n"] == 4
+
+
+def test_run_trial_records_a_failing_scenario(tmp_path):
+    rec = run_trial("fukuhara-gaits", 0, {"no_such_option": 1.0}, str(tmp_path / "t"), t_end=1.0)
+    assert rec["status"] == "failed" and "no_such_option" in rec["error"]
+
+
+def test_vary_groups_share_seeds(tmp_path):
+    doc = run_sweep("fukuhara-gaits", 2, 3, tmp_path, sets={"setting": 1.0}, vary=parse_vary("rule2=1,0"),
+                    serial=True, progress=False, trial_fn=_flaky_trial)
+    assert [g["label"] for g in doc["groups"]] == ["rule2=1", "rule2=0"]
+    assert [[t["seed"] for t in g["trials"]] for g in doc["groups"]] == [[3, 4], [3, 4]]
+    assert "rule2=0" in doc["report"][2]
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["sweep", "no-such", "--trials", "2"], "unknown scenario"),
+    (["sweep", "fukuhara-gap", "--trials", "0"], "must be >= 1"),
+    (["sweep", "fukuhara-gap", "--trials", "2", "--vary", "rule2"], "--vary expects"),
+    (["sweep", "fukuhara-gap", "--trials", "2", "--serial", "--scheduler", "tcp://x:1"], "exclude"),
+    (["sweep", "fukuhara-gap", "--trials", "2", "--set", "rule2"], "--set expects"),
+])
+def test_cli_bad_input_exits_2(argv, text, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse type errors
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert text in err and err.strip().splitlines()[-1].startswith(("cpgsim sweep: error", "usage")) is not None
+    assert len(err.strip().splitlines()) <= 2

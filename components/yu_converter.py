@@ -39,6 +39,7 @@ mode   name               joint targets
 2      elevator, forward  alpha: leader, normalised; beta, gamma: new swing set (Y11)
 3      searching          Y14 with ``mu`` of Y15, around the angles held at the trigger
 4      return             ramp from the angles held at the give-up back to Y6 (the AEP)
+5      withdraw           step back from the AEP onto the stance line (see below)
 ====== ================== ==================================================================
 
 Whenever the mode changes (1 and 2 count as one), the block holds its last output ``q_hold``
@@ -46,6 +47,16 @@ and the time ``t_hold`` and blends ``q = (1 - rho)*q_hold + rho*q_mode`` with
 ``rho = min(1, (t - t_hold)/T)`` -- Yu Y11's ramp ``min(1, (t - t_ob)/T_s)`` -- so joint targets
 never jump (``T`` is ``T_s`` for the elevator, ``T_search`` for searching, ``T_return`` for the
 return, 0 for nominal).
+
+*Withdraw* (mode 5, only if the reflex logic's ``withdraw`` is on; a choice for Yu's "waiting for
+high-level regulation" after a failed search). The foot, back on its AEP over a hole, steps back
+onto the stance line: with ``rho = min(1, (t - t_hold)/T_withdraw)``, ``s = min(1, rho/0.7)``,
+``d = max(0, (rho - 0.7)/0.3)``, the foot ``f`` goes horizontally from ``FK(q_hold)`` to ``f_w`` with
+``s`` (lifted by ``withdraw_lift sin(pi s)``) and then straight down with ``d``; ``q = IK(f)``;
+``f_w = (W, W tan(withdraw_alpha), -H - withdraw_dip)`` (``W`` the stance width, ``H`` the standing
+height: a point of the stance line, ``withdraw_dip`` below the nominal ground so the foot meets the
+ground it left; the vertical end keeps the touchdown force upright, a foot still moving back when
+it met the ground read more than the ``support`` cone allows).
 
 *Elevator (Y10, Y11), interpretation.* Y11 ramps the swing coefficients from the nominal to the
 raised set within ``T_s`` while the network keeps running. Simulated literally (followers not
@@ -76,9 +87,34 @@ the nominal ``alpha_max`` bound (SPEC's equation is kept as is).
 
 *Touchdown offset.* When a swing ends by touchdown before its nominal end (early touchdown, or
 touchdown during a search), the reflex logic jumps the network to the AEP state and pulses
-``capture``: the block stores ``d = q - q_AEP`` and adds it to Y6 for the whole stance and,
-fading linearly with the leader (``(x1_peak - x1)/(2*x1_peak)``), during the next swing; the
-next swing thus ends on the nominal AEP again (Yu 6.1.2: "can be corrected in the next swing").
+``capture``: the block stores the foot's displacement from the nominal AEP, ``d = FK(q) -
+FK(q_AEP)`` (outward, forward, up; m), and for the whole stance outputs ``q = IK(FK(Y6) + d)``:
+the foot follows the nominal stance path shifted by ``d``. During the next swing the shift fades
+linearly with the leader (``fade = (x1_peak - x1)/(2*x1_peak)``), so the swing ends on the
+nominal AEP again (Yu 6.1.2: "can be corrected in the next swing"). ``FK``/``IK`` are the leg's
+kinematics (knee up, as :func:`~components.geometry.leg_ik`); with ``d = 0`` the output is Y6.
+The shift is Cartesian, not a joint-angle offset (the first version added ``q - q_AEP`` to the
+angles): all feet of a tripod then move exactly alike relative to the body. With a joint offset
+the shifted foot's path bent away from the others' by a few mm over a stance; the servos
+(about 10 N per mm at the foot) turned that into horizontal forces above the 10 N obstacle
+threshold, which fired elevator reflexes at lift-off on the DART robot.
+
+*Height memory* (parameter ``height_memory``, default 0 = Yu's behaviour above). Walking on a
+raised surface (Yu 6.1.1: the right legs on the 40 mm step), every later swing of Yu's converter
+aims at the nominal foothold 40 mm *below* the surface: the foot meets the surface at the swing's
+apex (``x1 ~ 0``), the early touchdown freezes it there and the captured forward shift (about
+half a stride back) moves the following PEP far behind the nominal one -- every cycle (measured
+on the DART robot; the body then pitched and yawed and the left legs touched down early too).
+With ``height_memory = 1`` a capture also remembers the foothold's height above the nominal
+ground, ``dh = d_up``, if ``aim_min <= dh`` (only footholds found clearly higher: a lower one,
+found by searching, is a hole the next swing steps out of; a few mm up is the body's sag or
+tilt, and remembering it let the body sink step by step on the DART robot), clamped to
+``aim_max``. The next swing fades from ``d`` to ``a = (0, 0, dh)`` instead of to 0, so it lifts
+``h_max`` above the remembered surface and lands on the nominal AEP point raised by ``dh``; a
+swing that ends normally keeps ``a`` as the stance shift. Any reflex mode clears ``d`` and ``a``
+(the elevator and the search aim at the nominal ground; a search holds the posture it starts
+from). Output ``aim_h`` (= ``dh``) lets the reflex logic gate early touchdowns relative to the
+remembered surface.
 
 | port | dir | shape | unit | meaning |
 |---|---|---|---|---|
@@ -88,6 +124,7 @@ next swing thus ends on the nominal AEP again (Yu 6.1.2: "can be corrected in th
 | ``capture`` | in | 1 | 1 | 1: store the touchdown offset now |
 | ``q`` | out | 3 | rad | ``(alpha, beta, gamma)`` joint targets |
 | ``swing`` | out | 1 | 1 | 1 while the nominal map uses the swing set |
+| ``aim_h`` | out | 1 | m | remembered foothold height above the nominal ground (height memory) |
 
 The ``mode`` input only decides the sampled update (hold, offset); the output uses the committed
 mode (the state ``mode_prev``), so a recorded or exported output never shows an event before the
@@ -108,9 +145,9 @@ from .core import Block, Equations, ParameterError, Symbols
 from .geometry import YU_SIM, RobotGeometry, leg_ik_plane
 from .networks import TABLE1_OMEGA
 
-NOMINAL, ELEV_RETRACT, ELEV_FORWARD, SEARCHING, RETURNING = 0, 1, 2, 3, 4
+NOMINAL, ELEV_RETRACT, ELEV_FORWARD, SEARCHING, RETURNING, WITHDRAW = 0, 1, 2, 3, 4, 5
 MODE_NAMES = {NOMINAL: "nominal", ELEV_RETRACT: "elevator-retract", ELEV_FORWARD: "elevator-forward",
-              SEARCHING: "searching", RETURNING: "return"}
+              SEARCHING: "searching", RETURNING: "return", WITHDRAW: "withdraw"}
 
 
 # -- the locked network orbit ----------------------------------------------------------------------
@@ -263,6 +300,7 @@ class YuConverter(Block):
         self.geometry = geometry
         self.orbit = orbit or locked_orbit()
         self._coef = converter_coefficients(geometry, self.orbit, clearance_elevator)
+        self._clearance_el = None if clearance_elevator is None else float(clearance_elevator)
         self._omega1 = float(omega1)
         super().__init__(name, **params)
 
@@ -288,6 +326,23 @@ class YuConverter(Block):
         self.add_parameter("d_beta", math.radians(4.0), "rad", description="searching amplitude (Y14)")
         self.add_parameter("d_gamma", math.radians(2.5), "rad", description="searching amplitude (Y14)")
         self.add_parameter("sigma", 1.2, "1", (1, math.inf), "searching depth ratio (Y15)")
+        self.add_parameter("T_withdraw", 1.0, "s", (0, math.inf), "withdraw step duration", strict=True)
+        self.add_parameter("withdraw_alpha", g.alpha_max / 5, "rad",
+                           description="withdraw point: alpha on the stance line")
+        self.add_parameter("withdraw_lift", g.clearance / 2, "m", (0, math.inf), "withdraw step: lift at mid-step")
+        self.add_parameter("withdraw_dip", 0.125 * g.clearance, "m", (0, math.inf),
+                           "withdraw point below the nominal ground")
+        self.add_parameter("stance_w", g.stance_width, "m", (0, math.inf), "stance line distance W", strict=True)
+        self.add_parameter("height", g.height, "m", (0, math.inf), "standing height H", strict=True)
+        self.add_parameter("height_memory", 0.0, "1", (0, 1), "next swing aims at the last higher foothold",
+                           kind="boolean")
+        self.add_parameter("aim_min", 0.5 * g.clearance, "m", (0, math.inf),
+                           "smallest remembered foothold height (height memory)")
+        self.add_parameter("aim_max", 2 * g.clearance if self._clearance_el is None else self._clearance_el, "m",
+                           (0, math.inf), "largest remembered foothold height (height memory)")
+        for seg in ("coxa", "thigh", "shank"):
+            self.add_parameter(seg, getattr(g.leg, seg), "m", (0, math.inf), f"{seg} length (touchdown shift IK)",
+                               strict=True)
         self.add_input("x1", unit="1")
         self.add_input("y1", unit="1/s")
         self.add_input("x2", unit="1")
@@ -298,13 +353,16 @@ class YuConverter(Block):
         self.add_discrete_state("q_hold", (0.0, 0.0, 0.0), "rad", "angles held at the last mode change")
         self.add_discrete_state("x1_hold", 0.0, "1", "leader at the last mode change")
         self.add_discrete_state("t_hold", -1e9, "s", "time of the last mode change")
-        self.add_discrete_state("offset", (0.0, 0.0, 0.0), "rad", "touchdown offset d")
+        self.add_discrete_state("offset", (0.0, 0.0, 0.0), "m", "touchdown shift d of the foot (out, fwd, up)")
+        self.add_discrete_state("aim", (0.0, 0.0, 0.0), "m", "shift the next swing ends with (height memory)")
+        self.add_discrete_state("aim_h", 0.0, "m", "remembered foothold height above the nominal ground")
         self.add_discrete_state("half_prev", 0.0, description="swing half at the last step")
         self.add_output("q", 3, "rad", description="joint targets (alpha, beta, gamma)")
         self.add_output("swing", unit="1", description="1 while the swing set is used")
+        self.add_output("aim_h", unit="m", description="remembered foothold height above the nominal ground")
 
     # the mode expressions, reused for the held output at a mode change
-    def _targets(self, v: Symbols, mode, q_hold, x1_hold, t_hold, offset):
+    def _targets(self, v: Symbols, mode, q_hold, x1_hold, t_hold, offset, aim):
         p, u = v.p, v.u
         x1, y1, x2, x3 = u["x1"], u["y1"], u["x2"], u["x3"]
         half = swing_half(x1, y1)
@@ -314,7 +372,8 @@ class YuConverter(Block):
         gamma6 = ca.if_else(half, p["g_gamma_sw"] * x3 + p["h_gamma_sw"], p["g_gamma_st"] * x3 + p["h_gamma_st"])
         q6 = ca.vertcat(alpha6, beta6, gamma6)
         fade = ca.if_else(half, ca.fmin(1, ca.fmax(0, (p["x1_peak"] - x1) / (2 * p["x1_peak"]))), 1)
-        q_nom = q6 + fade * offset
+        shift = fade * offset + (1 - fade) * aim
+        q_nom = ca.if_else(ca.dot(shift, shift) > 0, _ik3(p, _fk3(p, q6) + shift), q6)
 
         def ramp(T):
             return ca.if_else(T > 0, ca.fmin(1, ca.fmax(0, (v.t - t_hold) / ca.fmax(T, 1e-12))), 1)
@@ -340,8 +399,17 @@ class YuConverter(Block):
         # return to the AEP
         rho_r = ramp(p["T_return"])
         q_ret = (1 - rho_r) * q_hold + rho_r * q6
+        # withdraw: step back onto the stance line (Cartesian blend with a lift)
+        rho_w = ramp(p["T_withdraw"])
+        f_w = ca.vertcat(p["stance_w"], p["stance_w"] * ca.tan(p["withdraw_alpha"]), -p["height"] - p["withdraw_dip"])
+        s_h = ca.fmin(1, rho_w / 0.7)  # back over the first 70 %, then straight down onto the ground
+        s_v = ca.fmax(0, (rho_w - 0.7) / 0.3)
+        f0 = _fk3(p, q_hold)
+        f_wd = ca.vertcat((1 - s_h) * f0[0] + s_h * f_w[0], (1 - s_h) * f0[1] + s_h * f_w[1],
+                          (1 - s_v) * f0[2] + s_v * f_w[2] + p["withdraw_lift"] * ca.sin(math.pi * s_h))
+        q_wd = _ik3(p, f_wd)
         q = ca.if_else(mode < 0.5, q_nom,
-                       ca.if_else(mode < 2.5, q_el, ca.if_else(mode < 3.5, q_sr, q_ret)))
+                       ca.if_else(mode < 2.5, q_el, ca.if_else(mode < 3.5, q_sr, ca.if_else(mode < 4.5, q_ret, q_wd))))
         return q, half
 
     def define(self, v: Symbols) -> Equations:
@@ -349,25 +417,57 @@ class YuConverter(Block):
         mode = u["mode"]
         # the output uses the committed mode (state); the input only decides this sample's update, so
         # recorded/sent outputs never show an event the reflex logic has not committed yet
-        q_prev, half = self._targets(v, z["mode_prev"], z["q_hold"], z["x1_hold"], z["t_hold"], z["offset"])
+        # at the sample a swing ends the stance map takes over with the shift the swing ended with (``aim``);
+        # the stored touchdown shift is replaced by the update of this very sample, so use ``aim`` already
+        # (the first version used the old shift here for one sample: a search or a reflex starting at
+        # that sample held that posture -- 18 mm too low after a foothold found in a ditch)
+        swing_end = ca.logic_and(z["half_prev"] > 0.5, ca.logic_not(swing_half(u["x1"], u["y1"])))
+        shift_now = ca.if_else(swing_end, z["aim"], z["offset"])
+        q_prev, half = self._targets(v, z["mode_prev"], z["q_hold"], z["x1_hold"], z["t_hold"], shift_now,
+                                     z["aim"])
         family, family_prev = _family(mode), _family(z["mode_prev"])
         change = family != family_prev
         q_aep = ca.vertcat(p["g_alpha"] * p["x1_peak"] + p["h_alpha"],
                            p["g_beta_st"] * p["x2_aep"] + p["h_beta_st"],
                            p["g_gamma_st"] * p["x2_aep"] + p["h_gamma_st"])
-        swing_end = ca.logic_and(z["half_prev"] > 0.5, ca.logic_not(half))
-        offset = ca.if_else(u["capture"] > 0.5, q_prev - q_aep,
-                            ca.if_else(ca.logic_or(swing_end, ca.logic_and(change, mode > 0.5)), 0 * q_aep,
-                                       z["offset"]))
+        capture = u["capture"] > 0.5
+        reflex_start = ca.logic_and(change, mode > 0.5)
+        # touchdown shift of the foot from the nominal AEP; height memory: its height part
+        d_new = _fk3(p, q_prev) - _fk3(p, q_aep)
+        dh = ca.if_else(ca.logic_and(p["height_memory"] > 0.5, d_new[2] >= p["aim_min"]),
+                        ca.fmin(p["aim_max"], d_new[2]), 0)
+        zero = ca.DM.zeros(3)
+        offset = ca.if_else(capture, d_new,
+                            ca.if_else(reflex_start, zero, ca.if_else(swing_end, z["aim"], z["offset"])))
+        aim = ca.if_else(capture, ca.vertcat(0, 0, dh), ca.if_else(reflex_start, zero, z["aim"]))
+        aim_h = ca.if_else(capture, dh, ca.if_else(reflex_start, 0, z["aim_h"]))
         return Equations(
-            outputs={"q": q_prev, "swing": ca.if_else(half, 1, 0)},
+            outputs={"q": q_prev, "swing": ca.if_else(half, 1, 0), "aim_h": z["aim_h"]},
             updates={"mode_prev": mode,
                      "q_hold": ca.if_else(change, q_prev, z["q_hold"]),
                      "x1_hold": ca.if_else(change, u["x1"], z["x1_hold"]),
                      "t_hold": ca.if_else(change, v.t, z["t_hold"]),
-                     "offset": offset,
+                     "offset": offset, "aim": aim, "aim_h": aim_h,
                      "half_prev": ca.if_else(ca.logic_and(half, u["capture"] < 0.5), 1, 0)},
         )
+
+
+def _fk3(p, q):
+    """Foot ``(outward, forward, up)`` from the alpha joint for joint angles ``q`` (SX), as ``leg_fk``."""
+    a, b, g = q[0], q[1], q[2]
+    r = p["coxa"] + p["thigh"] * ca.cos(b) + p["shank"] * ca.cos(b - g)
+    return ca.vertcat(r * ca.cos(a), r * ca.sin(a), p["thigh"] * ca.sin(b) + p["shank"] * ca.sin(b - g))
+
+
+def _ik3(p, f):
+    """Joint angles for the foot ``f = (outward, forward, up)`` (SX version of ``leg_ik``, knee up; the
+    reach is clamped so an unreachable point gives the nearest stretched/folded posture, not NaN)."""
+    r = ca.sqrt(f[0] ** 2 + f[1] ** 2)
+    dx, h = r - p["coxa"], f[2]
+    c = (dx * dx + h * h - p["thigh"] ** 2 - p["shank"] ** 2) / (2 * p["thigh"] * p["shank"])
+    gamma = ca.acos(ca.fmin(1, ca.fmax(-1, c)))
+    beta = ca.atan2(h, dx) + ca.atan2(p["shank"] * ca.sin(gamma), p["thigh"] + p["shank"] * ca.cos(gamma))
+    return ca.vertcat(ca.atan2(f[1], f[0]), beta, gamma)
 
 
 def swing_half(x1, y1):
@@ -376,5 +476,5 @@ def swing_half(x1, y1):
 
 
 def _family(mode):
-    """Mode family: 0 nominal, 1 elevator (modes 1, 2), 3 searching, 4 return."""
+    """Mode family: 0 nominal, 1 elevator (modes 1, 2), 3 searching, 4 return, 5 withdraw."""
     return ca.if_else(ca.logic_and(mode > 0.5, mode < 2.5), 1, ca.floor(mode + 0.5))

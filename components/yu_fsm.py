@@ -56,6 +56,19 @@ true and the FSM waited for ever.
   ``gaveup``). A standing leg starts its swing only with aTD (its stance ends when an alien leg
   has touched down).
 
+**Early stance after an aborted stance** (a choice; Yu is silent). A reflex freezes the standing
+legs mid-stance; when it ends they resume their stance while the legs that swung with the reflex
+leg have long landed and hold their posture in SwingProlong -- with their feet on the ground.
+On the DART robot the resumed stance then dragged those three feet along (the two tripods
+fought: lateral forces above the 10 N obstacle threshold, the body yawed 4 degrees and a left
+leg's elevator reflex fired at its lift-off). So after an abort (latched from the moment a
+reflex sends a Stance leg to StanceProlong until the next slot switch), a leg that waits in
+SwingProlong, has landed, and sees the standing legs resume (no reflex runs and some leg of
+another slot has its stance part still to do) starts its stance at once: all six feet then push
+the body alike. It counts as ready for the switch; at the switch it simply stays in Stance, and
+it ends its stance (at its PEP) early and waits in StanceProlong for the next switch. Without an
+abort (e.g. a plain early touchdown) a landed leg holds in SwingProlong as Yu's FSM says.
+
 **Transitions** (evaluated at every sample):
 
 ==================== ================================================== ==================
@@ -66,14 +79,16 @@ Stance               stance fraction of this slot done                  StancePr
 Stance               R (a reflex runs somewhere)                        StanceProlong
 StanceProlong        not done and not R                                 Stance (resume)
 SwingProlong         SWITCH                                             Stance
+SwingProlong         after an abort: landed, no R, standing legs resume   Stance (early)
 StanceProlong        SWITCH, the leg swings in the next slot, aTD       Swing
 StanceProlong        SWITCH, otherwise                                  Stance
 ==================== ================================================== ==================
 
 ``SWITCH`` (then ``k -> k + 1 mod gamma``) = every leg is in its Prolong state with its part of
-the slot done (swing ended / stance fraction reached), no reflex runs, ATD, and aTD for the legs
-that swing next. So swing/stance changes happen at ATD; legs finishing early hold; a reflex
-delays the whole gait and all legs resynchronize when it ends. For the tripod this is Yu's
+the slot done (swing ended / stance fraction reached; a swinging-slot leg in early stance counts
+as done), no reflex runs, ATD, and aTD for the legs that swing next. So swing/stance changes
+happen at ATD; legs finishing early hold; a reflex delays the whole gait and all legs
+resynchronize when it ends. For the tripod this is Yu's
 FSM: a swing that ends holds in SwingProlong, a stance that ends holds in StanceProlong, and the
 groups exchange at ATD.
 
@@ -147,6 +162,7 @@ class YuGaitFSM(Block):
         self.add_discrete_state("n_switch", 0.0, description="slot switches so far")
         self.add_discrete_state("tau", (0.0,) * 6, "s", "network time run since the stance began")
         self.add_discrete_state("t_prev", 0.0, "s", "time of the last sample")
+        self.add_discrete_state("aborted", 0.0, description="a reflex aborted a stance in this slot")
         self.add_output("rate", 6, "1", description="clock time scale per leg")
         self.add_output("state", 6, "1", description="0 Swing, 1 Stance, 2 SwingProlong, 3 StanceProlong")
         self.add_output("slot", unit="1", description="current slot")
@@ -192,7 +208,7 @@ class YuGaitFSM(Block):
             role_sw.append(sw)
             done.append(dn)
             s_eff.append(s)
-            ready.append(ca.if_else(sw, ca.fabs(s - SWING_PROLONG) < 0.5,
+            ready.append(ca.if_else(sw, ca.logic_or(ca.fabs(s - SWING_PROLONG) < 0.5, ca.fabs(s - STANCE) < 0.5),
                                     ca.logic_and(ca.fabs(s - STANCE_PROLONG) < 0.5, dn)))
         all_ready = ready[0]
         next_ok = ca.logic_or(ca.fabs(slot_of[0] - k_next) > 0.5, a_td[0])
@@ -200,6 +216,11 @@ class YuGaitFSM(Block):
             all_ready = ca.logic_and(all_ready, ready[i])
             next_ok = ca.logic_and(next_ok, ca.logic_or(ca.fabs(slot_of[i] - k_next) > 0.5, a_td[i]))
         switch = ca.logic_and(ca.logic_and(all_ready, ca.logic_not(r_any)), ca.logic_and(atd, next_ok))
+        # early stance after an aborted stance (module docstring)
+        in_stance = sum(_b(ca.fabs(s - STANCE) < 0.5) for s in s_eff) > 0.5
+        aborted = ca.logic_or(z["aborted"] > 0.5, ca.logic_and(r_any, in_stance))
+        standing_left = sum(_b(ca.logic_and(ca.logic_not(role_sw[j]), ca.logic_not(done[j]))) for j in range(6)) > 0.5
+        resume = ca.logic_and(ca.logic_and(aborted, ca.logic_not(r_any)), standing_left)
         new_states = []
         for i in range(6):
             s, dn = s_eff[i], done[i]
@@ -208,7 +229,8 @@ class YuGaitFSM(Block):
             def is_(code, s=s):
                 return ca.fabs(s - code) < 0.5
             ns = ca.if_else(is_(SWING), ca.if_else(u["swing"][i] > 0.5, SWING, SWING_PROLONG),
-                 ca.if_else(is_(SWING_PROLONG), ca.if_else(switch, STANCE, SWING_PROLONG),
+                 ca.if_else(is_(SWING_PROLONG), ca.if_else(ca.logic_or(switch, ca.logic_and(resume, td[i])), STANCE,
+                                                           SWING_PROLONG),
                  ca.if_else(is_(STANCE), ca.if_else(ca.logic_or(dn, r_any), STANCE_PROLONG, STANCE),
                             ca.if_else(switch, ca.if_else(swing_next, SWING, STANCE),
                                        ca.if_else(ca.logic_and(ca.logic_not(dn), ca.logic_not(r_any)),
@@ -217,14 +239,16 @@ class YuGaitFSM(Block):
         state_now = ca.vertcat(*s_eff)
         rate_now = self._rates(p, state_now, u["active"])
         tau = z["tau"] + rate_now * (v.t - z["t_prev"])
-        entering = [ca.logic_and(switch, ca.fabs(s_eff[i] - SWING_PROLONG) < 0.5) for i in range(6)]
+        entering = [ca.logic_and(ca.fabs(s_eff[i] - SWING_PROLONG) < 0.5, ca.fabs(new_states[i] - STANCE) < 0.5)
+                    for i in range(6)]
         tau = ca.vertcat(*[ca.if_else(entering[i], 0, tau[i]) for i in range(6)])
         return Equations(
             outputs={"rate": rate_now, "state": state_now, "slot": k,
                      "atd": _b(atd), "natd": _b(natd), "atd_alien": ca.vertcat(*[_b(a) for a in a_td]),
                      "n_switch": z["n_switch"]},
             updates={"slot": ca.if_else(switch, k_next, k), "state": ca.vertcat(*new_states),
-                     "n_switch": z["n_switch"] + _b(switch), "tau": tau, "t_prev": v.t},
+                     "n_switch": z["n_switch"] + _b(switch), "tau": tau, "t_prev": v.t,
+                     "aborted": ca.if_else(switch, 0, _b(aborted))},
         )
 
 

@@ -8,6 +8,8 @@
     toe_force -> sensors -> reflex -> network (modes, resets, rates) -> converter -> q -> fk -> foot
                                ^---- x1, y1 ----'                 mode_cmd, capture --^
                              reflex <- foot height (gate of the early touchdown) <- fk
+                             reflex <- aimed foothold height (height memory) <- converter
+                             reflex <- support flag (foothold-like contact) <- sensors
 
 ``hexapod_controller``: six ``leg`` graphs (``L1, L2, L3, R1, R2, R3`` = Yu legs 1-6) and the gait
 FSM (:class:`~components.yu_fsm.YuGaitFSM`), which drives each leg's clock ``rate``.
@@ -139,7 +141,7 @@ def leg_network(name: str = "network", leader_start: Sequence[float] = (-1.0, 0.
 _NET_COMMANDS = ("lead_gain", "omega_scale1", "omega_scale23", "rate1", "rate23", "y1_reset", "set1", "x1_set",
                  "y1_set", "set23", "x23_set", "y23_set")
 _LEG_STATUS = ("swing", "active", "reflex", "gaveup", "landed", "mode", "n_ert", "n_srt", "n_found", "n_early",
-               "n_giveup")
+               "n_giveup", "n_withdraw")
 
 
 def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Sequence[float] = (-1.0, 0.0),
@@ -159,7 +161,7 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
     g = Graph(name, "Yu single-leg controller (network, sensory neurons, reflexes, converter)")
     g.add(leg_network("network", leader_start, eps, b, omega, k, orbit))
     g.add(YuSensoryNeurons("sensors"))
-    g.add(YuReflexLogic("reflex", orbit=orbit, height=geometry.height))
+    g.add(YuReflexLogic("reflex", orbit=orbit, height=geometry.height, omega1=omega[0]))
     g.add(YuConverter("converter", geometry=geometry, orbit=orbit, clearance_elevator=clearance_elevator,
                       omega1=omega[0]))
     g.add(LegFK("fk", geometry))
@@ -168,6 +170,7 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
     g.connect("network.y1", "reflex.y1")
     g.connect("sensors.lambda_ob", "reflex.lambda_ob")
     g.connect("sensors.lambda_td", "reflex.lambda_td")
+    g.connect("sensors.support", "reflex.support")
     for cmd in _NET_COMMANDS:
         g.connect(f"reflex.{cmd}", f"network.{cmd}")
     for port in ("x1", "y1", "x2", "x3"):
@@ -177,6 +180,7 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
     g.connect("converter.q", "fk.q")
     g.connect("fk.foot", "foot_split.u")
     g.connect("foot_split.y3", "reflex.foot_h")
+    g.connect("converter.aim_h", "reflex.aim_h")
     g.expose_input("toe_force", "sensors.toe_force", default=DEFAULT_TOE_FORCE)
     g.expose_input("rate", "reflex.rate", default=1.0)
     g.expose_output("q", "converter.q")

@@ -23,7 +23,8 @@ from components.geometry import LEG_NAMES, RobotGeometry  # noqa: E402
 from .results import Results  # noqa: E402
 
 LEG_LABELS = [f"{n} (leg {i + 1})" for i, n in enumerate(LEG_NAMES)]
-REFLEX_COLORS = {"elevator": "tab:red", "searching": "tab:blue"}
+REFLEX_COLORS = {"elevator": "tab:red", "searching": "tab:blue", "found": "tab:green", "giveup": "black",
+                 "withdraw": "tab:purple"}
 
 
 def stance_from_forces(res: Results, robot: str, fz_threshold: float) -> np.ndarray:
@@ -47,14 +48,15 @@ def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: 
             ax.add_patch(plt.Rectangle((t[a], row - 0.35), t[min(b, len(t) - 1)] - t[a], 0.7, color="black"))
     for ev in reflexes:
         ax.plot(ev["t"], 5 - ev["leg"], marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"), ms=8)
-    for kind, color in REFLEX_COLORS.items():
-        ax.plot([], [], "v", color=color, label=f"{kind} reflex")
+    for kind in sorted({ev["kind"] for ev in reflexes} | {"elevator", "searching"}, key=list(REFLEX_COLORS).index):
+        ax.plot([], [], "v", color=REFLEX_COLORS.get(kind, "tab:green"),
+                label=f"{kind} reflex" if kind in ("elevator", "searching") else kind)
     ax.set_yticks(range(6), LEG_LABELS[::-1])
     ax.set_xlim(t[0], t[-1])
     ax.set_ylim(-0.7, 5.7)
     ax.set_xlabel("time [s]")
     ax.set_title(title or "gait diagram (black: stance)", loc="left", fontsize=10)
-    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=2, frameon=False)
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=5, frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -98,14 +100,23 @@ def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], refl
         for key, style in (("Fcx", ":"), ("Fcy", "--"), ("Fcz", "-.")):
             if key in thresholds:
                 ax.axhline(thresholds[key], color="tab:gray", ls=style, lw=0.8)
-        for ev in reflexes:
-            if ev["leg"] == leg:
-                ax.axvline(ev["t"], color=REFLEX_COLORS.get(ev["kind"], "tab:green"), lw=1.2)
-                ax.annotate(f"{ev['kind']} {ev.get('force_N', 0):.0f} N", (ev["t"], ax.get_ylim()[1] * 0.8),
-                            fontsize=7, color=REFLEX_COLORS.get(ev["kind"], "tab:green"))
         ax.set_ylabel(f"{LEG_NAMES[leg]} [N]")
         top = np.percentile(np.abs(f[:, leg, :]), 99.5) * 1.3 + 1
         ax.set_ylim(-top, top)
+        for ev in reflexes:
+            if ev["leg"] == leg:
+                color = REFLEX_COLORS.get(ev["kind"], "tab:green")
+                ax.axvline(ev["t"], color=color, lw=1.0)
+                if ev["kind"] == "elevator":
+                    text = f"elevator {ev.get('force_N', 0):.0f} N"
+                    if "peak_force_N" in ev:
+                        text += f" (peak {ev['peak_force_N']:.0f} N)"
+                elif ev["kind"] in ("searching", "giveup"):
+                    text = ev["kind"]
+                else:
+                    continue
+                ax.annotate(text, (ev["t"], top * 0.75), fontsize=7, color=color, xytext=(2, 0),
+                            textcoords="offset points")
     axes[0].legend(fontsize=7, ncol=3, loc="upper right")
     thr = ", ".join(f"{k} = {v:g} N" for k, v in thresholds.items())
     axes[0].set_title(f"toe forces (body frame); thresholds {thr}; vertical lines: reflex triggers")

@@ -536,6 +536,19 @@ def test_different_fmus_in_one_process(exported):
         f.freeInstance()
 
 
+def test_debug_logging_categories(exported):
+    """fmi2SetDebugLogging accepts the declared categories and rejects an unknown one via the logger."""
+    path = exported("toy", 2, "both").path
+    log = LogCapture()
+    fmu, _ = instance(path, callbacks=log.callbacks)
+    fmu.setDebugLogging(True, ["logEvents", "logStatusError"])
+    with pytest.raises(FMICallException) as err:
+        fmu.setDebugLogging(True, ["logNoSuchThing"])
+    assert err.value.status == 3
+    assert any("fmi2SetDebugLogging" in m and "logNoSuchThing" in m for _, _, m in log.messages)
+    fmu.freeInstance()
+
+
 def test_errors_go_through_the_logger_not_stdout(exported, capfd):
     path = exported("toy", 2, "both").path
     log = LogCapture()

@@ -92,6 +92,29 @@ static void cpg_logf(cpg_instance *inst, int status, const char *category, const
 
 #define CPG_FAIL(inst, ...) (cpg_logf((inst), CPG_ERROR, "logStatusError", __VA_ARGS__), CPG_ERROR)
 
+/* The body of fmi2SetDebugLogging / fmi3SetDebugLogging (``fn`` names the caller in messages):
+   no categories = warnings and errors (+ events when on); else exactly the listed categories. */
+static int cpg_set_debug_logging(cpg_instance *inst, int on, size_t n, const char *const categories[],
+                                 const char *fn) {
+    size_t i;
+    inst->logging_on = on ? 1 : 0;
+    if (n == 0) {
+        inst->log_mask = LOG_WARNING | LOG_ERROR | (on ? LOG_EVENTS : 0);
+        return CPG_OK;
+    }
+    inst->log_mask = LOG_ERROR;
+    for (i = 0; i < n; ++i) {
+        const char *cat = categories[i];
+        if (!cat) continue;
+        if (!strcmp(cat, "logEvents")) inst->log_mask |= LOG_EVENTS;
+        else if (!strcmp(cat, "logStatusWarning")) inst->log_mask |= LOG_WARNING;
+        else if (!strcmp(cat, "logStatusError")) inst->log_mask |= LOG_ERROR;
+        else if (!strcmp(cat, "logAll")) inst->log_mask |= LOG_EVENTS | LOG_WARNING | LOG_ERROR;
+        else return CPG_FAIL(inst, "%s: unknown log category '%s'", fn, cat);
+    }
+    return CPG_OK;
+}
+
 /* name of variable vr, for messages */
 static void cpg_var_name(unsigned vr, char *out, size_t n) {
     unsigned cat = vr / CPG_VR_STRIDE, i = vr % CPG_VR_STRIDE;

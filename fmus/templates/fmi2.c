@@ -57,28 +57,9 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
-    cpg_instance *inst = (cpg_instance *)c;
-    size_t i;
     if (!allowed(c, ANY_PHASE, "fmi2SetDebugLogging")) return fmi2Error;
-    inst->logging_on = loggingOn ? 1 : 0;
-    if (nCategories == 0) {
-        inst->log_mask = LOG_WARNING | LOG_ERROR | (loggingOn ? LOG_EVENTS : 0);
-        return fmi2OK;
-    }
-    inst->log_mask = LOG_ERROR;
-    for (i = 0; i < nCategories; ++i) {
-        const char *cat = categories[i];
-        if (!cat) continue;
-        if (!strcmp(cat, "logEvents")) inst->log_mask |= LOG_EVENTS;
-        else if (!strcmp(cat, "logStatusWarning")) inst->log_mask |= LOG_WARNING;
-        else if (!strcmp(cat, "logStatusError")) inst->log_mask |= LOG_ERROR;
-        else if (!strcmp(cat, "logAll")) inst->log_mask |= LOG_EVENTS | LOG_WARNING | LOG_ERROR;
-        else {
-            cpg_logf(inst, CPG_ERROR, "logStatusError", "fmi2SetDebugLogging: unknown log category '%s'", cat);
-            return fmi2Error;
-        }
-    }
-    return fmi2OK;
+    return (fmi2Status)cpg_set_debug_logging((cpg_instance *)c, loggingOn, nCategories, categories,
+                                             "fmi2SetDebugLogging");
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,

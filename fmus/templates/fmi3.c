@@ -53,24 +53,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[]) {
-    size_t i;
     if (!allowed(instance, ANY_PHASE, "fmi3SetDebugLogging")) return fmi3Error;
-    INST->logging_on = loggingOn ? 1 : 0;
-    if (nCategories == 0) {
-        INST->log_mask = LOG_WARNING | LOG_ERROR | (loggingOn ? LOG_EVENTS : 0);
-        return fmi3OK;
-    }
-    INST->log_mask = LOG_ERROR;
-    for (i = 0; i < nCategories; ++i) {
-        const char *cat = categories[i];
-        if (!cat) continue;
-        if (!strcmp(cat, "logEvents")) INST->log_mask |= LOG_EVENTS;
-        else if (!strcmp(cat, "logStatusWarning")) INST->log_mask |= LOG_WARNING;
-        else if (!strcmp(cat, "logStatusError")) INST->log_mask |= LOG_ERROR;
-        else if (!strcmp(cat, "logAll")) INST->log_mask |= LOG_EVENTS | LOG_WARNING | LOG_ERROR;
-        else return (fmi3Status)CPG_FAIL(INST, "fmi3SetDebugLogging: unknown log category '%s'", cat);
-    }
-    return fmi3OK;
+    return (fmi3Status)cpg_set_debug_logging(INST, loggingOn, nCategories, categories, "fmi3SetDebugLogging");
 }
 
 static fmi3Instance instantiate(int interface, fmi3String instanceName, fmi3String token, fmi3Boolean loggingOn,

@@ -13,7 +13,6 @@ import os
 import stat
 import subprocess
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -167,13 +166,9 @@ def _build(tool: str, source: str, name: str, dest: Path) -> Path:
 
 
 @pytest.fixture(autouse=True)
-def _temp_in_tmp_path(tmp_path, monkeypatch):
+def _temp_in_tmp_path(fmu_tmp):
     """Every temporary file (FMU extraction, isolated processes) goes under this test's tmp_path."""
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    monkeypatch.setenv("TMPDIR", str(tmp))
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
-    monkeypatch.chdir(tmp_path)  # files an FMU might write relative to the working directory land here too
+    tmp = fmu_tmp
     yield tmp
     leftovers = [p for p in tmp.iterdir() if p.name.startswith(("cpgsim_fmu_", "cpgsim_ssp_"))]
     assert not leftovers, f"extraction directories left behind: {leftovers}"

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -25,13 +24,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(autouse=True)
-def _temp_in_tmp_path(tmp_path, monkeypatch):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    monkeypatch.setenv("TMPDIR", str(tmp))
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
-    monkeypatch.chdir(tmp_path)  # files an FMU might write relative to the working directory land here too
-    yield tmp
+def _temp_in_tmp_path(fmu_tmp):
+    yield fmu_tmp
 
 
 @pytest.fixture(scope="module")

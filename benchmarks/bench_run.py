@@ -4,8 +4,10 @@ the harness's share of the wall time.
 The plant's ``world.step()`` is wrapped in a timing accumulator (a proxy around the DART world,
 installed right after the plant's ``setup``); "harness" is everything else in the run: the
 co-simulation master loop, the controller's compiled C step, the plant's contact readout and
-outputs, recording. Compilation and setup are excluded (timed separately). ``--profile`` adds a
-cProfile breakdown of one more run.
+outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
+interleaved in the same process: the controller's compiled step on a worker thread (the default of
+a robot run, :class:`harness.native.ThreadedStep`) and on the master's own thread; medians are
+printed. ``--profile`` adds a cProfile breakdown of one more run.
 
 Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--profile]``.
 """
@@ -17,6 +19,8 @@ import cProfile
 import io
 import pstats
 import time
+
+import numpy as np
 
 from harness.run import build_scenario
 from harness.simulate import Simulator
@@ -57,10 +61,11 @@ def _instrument(graph) -> list[TimedWorld]:
     return proxies
 
 
-def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False) -> dict[str, float]:
+def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
+          step_thread: bool = True) -> dict[str, float]:
     t0 = time.perf_counter()
     setup = build_scenario(scenario, {})
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record).prepare()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread).prepare()
     t_prepare = time.perf_counter() - t0
     proxies = _instrument(setup.graph)
     prof = cProfile.Profile() if profile else None
@@ -89,18 +94,27 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--profile", action="store_true")
     args = ap.parse_args(argv)
-    runs = [bench(args.seconds) for _ in range(args.repeat)]
+    modes = {"step on a worker thread": True, "step on the master thread": False}
+    runs: dict[str, list[dict[str, float]]] = {m: [] for m in modes}
+    for _ in range(args.repeat):  # interleaved, so both see the same machine load
+        for mode, threaded in modes.items():
+            runs[mode].append(bench(args.seconds, step_thread=threaded))
     us = 1e6
-    print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs")
-    print(f"  prepare (graph, compile, C library; cached after the first): {runs[0]['prepare']:.2f} s")
-    for r in runs:
-        n = r["steps"]
-        print(f"  wall {r['wall']:6.2f} s  real-time factor {r['rtf']:5.2f}x  world.step {r['step_time']:5.2f} s "
-              f"({r['step_time'] / n * us:5.1f} us/step)  harness {r['wall'] - r['step_time']:5.2f} s "
-              f"({(r['wall'] - r['step_time']) / n * us:5.1f} us/step)  harness share {r['share']:.0%}")
-    best = max(runs, key=lambda r: r["rtf"])
-    print(f"  best: {best['rtf']:.2f}x real time, harness share {best['share']:.0%} "
-          f"(targets: >= 5x, <= 25%); distance {best['distance']:.3f} m")
+    first = runs[next(iter(modes))][0]
+    print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs each")
+    print(f"  prepare (graph, compile, C library; cached after the first): {first['prepare']:.2f} s")
+    print(f"  {'mode':27s} {'wall s':>7s} {'real time':>10s} {'world.step':>11s} {'harness':>9s} {'share':>6s}  "
+          "(medians; world.step and harness in us per 1 ms step)")
+    for mode, rs in runs.items():
+        med = {k: float(np.median([r[k] for r in rs])) for k in ("wall", "rtf", "step_time", "share")}
+        n = rs[0]["steps"]
+        print(f"  {mode:27s} {med['wall']:7.2f} {med['rtf']:9.2f}x {med['step_time'] / n * us:11.1f} "
+              f"{(med['wall'] - med['step_time']) / n * us:9.1f} {med['share']:6.0%}")
+        print(f"  {'':27s} real time per run: " + ", ".join(f"{r['rtf']:.2f}x" for r in rs)
+              + "; share: " + ", ".join(f"{r['share']:.0%}" for r in rs))
+    a, b = (float(np.median([r["rtf"] for r in rs])) for rs in runs.values())
+    print(f"  worker thread / master thread: {a / b:.2f}x faster; targets: >= 5x real time, <= 25% share; "
+          f"distance {first['distance']:.3f} m")
     if args.profile:
         r = bench(args.seconds, profile=True)
         print(f"cProfile run (overhead inflates Python frames): wall {r['wall']:.2f} s")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+import casadi as ca
 import numpy as np
 
 from .core import ParameterError
@@ -129,10 +130,14 @@ class RobotGeometry:
 
 def leg_fk(leg: LegGeometry, alpha: float | np.ndarray, beta: float | np.ndarray,
            gamma: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Foot position relative to the alpha joint: (outward r*cos(alpha), forward r*sin(alpha), h)."""
-    r = leg.coxa + leg.thigh * np.cos(beta) + leg.shank * np.cos(np.asarray(beta) - gamma)
-    h = leg.thigh * np.sin(beta) + leg.shank * np.sin(np.asarray(beta) - gamma)
-    return r * np.cos(alpha), r * np.sin(alpha), h
+    """Foot position relative to the alpha joint: (outward r*cos(alpha), forward r*sin(alpha), h).
+
+    Takes floats, numpy arrays or CasADi symbols (the plant's compiled readout uses this one)."""
+    m = ca if isinstance(beta, (ca.SX, ca.MX)) else np
+    knee = beta - gamma if m is ca else np.asarray(beta) - gamma
+    r = leg.coxa + leg.thigh * m.cos(beta) + leg.shank * m.cos(knee)
+    h = leg.thigh * m.sin(beta) + leg.shank * m.sin(knee)
+    return r * m.cos(alpha), r * m.sin(alpha), h
 
 
 def leg_ik_plane(leg: LegGeometry, r: float, h: float) -> tuple[float, float]:

@@ -18,7 +18,9 @@ ERT         mode 0, ``half``, ``rate > 0``, ``x1_ob_min < x1 < x1_ob_max`` and a
             0 = SPEC, also not while ``support``: a swinging foot that the tilting body puts down on
             the ground feels a horizontal force too, but it is standing, not hitting; with
             ``ob_after_liftoff = 1``, default 0, only once the foot has left the ground in this
-            swing (``landed`` cleared): a foot dragged at lift-off is no obstacle) -> mode 1; leader reset
+            swing (``landed`` cleared) and, with ``ob_clear_time`` > 0, its touchdown flag has been off
+            that long:
+            a foot dragged at lift-off is no obstacle) -> mode 1; leader reset
             ``y1 = -1`` keeping ``x1`` (Y10, through the neuron's ``y_reset``); followers frozen
             (rate 0) and cut from the leader (``lead_gain = 0``) while the leader retracts.
 E1 end      mode 1 and ``y1 > 0`` (the leader turns forward at its new PEP) -> mode 2; followers
@@ -220,6 +222,8 @@ class YuReflexLogic(Block):
                            kind="boolean")
         self.add_parameter("ob_after_liftoff", 0.0, "1", (0, 1), "elevator only once the foot has left the ground",
                            kind="boolean")
+        self.add_parameter("ob_clear_time", 0.0, "s", (0, float("inf")),
+                           "with ob_after_liftoff: elevator only once the touchdown flag has been off this long")
         self.add_parameter("withdraw", 0.0, "1", (0, 1), "after a failed search, step back onto the stance line",
                            kind="boolean")
         self.add_parameter("T_return", 0.5, "s", (0, float("inf")), "return time (as the converter's T_return)")
@@ -243,6 +247,7 @@ class YuReflexLogic(Block):
         self.add_discrete_state("td_prev", 1.0, description="touchdown-with-support flag at the last sample")
         self.add_discrete_state("gaveup", 0.0, description="1 after a failed search until touchdown/next swing end")
         self.add_discrete_state("landed", 0.0, description="touched down since the last swing ended")
+        self.add_discrete_state("t_ground", 0.0, "s", "last time the touchdown flag was on")
         self.add_discrete_state("t_mode", 0.0, "s", "time of the last mode change")
         self.add_discrete_state("withdrawn", 0.0, description="1 once the leg withdrew after its give-up")
         for c in ("n_ert", "n_srt", "n_found", "n_early", "n_giveup", "n_withdraw"):
@@ -284,8 +289,9 @@ class YuReflexLogic(Block):
         fell = ca.logic_and(half_prev, ca.logic_not(half))
         rose = ca.logic_and(ca.logic_not(half_prev), half)
 
+        airborne = ca.logic_and(z["landed"] < 0.5, v.t - z["t_ground"] >= p["ob_clear_time"])
         not_foothold = ca.logic_and(ca.logic_or(p["ob_support_veto"] < 0.5, u["support"] < 0.5),
-                                    ca.logic_or(p["ob_after_liftoff"] < 0.5, z["landed"] < 0.5))
+                                    ca.logic_or(p["ob_after_liftoff"] < 0.5, airborne))
         ob_gate = ca.logic_and(ca.logic_and(ca.logic_and(m0, half), ca.logic_and(running, lob)),
                                ca.logic_and(ca.logic_and(x1 > p["x1_ob_min"], x1 < p["x1_ob_max"]),
                                             ca.logic_and(p["elevator"] > 0.5, not_foothold)))
@@ -348,6 +354,9 @@ class YuReflexLogic(Block):
                     "n_withdraw": w_start}
         m04 = ca.logic_or(m0, m4)
         lifted = ca.logic_and(half, x1 > p["x1_lift"])  # swinging, past the PEP (not waiting on it)
+        landed = ca.if_else(ca.logic_or(early, found), 1,
+                 ca.if_else(ca.logic_and(ca.logic_not(ltd), ca.logic_or(lifted, ca.logic_not(m04))), 0,
+                 ca.if_else(ca.logic_and(ca.logic_and(ltd, ca.logic_not(half)), m04), 1, z["landed"])))
         updates = {
             "mode": new_mode,
             "half_prev": ca.if_else(to_aep, 0, _b(half)),
@@ -356,9 +365,8 @@ class YuReflexLogic(Block):
             "gaveup": gaveup,
             "t_mode": ca.if_else(ca.fabs(new_mode - mode) > 0.5, v.t, z["t_mode"]),
             "withdrawn": ca.if_else(w_start, 1, ca.if_else(_eq(new_mode, NOMINAL), 0, z["withdrawn"])),
-            "landed": ca.if_else(ca.logic_or(early, found), 1,
-                      ca.if_else(ca.logic_and(ca.logic_not(ltd), ca.logic_or(lifted, ca.logic_not(m04))), 0,
-                      ca.if_else(ca.logic_and(ca.logic_and(ltd, ca.logic_not(half)), m04), 1, z["landed"]))),
+            "landed": landed,
+            "t_ground": ca.if_else(ltd, v.t, z["t_ground"]),
         }
         for c, ev in counters.items():
             updates[c] = z[c] + _b(ev)

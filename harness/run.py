@@ -85,14 +85,18 @@ def fell_from(res: Results, robot: str, max_tilt: float = math.pi / 4) -> tuple[
 
 
 def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, sets: dict[str, float] | None = None,
-                 progress: bool = True, plots: bool = True, **kw: Any) -> dict[str, Any]:
-    """Run scenario ``name``; returns the summary (also written to ``out_dir/summary.json``)."""
+                 progress: bool = True, plots: bool = True, step_thread: bool | None = None,
+                 **kw: Any) -> dict[str, Any]:
+    """Run scenario ``name``; returns the summary (also written to ``out_dir/summary.json``).
+
+    ``step_thread``: see :class:`~harness.simulate.Simulator` (sweeps turn it off: their trials already
+    fill the CPUs)."""
     setup = build_scenario(name, sets, **kw)
     t_end = float(t_end if t_end is not None else setup.t_end)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     setup_wall0 = time.perf_counter()
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record).prepare()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread).prepare()
     setup_wall = time.perf_counter() - setup_wall0
     error: SimulationError | None = None
     wall0 = time.perf_counter()

@@ -85,9 +85,7 @@ class AmputatedHexapod(DartHexapod):
                     group.removeShapeFrame(node)
                     node.removeCollisionAspect()
         if self._settle_after > 0:
-            for _ in range(int(round(self._settle_after / self.time_step))):
-                self.world.step()
-                self._read_contacts()
+            self._settle(self._settle_after)
             self.world.setTime(float(t0))
             self._update_outputs()
 

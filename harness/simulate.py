@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
@@ -23,6 +24,7 @@ from components.core import Block, CoSimBlock, ModelError, ParameterError
 
 from .compile import CompiledModel, compile_graph
 from .graph import Graph
+from .master import row_slices, run_master
 from .results import Results
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
@@ -63,13 +65,17 @@ class Simulator:
     ``backend`` picks how an equation-only horizon runs: ``"native"`` (the step's C code from
     CasADi looped in C, :mod:`harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
     when a C compiler works). ``jit`` compiles the per-step function used by the co-simulation
-    master with the C compiler.
+    master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
+    worker thread (:class:`harness.native.ThreadedStep`); ``None`` (default) does so when the step
+    is large (above ``NATIVE_AUTO_MAX_INSTRUCTIONS``) and the process may use two CPUs, unless the
+    environment sets ``CPGSIM_STEP_THREAD=0`` (or ``=1`` to force it).
     """
 
     def __init__(self, graph: Graph | Block, dt: float = 1e-3, substeps: int = 1,
                  params: Mapping[str, Any] | None = None, record: Sequence[str] | None = None,
                  order: Literal["jacobi", "gauss-seidel"] = "jacobi", jit: bool = False,
-                 backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000) -> None:
+                 backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000,
+                 step_thread: bool | None = None) -> None:
         if order not in ("jacobi", "gauss-seidel"):
             raise ModelError(f"co-simulation order must be 'jacobi' or 'gauss-seidel', got {order!r}")
         if isinstance(graph, Graph) and params:
@@ -85,6 +91,7 @@ class Simulator:
         self._native_runner = None
         self.jit = jit
         self.chunk = max(1, int(chunk))
+        self.step_thread = step_thread
         self._record_patterns = list(record) if record else None
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
@@ -196,8 +203,9 @@ class Simulator:
             self._chunk_fns[n] = self._step_fn.mapaccum(f"horizon{n}", n, [1, 2], [0, 1], {})
         return self._chunk_fns[n]
 
-    def _step_caller(self, t_arr, x, z, u, p, x_next, z_next, y) -> Callable[[], None]:
-        """``evaluate()``: one step at ``t_arr[0]`` from the given arrays into the outputs (no copies).
+    def _step_caller(self, x, z, u, p, x_next, z_next, y):
+        """``step(t)``: one step at ``t`` from the given arrays into the outputs (no copies);
+        ``step.commit(t)`` also moves ``x_next, z_next`` into ``x, z`` when they are finite.
 
         The compiled C step (bound once) when a compiler works, else CasADi's zero-copy buffer. In
         a co-simulation the step runs every macro step, so it is compiled whatever its size.
@@ -205,15 +213,26 @@ class Simulator:
         native = self._native(always=True)
         if native is not None:
             bound = native.bind(x, z, u, p, x_next, z_next, y)
+            if self._use_step_thread():
+                from .native import NativeUnavailable, ThreadedStep
+
+                try:
+                    bound = ThreadedStep(bound)
+                except NativeUnavailable:
+                    pass
             self._bound = bound  # keep alive for the run
-            return lambda: bound(t_arr[0])
-        buf, evaluate = self._step_fn.buffer()
-        for i, arr in enumerate((t_arr, x, z, u, p)):
-            buf.set_arg(i, memoryview(arr))
-        for i, arr in enumerate((x_next, z_next, y)):
-            buf.set_res(i, memoryview(arr))
-        self._bound = buf
-        return evaluate
+            return bound
+        self._bound = _CasadiStep(self._step_fn, x, z, u, p, x_next, z_next, y)
+        return self._bound
+
+    def _use_step_thread(self) -> bool:
+        env = os.environ.get("CPGSIM_STEP_THREAD", "")
+        if env in ("0", "1"):
+            return env == "1"
+        if self.step_thread is not None:
+            return bool(self.step_thread)
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return cpus >= 2 and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS
 
     def _native(self, always: bool = False):
         """The C step library, or None when the backend is 'casadi' or no compiler works."""
@@ -284,84 +303,39 @@ class Simulator:
     # -- co-simulation master ---------------------------------------------------------------------
     def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
                    progress: bool) -> None:
+        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors."""
         m = self.model
-        n = len(times) - 1
-        dt = m.dt
         u = np.zeros(m.inputs.size)
         y = np.zeros(m.signals_layout.size)
         x_next, z_next = np.zeros_like(x), np.zeros_like(z)
-        t_arr = np.zeros(1)
-        evaluate = self._step_caller(t_arr, x, z, u, p, x_next, z_next, y)
-        free_slots = [(m.inputs.index("$" + nm).slice, idx) for idx, nm in
-                      zip(_row_slices(m.free_inputs), m.free_inputs, strict=True)]
-        cs_in_slots = [(m.inputs.index(s.name).slice, s.name) for s in m.inputs.slots if not s.name.startswith("$")]
-        feeds = self._cosim_feeds(cs)
-        ft_paths = [path for path, blk in cs.items() if any(blk.feedthrough.values())]
-        y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
-        c_picks = _group_cosim_picks(picks)
-        yj = np.array([j for j, _ in y_picks], dtype=int)
-        yi = np.array([i for _, i in y_picks], dtype=int)
-        row = np.zeros(len(picks))
-        bar = _progress(n, progress, m.name)
-        outputs: dict[str, dict[str, np.ndarray]] = {}
-        started: list[CoSimBlock] = []
+        step = self._step_caller(x, z, u, p, x_next, z_next, y)
+
+        def block_error(path: str, what: str, exc: Exception) -> CoSimulationError:
+            return CoSimulationError(
+                f"co-simulation block {path!r} failed in {what} at t={rec.last_time():.6g} s: "
+                f"{type(exc).__name__}: {exc}", rec.results(False, f"{path}.{what} failed: {exc}"))
+
+        def diverged() -> None:
+            self._diverged(x_next, x, float(times[rec.n]), rec, picks)
+
+        bar = _progress(len(times) - 1, progress, m.name)
         try:
-            for path, blk in cs.items():
-                _guard(path, "setup", lambda b=blk: b.setup(float(times[0])), rec)
-                started.append(blk)
-            for k in range(n + 1):
-                t = float(times[k])
-                for path, blk in cs.items():
-                    outputs[path] = _guard(path, "get_outputs", blk.get_outputs, rec)
-                for sl, rows in free_slots:
-                    u[sl] = u_free[rows, k]
-                for sl, name in cs_in_slots:
-                    path, port = name.rsplit(".", 1)
-                    u[sl] = outputs[path][port]
-                t_arr[0] = t
-                evaluate()
-                for _ in range(len(ft_paths)):  # direct feedthrough: inputs at t before outputs at t
-                    for path in ft_paths:
-                        values = {port: _source_value(src, y, u_free[:, k], outputs, m) for port, src in feeds[path]}
-                        _guard(path, "set_inputs", lambda b=cs[path], v=values: b.set_inputs(v), rec)
-                        outputs[path] = _guard(path, "get_outputs", cs[path].get_outputs, rec)
-                    for sl, name in cs_in_slots:
-                        path, port = name.rsplit(".", 1)
-                        u[sl] = outputs[path][port]
-                    evaluate()
-                if not np.all(np.isfinite(x_next)):
-                    rec.add_row(_fill_row(row, yj, yi, y, c_picks, outputs))
-                    self._diverged(x_next, x, t + dt, rec, picks)
-                rec.add_row(_fill_row(row, yj, yi, y, c_picks, outputs))
-                if k == n:
-                    break
-                for path, blk in cs.items():
-                    values = {port: _source_value(src, y, u_free[:, k], outputs, m) for port, src in feeds[path]}
-                    _guard(path, "set_inputs", lambda b=blk, v=values: b.set_inputs(v), rec)
-                    _guard(path, "do_step", lambda b=blk, tk=t: b.do_step(tk, dt), rec)
-                    if self.order == "gauss-seidel":
-                        outputs[path] = _guard(path, "get_outputs", blk.get_outputs, rec)
-                x[:] = x_next
-                z[:] = z_next
-                if k % 100 == 0:
-                    bar.update(min(100, n - k))
+            run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, self._cosim_feeds(cs),
+                       rec, self.order, bar, block_error, diverged)
         except KeyboardInterrupt as exc:
             raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
                                   rec.results(False, "interrupted")) from exc
         finally:
             bar.close()
-            for blk in started:
-                try:
-                    blk.terminate()
-                except Exception:  # noqa: BLE001 - best effort cleanup must not mask the real error
-                    pass
+            if hasattr(step, "stop_thread"):
+                step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
 
     def _cosim_feeds(self, cs: dict[str, CoSimBlock]) -> dict[str, list[tuple[str, tuple]]]:
         m = self.model
         feeds: dict[str, list[tuple[str, tuple]]] = {}
         free_names = list(m.free_inputs)
-        free_rows = dict(zip(free_names, _row_slices(m.free_inputs), strict=True))
+        free_rows = dict(zip(free_names, row_slices(m.free_inputs), strict=True))
         for path, blk in cs.items():
             lst = []
             for iname, port in blk.inputs.items():
@@ -376,55 +350,6 @@ class Simulator:
                     lst.append((iname, ("y", m.signals_layout.index(src).slice)))
             feeds[path] = lst
         return feeds
-
-
-def _row_slices(ports: Mapping[str, Any]) -> list[slice]:
-    out, k = [], 0
-    for port in ports.values():
-        out.append(slice(k, k + port.size))
-        k += port.size
-    return out
-
-
-def _source_value(src: tuple, y: np.ndarray, u_free_k: np.ndarray, outputs, m) -> np.ndarray:
-    kind, where = src
-    if kind == "y":
-        return y[where].copy()
-    if kind == "free":
-        return u_free_k[where].copy()
-    if kind == "cs":
-        return np.asarray(outputs[where[0]][where[1]], dtype=float)
-    return where
-
-
-def _group_cosim_picks(picks) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
-    """Recorded co-simulation outputs grouped per port: (path, port, row columns, element indices)."""
-    groups: dict[str, tuple[list[int], list[int]]] = {}
-    for j, (src, i, _) in enumerate(picks):
-        if src != "y":
-            cols, elems = groups.setdefault(src, ([], []))
-            cols.append(j)
-            elems.append(i)
-    return [(*src.rsplit(".", 1), np.array(c), np.array(e)) for src, (c, e) in groups.items()]
-
-
-def _fill_row(row, yj, yi, y, c_picks, outputs) -> np.ndarray:
-    row[yj] = y[yi]
-    for path, port, cols, elems in c_picks:
-        row[cols] = np.asarray(outputs[path][port]).ravel()[elems]
-    return row
-
-
-def _guard(path: str, what: str, fn: Callable[[], Any], rec: _Recorder) -> Any:
-    try:
-        return fn()
-    except SimulationError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - wrap with the block name, keep partial results
-        raise CoSimulationError(
-            f"co-simulation block {path!r} failed in {what} at t={rec.last_time():.6g} s: "
-            f"{type(exc).__name__}: {exc}",
-            rec.results(False, f"{path}.{what} failed: {exc}")) from exc
 
 
 def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) -> np.ndarray:
@@ -445,6 +370,31 @@ def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) ->
     if not np.all(np.isfinite(arr)):
         raise ModelError(f"input {name!r} contains non-finite values")
     return arr
+
+
+class _CasadiStep:
+    """The step on CasADi's zero-copy buffer (no C compiler): same interface as ``native.BoundStep``."""
+
+    def __init__(self, fn: ca.Function, x, z, u, p, x_next, z_next, y) -> None:
+        self._t = np.zeros(1)
+        self._buf, self._evaluate = fn.buffer()
+        for i, arr in enumerate((self._t, x, z, u, p)):
+            self._buf.set_arg(i, memoryview(arr))
+        for i, arr in enumerate((x_next, z_next, y)):
+            self._buf.set_res(i, memoryview(arr))
+        self._x, self._z, self._x_next, self._z_next = x, z, x_next, z_next
+
+    def __call__(self, t: float) -> None:
+        self._t[0] = t
+        self._evaluate()
+
+    def commit(self, t: float) -> bool:
+        self(t)
+        if not np.isfinite(self._x_next.sum()):
+            return False
+        self._x[:] = self._x_next
+        self._z[:] = self._z_next
+        return True
 
 
 class _Recorder:

@@ -64,7 +64,7 @@ def run_trial(scenario: str, seed: int, sets: dict[str, float] | None, out_dir: 
     record: dict[str, Any] = {"seed": int(seed), "dir": str(out_dir), "status": "ok", "error": None, "outcome": {}}
     try:
         summary = run_scenario(scenario, out_dir, t_end=t_end, sets=dict(sets or {}), progress=False, plots=plots,
-                               seed=int(seed))
+                               step_thread=False, seed=int(seed))
         record["outcome"] = {k: summary[k] for k in OUTCOME_KEYS if k in summary}
     except Exception as exc:  # noqa: BLE001 - a trial must never stop the sweep
         record["status"] = "failed"

@@ -20,11 +20,13 @@ Roll turns about the forward axis ``y`` (positive: right side down), pitch about
 ``x`` (positive: nose up), yaw about ``z`` (positive: turning left). No output reads an input in
 the same step (no direct feedthrough).
 
-Servos. Each joint is a DART joint spring and damper whose rest position is moved to the target
-(``tau = -kp (q - q_rest) - kd qd``), integrated implicitly by DART: NOTES measured explicit
-Python PD torques at 1 ms to go unstable on light links from ``kp >= 100`` while this scheme stayed
-stable up to ``kp = 1000``. With ``velocity_ff = 1`` the rest position is advanced by
-``(kd/kp) * dq_target/dt`` so the damper acts on the velocity *error* (removes the tracking lag
+Servos. Each joint is a DART joint spring and damper, ``tau = -kp (q - q_target) - kd qd``,
+integrated implicitly by DART: NOTES measured explicit Python PD torques at 1 ms to go unstable on
+light links from ``kp >= 100`` while this scheme stayed stable up to ``kp = 1000``. The spring's
+rest position stays at 0 and the target enters as the joint force ``kp q_target`` (DART's spring
+force is ``-kp (q + h qd - q_rest)``, so this is the same law; one ``setForces`` call per step
+instead of 18 ``setRestPosition`` calls). With ``velocity_ff = 1`` the force gains
+``kd * dq_target/dt`` so the damper acts on the velocity *error* (removes the tracking lag
 ``kd/kp * qd`` of a moving target); the target velocity is a backward difference of the inputs,
 so a jump of the target gives a one-step kick -- keep it off for discontinuous targets (default).
 Default gains scale with the robot (:func:`default_gains`). Parameters apply at :meth:`setup`, or
@@ -39,12 +41,11 @@ step ``dt`` longer than the world step the force is averaged over the sub-steps.
 
 Cost (``benchmarks/bench_run.py``, docs/performance.md). A 1 kHz closed loop calls ``set_inputs``,
 ``do_step`` and ``get_outputs`` 1000 times per simulated second, so the Python around
-``world.step()`` is kept lean: collision objects are identified by their (kept-alive) wrappers'
-``id()`` after the first sight (two ``getShape()`` calls less per contact; the terrain is usually
-object 1, so object 2 is looked at first), the servo rest positions go through bound methods,
-and the outputs (foot centres, body-frame toe forces, roll/pitch/yaw) are computed on plain
-floats from one ``tolist()`` of the body transform -- about 35 % less Python per step than the
-first version, with identical outputs (compared over 12 s of walking: 4e-15 N, 1e-16 m).
+``world.step()`` is kept lean: one ``setForces`` for the servos; collision objects are identified
+by their (kept-alive) wrappers' ``id()`` after the first sight (two ``getShape()`` calls less per
+contact; the terrain is usually object 1, so object 2 is looked at first); and every output (foot
+centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi function
+(:mod:`robots.readout`, about 1 us per call) on the skeleton's positions and velocities.
 """
 
 from __future__ import annotations
@@ -57,12 +58,13 @@ import numpy as np
 
 from components.core import CoSimBlock, ModelError, ParameterError
 from components.geometry import YU_SIM, RobotGeometry, leg_ik
+from harness.native import NativeFunction, NativeUnavailable
 
-from .hexapod import JOINT_DOFS, HexapodModel, build_hexapod, tilt_angle
+from .hexapod import HexapodModel, build_hexapod, tilt_angle
+from .readout import OUTPUT_PORTS, readout_function
 from .terrain import Terrain, flat
 
 GRAVITY = 9.81
-_cos, _sin = math.cos, math.sin
 _free_to_transform = dart.dynamics.FreeJoint.convertToTransform
 DETECTORS = {
     "dart": dart.collision.DARTCollisionDetector,
@@ -192,6 +194,7 @@ class DartHexapod(CoSimBlock):
             for j in self.model.joints:
                 j.setSpringStiffness(0, v["kp"])
                 j.setDampingCoefficient(0, v["kd"])
+            self._target_changed = True  # the servo forces scale with kp
             for bodies in [[self.model.body], *self.model.link_bodies]:
                 for bn in bodies:
                     for sn in bn.getShapeNodes():
@@ -217,10 +220,10 @@ class DartHexapod(CoSimBlock):
         model.set_body_pose([0.0, 0.0, 0.0])
         z = self.body_height if self.body_height is not None else self._touching_height(model)
         model.set_body_pose([0.0, 0.0, z])
-        for j, q in zip(model.joints, self.q0, strict=True):
+        for j in model.joints:  # rest at 0: the target enters as the force kp * q_target (see do_step)
             j.setSpringStiffness(0, v["kp"])
             j.setDampingCoefficient(0, v["kd"])
-            j.setRestPosition(0, float(q))
+            j.setRestPosition(0, 0.0)
         world.addSkeleton(model.skeleton)
         self.world, self.model = world, model
 
@@ -244,27 +247,44 @@ class DartHexapod(CoSimBlock):
         # stays valid): saves two getShape() calls per contact and step
         self._objects: list = []
         self._object_code: dict[int, int] = {}
-        self._set_rest = [j.setRestPosition for j in model.joints]
+        self._skel = model.skeleton
         self._steps_per: dict[float, int] = {}
-        leg = self.geometry.leg
-        self._leg_c, self._leg_f, self._leg_t = leg.coxa, leg.thigh, leg.shank
-        self._mounts = [(float(mx), float(my), float(self.geometry.side(i)))
-                        for i, (mx, my) in enumerate(self.geometry.mounts)]
         self._q_target = self.q0.copy()
         self._q_target_prev = self.q0.copy()
-        self._target_changed = False
+        self._target_changed = True
         self._ff_active = False
+        self._forces = np.zeros(model.skeleton.getNumDofs())
         self._n_steps = 0
-        self._force_world = np.zeros((6, 3))
+        self._force_list = [0.0] * 18
         self._body_contact = False
         self._link_contact = np.zeros(6, dtype=bool)
-        if self.settle > 0:
-            for _ in range(int(round(self.settle / self.time_step))):
-                world.step()
-                self._read_contacts()
+        self._bind_readout()
+        self._settle(self.settle)
         world.setTime(float(t0))
         self._t = float(t0)
         self._update_outputs()
+
+    def _bind_readout(self) -> None:
+        """The compiled sensor readout (:mod:`robots.readout`) on this plant's buffers."""
+        self._pos, self._vel = np.zeros(24), np.zeros(24)
+        self._force_world = np.zeros(18)
+        self._contact = np.zeros(1)
+        self._readout_out = np.zeros(sum(n for _, n in OUTPUT_PORTS))
+        fn = _readout_for(self.geometry)
+        try:
+            self._readout = NativeFunction(fn, [self._pos, self._vel, self._force_world, self._contact],
+                                           [self._readout_out])
+        except NativeUnavailable:  # no C compiler: CasADi's VM evaluates the same function (slower)
+            def evaluate() -> None:
+                self._readout_out[:] = np.asarray(fn(self._pos, self._vel, self._force_world, self._contact)).ravel()
+            self._readout = evaluate
+
+    def _settle(self, seconds: float) -> None:
+        """Simulate ``seconds`` with the targets held (before the clock starts)."""
+        for _ in range(int(round(seconds / self.time_step))):
+            self._apply_servo_forces(self.time_step)
+            self.world.step()
+            self._read_contacts()
 
     def _register(self, shape: dart.dynamics.Shape, code: int) -> None:
         self._shapes.append(shape)
@@ -320,37 +340,47 @@ class DartHexapod(CoSimBlock):
         n = self._steps_for(dt)
         if abs(t - self._t) > 0.5 * self.time_step:
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
-        if self._target_changed or self._ff_active:
-            rest = self._q_target
-            v = self.values
-            if v["velocity_ff"]:
-                vel = (self._q_target - self._q_target_prev) / dt
-                self._ff_active = bool(np.any(vel != 0.0))
-                rest = rest + (v["kd"] / v["kp"]) * vel
-            for set_rest, q in zip(self._set_rest, rest.tolist(), strict=True):
-                set_rest(0, q)
-            self._q_target_prev = self._q_target
-            self._target_changed = False
-        world = self.world
+        self._apply_servo_forces(dt)
+        world, skel, forces = self.world, self._skel, self._forces
         if n == 1:
             world.step()
             self._read_contacts()
         else:
-            total = np.zeros((6, 3))
+            total = np.zeros(18)
             body = False
             link = np.zeros(6, dtype=bool)
             for _ in range(n):
+                skel.setForces(forces)  # world.step() clears them
                 world.step()
                 self._read_contacts()
                 total += self._force_world
                 body |= self._body_contact
                 link |= self._link_contact
-            self._force_world = total / n
+            self._force_world[:] = total / n
             self._body_contact = body
             self._link_contact = link
         self._t = t + dt
         self._n_steps += n
         self._update_outputs()
+
+    def _apply_servo_forces(self, dt: float) -> None:
+        """Joint forces for the next world step: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).
+
+        DART's joint spring, at rest position 0, adds ``-kp (q + h qd) - kd qd`` implicitly, so the total
+        is the servo law ``-kp (q + h qd - q_target) - kd qd`` of a spring whose rest position is the
+        target -- one ``setForces`` call instead of 18 ``setRestPosition`` calls.
+        """
+        if self._target_changed or self._ff_active:
+            v = self.values
+            legs = self._forces[6:]
+            np.multiply(self._q_target, v["kp"], out=legs)
+            if v["velocity_ff"]:
+                vel = (self._q_target - self._q_target_prev) / dt
+                self._ff_active = bool(np.any(vel != 0.0))
+                legs += v["kd"] * vel
+            self._q_target_prev = self._q_target
+            self._target_changed = False
+        self._skel.setForces(self._forces)
 
     def _object_code_of(self, obj) -> int:
         """Code of a collision object (leg index, ``_LINK + leg``, ``_BODY`` or ``_OTHER``), registered on
@@ -362,9 +392,8 @@ class DartHexapod(CoSimBlock):
 
     def _read_contacts(self) -> None:
         """Sum the last collision result's contact forces per leg (world frame, force on the robot)."""
-        fx = [0.0] * 6
-        fy = [0.0] * 6
-        fz = [0.0] * 6
+        f = self._force_list
+        f[:] = _ZEROS18
         body = False
         link = self._link_contact
         link[:] = False
@@ -386,56 +415,30 @@ class DartHexapod(CoSimBlock):
                 sign = 1.0
             if code < _LINK:
                 f0, f1, f2 = c.force.tolist()
-                fx[code] += sign * f0
-                fy[code] += sign * f1
-                fz[code] += sign * f2
+                k = 3 * code
+                f[k] += sign * f0
+                f[k + 1] += sign * f1
+                f[k + 2] += sign * f2
             elif code == _BODY:
                 body = True
             else:
                 link[code - _LINK] = True  # a coxa/femur (or unsensed shank) touched something
-        self._force_world = np.array((fx, fy, fz)).T
+        self._force_world[:] = f
         self._body_contact = body
 
     def _update_outputs(self) -> None:
-        skel = self.model.skeleton
-        pos = skel.getPositions()
-        # the body frame is the FreeJoint's child frame: its transform follows from the 6 coordinates
-        M = _free_to_transform(pos[:6]).matrix()
-        R = M[:3, :3]
-        self._R = R
-        (r00, r01, r02, px), (r10, r11, r12, py), (r20, r21, r22, pz) = M[:3].tolist()
-        q = pos[JOINT_DOFS]
-        # foot centres by the leg kinematics of components.geometry (equal to DART's to 1e-15 m, see
-        # tests/test_robot.py) and the toe forces in the body frame (R^T f): plain floats beat numpy on
-        # 6 legs (and six getWorldTransform() calls); measured 2x cheaper than the numpy version
-        ql = q.tolist()
-        lc, lf, lt = self._leg_c, self._leg_f, self._leg_t
-        feet = []
-        force = []
-        fw = self._force_world.tolist()
-        for i, (mx, my, side) in enumerate(self._mounts):
-            a, b, g = ql[3 * i], ql[3 * i + 1], ql[3 * i + 2]
-            r = lc + lf * _cos(b) + lt * _cos(b - g)
-            x, y, z = mx + side * r * _cos(a), my + r * _sin(a), lf * _sin(b) + lt * _sin(b - g)
-            feet += (px + r00 * x + r01 * y + r02 * z, py + r10 * x + r11 * y + r12 * z,
-                     pz + r20 * x + r21 * y + r22 * z)
-            fx, fy, fz = fw[i]
-            force += (r00 * fx + r10 * fy + r20 * fz, r01 * fx + r11 * fy + r21 * fz, r02 * fx + r12 * fy + r22 * fz)
-        pitch = math.asin(max(-1.0, min(1.0, r21)))  # rpy_from_rotation on the floats
-        self._out = {
-            "q": q,
-            "qd": skel.getVelocities()[JOINT_DOFS],
-            "toe_force": np.array(force),
-            "body_position": np.array((px, py, pz)),
-            "body_rpy": np.array((math.atan2(-r20, r22), pitch, math.atan2(-r01, r11))),
-            "foot_position": np.array(feet),
-            "body_contact": _ONE if self._body_contact else _ZERO,
-        }
+        """The output ports from DART's state and the summed contacts (compiled readout, about 1 us)."""
+        skel = self._skel
+        self._pos[:] = skel.getPositions()
+        self._vel[:] = skel.getVelocities()
+        self._contact[0] = 1.0 if self._body_contact else 0.0
+        self._readout()
 
     def get_outputs(self) -> dict[str, np.ndarray]:
         if self.world is None:
             raise ModelError(f"{self.name}: get_outputs before setup")
-        return dict(self._out)
+        out = self._readout_out.copy()  # the next do_step overwrites the bound buffer
+        return {name: out[sl] for name, sl in _PORT_SLICES}
 
     # -- helpers ----------------------------------------------------------------------------------
     @property
@@ -444,7 +447,7 @@ class DartHexapod(CoSimBlock):
 
     def toe_force_world(self) -> np.ndarray:
         """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
-        return self._force_world.copy()
+        return self._force_world.reshape(6, 3).copy()
 
     def link_contacts(self) -> np.ndarray:
         """Per leg, whether a coxa or femur (or an unsensed tibia) touched something in the last step."""
@@ -460,14 +463,28 @@ class DartHexapod(CoSimBlock):
             return False
         if self._body_contact:
             return True
-        if not np.all(np.isfinite(self.model.skeleton.getPositions())):
+        pos = self.model.skeleton.getPositions()
+        if not np.all(np.isfinite(pos)):
             return True
-        return tilt_angle(self._R) > max_tilt
+        return tilt_angle(_free_to_transform(pos[:6]).matrix()[:3, :3]) > max_tilt
 
 
+def _readout_for(geometry: RobotGeometry):
+    """The readout function of a geometry (built once per geometry and process)."""
+    key = repr(geometry)
+    fn = _READOUTS.get(key)
+    if fn is None:
+        fn = _READOUTS[key] = readout_function(geometry)
+    return fn
+
+
+_READOUTS: dict[str, object] = {}
+_PORT_SLICES: list[tuple[str, slice]] = []
+_k = 0
+for _name, _size in OUTPUT_PORTS:
+    _PORT_SLICES.append((_name, slice(_k, _k + _size)))
+    _k += _size
+_ZEROS18 = [0.0] * 18
 _LINK = 10  # code of leg i's unsensed links: _LINK + i
 _BODY = 100
 _OTHER = 1000  # not the robot (terrain)
-_ONE, _ZERO = np.ones(1), np.zeros(1)
-_ONE.flags.writeable = False
-_ZERO.flags.writeable = False

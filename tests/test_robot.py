@@ -83,6 +83,35 @@ def test_plant_outputs_match_dart_kinematics():
     assert np.allclose(out["q"], robot.model.skeleton.getPositions()[6:])
 
 
+def test_readout_matches_dart_for_large_body_rotations():
+    """The compiled readout (Rodrigues on the FreeJoint coordinates, leg FK, R^T f) against DART's own
+    transforms, for rotations up to ~2.6 rad and exactly zero (the series branch)."""
+    robot = DartHexapod()
+    robot.setup(0.0)
+    rng = np.random.default_rng(5)
+    for angle in (0.0, 1e-9, 0.3, 1.2, 2.6):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R_set = rotation_from_rpy(0.0, 0.0, 0.0) if angle == 0.0 else _axis_angle(axis, angle)
+        robot.model.set_body_pose([0.1, -0.2, 0.5], R_set)
+        robot.model.set_joint_angles(robot.q0 + rng.uniform(-0.3, 0.3, 18))
+        robot._force_world[:] = rng.normal(size=18)
+        robot._update_outputs()
+        out = robot.get_outputs()
+        R = robot.model.body.getWorldTransform().rotation()
+        assert np.allclose(R, R_set, atol=1e-12)
+        assert np.allclose(out["foot_position"].reshape(6, 3), robot.model.foot_positions(), atol=1e-12)
+        assert np.allclose(out["body_position"], [0.1, -0.2, 0.5], atol=1e-15)
+        assert np.allclose(rotation_from_rpy(*out["body_rpy"]), R, atol=1e-12)
+        expected = (R.T @ robot.toe_force_world().T).T.ravel()
+        assert np.allclose(out["toe_force"], expected, atol=1e-12)
+
+
+def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
 def test_rpy_round_trip():
     rng = np.random.default_rng(0)
     for _ in range(20):

@@ -130,6 +130,21 @@ def test_elevator_gates_after_liftoff_and_support_veto():
     assert _run(6.5, standing_push, **{"reflex.ob_support_veto": 1.0})["reflex.n_ert"][-1] == 0
 
 
+def test_elevator_clear_time_ignores_the_drag_of_a_lifting_foot():
+    """A heavy robot's foot keeps a large horizontal force while it unloads at lift-off (the prototype
+    dragged 40-130 N against a 30 N threshold): with ob_clear_time the elevator waits until the
+    touchdown flag has been off that long; a real hit later in the swing still triggers."""
+    def drag_at_liftoff(t):  # unloads at 5.1 s with a 20 N horizontal force lasting 15 ms beyond
+        return [0.0, 20.0 if t < 5.115 else 0.0, 5.0 if t < 5.1 else 0.0]
+    p = {"reflex.ob_after_liftoff": 1.0}
+    assert _run(6.5, drag_at_liftoff, **p)["reflex.n_ert"][-1] == 1
+    assert _run(6.5, drag_at_liftoff, **p, **{"reflex.ob_clear_time": 0.03})["reflex.n_ert"][-1] == 0
+
+    def drag_then_hit(t):
+        return [0.0, 20.0 if t < 5.115 or 5.5 <= t < 5.53 else 0.0, 5.0 if t < 5.1 else 0.0]
+    assert _run(6.5, drag_then_hit, **p, **{"reflex.ob_clear_time": 0.03})["reflex.n_ert"][-1] == 1
+
+
 @pytest.fixture(scope="module")
 def withdraw_runs():
     p = {"reflex.withdraw": 1.0, "reflex.found_support": 1.0}

@@ -1,0 +1,181 @@
+"""The co-simulation master loop: the compiled equation part and the black-box blocks, one macro step at a time.
+
+Semantics (unchanged from the first master): at ``t_k`` every co-simulation block's outputs are
+read, the compiled step runs (sampled updates, outputs ``y(t_k)`` after the update, RK4 to
+``t_k+1``), the row for ``t_k`` is recorded, then each block gets its inputs from ``y(t_k)``
+(Jacobi: the other blocks' outputs at ``t_k``; Gauss-Seidel: as already stepped) and steps to
+``t_k+1``. Blocks with direct feedthrough get their inputs and are read again within the step
+(the compiled step is evaluated again after each round).
+
+The loop runs 1000 times per simulated second in a robot run, so everything that can be decided
+once is decided in :class:`_Plan` before the loop: where each input comes from, which recorded
+columns are plain slices of a block's output, and whether the compiled step may commit its new
+state itself (one C call that also checks it for NaN/inf: no feedthrough blocks). A failing block
+is named by the stage variable the loop keeps, without a wrapper per call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from components.core import CoSimBlock
+
+from .compile import CompiledModel
+
+
+class _Plan:
+    """Everything the loop needs, resolved once."""
+
+    def __init__(self, m: CompiledModel, cs: dict[str, CoSimBlock], picks, feeds) -> None:
+        free_rows = row_slices(m.free_inputs)
+        self.free_to_u = [(m.inputs.index("$" + name).slice, rows)
+                          for name, rows in zip(m.free_inputs, free_rows, strict=True)]
+        self.cs_to_u = [(m.inputs.index(s.name).slice, *s.name.rsplit(".", 1))
+                        for s in m.inputs.slots if not s.name.startswith("$")]
+        self.feeds = feeds
+        self.ft_paths = [path for path, blk in cs.items() if any(blk.feedthrough.values())]
+        y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
+        self.yj = np.array([j for j, _ in y_picks], dtype=int)
+        self.yi = np.array([i for _, i in y_picks], dtype=int)
+        # recorded block outputs: (path, port, columns, elements); a whole port in consecutive columns
+        # is written as one slice
+        self.c_slices: list[tuple[str, str, slice]] = []
+        self.c_fancy: list[tuple[str, str, np.ndarray, np.ndarray]] = []
+        groups: dict[str, tuple[list[int], list[int]]] = {}
+        for j, (src, i, _) in enumerate(picks):
+            if src != "y":
+                cols, elems = groups.setdefault(src, ([], []))
+                cols.append(j)
+                elems.append(i)
+        for src, (cols, elems) in groups.items():
+            path, port = src.rsplit(".", 1)
+            size = cs[path].outputs[port].size
+            if elems == list(range(size)) and cols == list(range(cols[0], cols[0] + size)):
+                self.c_slices.append((path, port, slice(cols[0], cols[0] + size)))
+            else:
+                self.c_fancy.append((path, port, np.array(cols), np.array(elems)))
+
+    def inputs_of(self, path: str, y: np.ndarray, u_free: np.ndarray, k: int,
+                  outputs: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        values = {}
+        for port, (kind, where) in self.feeds[path]:
+            if kind == "y":
+                values[port] = y[where].copy()
+            elif kind == "free":
+                values[port] = u_free[where, k].copy()
+            elif kind == "cs":
+                values[port] = np.asarray(outputs[where[0]][where[1]], dtype=float)
+            else:
+                values[port] = where
+        return values
+
+    def record(self, row: np.ndarray, y: np.ndarray, outputs: dict[str, dict[str, np.ndarray]]) -> None:
+        if self.yj.size:
+            row[self.yj] = y[self.yi]
+        for path, port, sl in self.c_slices:
+            row[sl] = outputs[path][port]
+        for path, port, cols, elems in self.c_fancy:
+            row[cols] = np.asarray(outputs[path][port]).ravel()[elems]
+
+
+def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times: np.ndarray,
+               u_free: np.ndarray, picks, feeds, rec, order: str, progress_bar,
+               on_block_error: Callable[[str, str, Exception], Exception],
+               on_diverged: Callable[[], None]) -> None:
+    """Run the macro steps ``times[0] .. times[-1]`` (see the module docstring).
+
+    ``step(t)`` evaluates the compiled step on ``buffers = (x, z, u, y, x_next, z_next)``;
+    ``step.commit(t)`` also moves the new state in when it is finite. ``on_block_error(path, what,
+    exc)`` builds the exception for a failing block; ``on_diverged()`` raises for a non-finite
+    state (``x_next`` holds it, ``x`` the last finite one).
+    """
+    x, z, u, y, x_next, z_next = buffers
+    plan = _Plan(m, cs, picks, feeds)
+    n = len(times) - 1
+    dt = m.dt
+    t_list = times.tolist()
+    gauss_seidel = order == "gauss-seidel"
+    commit = not plan.ft_paths
+    outputs: dict[str, dict[str, np.ndarray]] = {}
+    getters = [(path, blk.get_outputs) for path, blk in cs.items()]
+    steppers = [(path, blk.set_inputs, blk.do_step, blk.get_outputs) for path, blk in cs.items()]
+    data = rec.data
+    started: list[CoSimBlock] = []
+    stage: tuple[str, str] | None = None
+    try:
+        for path, blk in cs.items():
+            stage = (path, "setup")
+            blk.setup(t_list[0])
+            started.append(blk)
+        for k in range(n + 1):
+            t = t_list[k]
+            for path, get in getters:
+                stage = (path, "get_outputs")
+                outputs[path] = get()
+            stage = None
+            for sl, rows in plan.free_to_u:
+                u[sl] = u_free[rows, k]
+            for sl, path, port in plan.cs_to_u:
+                u[sl] = outputs[path][port]
+            if commit and k < n:
+                committed = step.commit(t)
+            else:
+                committed = False
+                step(t)
+                for _ in range(len(plan.ft_paths)):  # direct feedthrough: inputs at t before outputs at t
+                    for path in plan.ft_paths:
+                        stage = (path, "set_inputs")
+                        cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                        stage = (path, "get_outputs")
+                        outputs[path] = cs[path].get_outputs()
+                    stage = None
+                    for sl, path, port in plan.cs_to_u:
+                        u[sl] = outputs[path][port]
+                    step(t)
+            plan.record(data[k], y, outputs)
+            rec.n = k + 1
+            if k == n:
+                break
+            if not committed and (commit or not np.isfinite(x_next.sum())):  # a sum is finite iff all are
+                on_diverged()
+            for path, set_inputs, do_step, get in steppers:
+                stage = (path, "set_inputs")
+                set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                stage = (path, "do_step")
+                do_step(t, dt)
+                if gauss_seidel:
+                    stage = (path, "get_outputs")
+                    outputs[path] = get()
+            stage = None
+            if not committed:
+                x[:] = x_next
+                z[:] = z_next
+            if k % 100 == 0:
+                progress_bar.update(min(100, n - k))
+    except Exception as exc:
+        if stage is None or _is_simulation_error(exc):
+            raise
+        raise on_block_error(*stage, exc) from exc
+    finally:
+        for blk in started:
+            try:
+                blk.terminate()
+            except Exception:  # noqa: BLE001 - best effort cleanup must not mask the real error
+                pass
+
+
+def _is_simulation_error(exc: Exception) -> bool:
+    from .simulate import SimulationError
+
+    return isinstance(exc, SimulationError)
+
+
+def row_slices(ports: dict[str, Any]) -> list[slice]:
+    out, k = [], 0
+    for port in ports.values():
+        out.append(slice(k, k + port.size))
+        k += port.size
+    return out

@@ -1,0 +1,59 @@
+"""The plant's per-step sensor readout as one CasADi function (compiled to C by the plant).
+
+``hexapod_readout(pos, vel, force_world, body_contact) -> out`` maps DART's raw state to the
+plant's output ports, concatenated in port order (``OUTPUT_PORTS``):
+
+- ``q``, ``qd``: the 18 leg joint coordinates and velocities (``pos[6:]``, ``vel[6:]``);
+- ``toe_force``: each leg's world-frame ground force rotated into the body frame, ``R^T f``;
+- ``body_position``, ``body_rpy``: the body frame's origin and ``(roll, pitch, yaw)`` with
+  ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (:func:`robots.plant.rpy_from_rotation`);
+- ``foot_position``: foot sphere centres in the world, ``p + R (mount + leg_fk(q_leg))`` with the
+  leg kinematics of :func:`components.geometry.leg_fk` (the plant's tests check them against
+  DART's own body transforms);
+- ``body_contact``: passed through.
+
+The body rotation comes from the root ``FreeJoint`` coordinates ``pos[:3]``, a rotation vector
+(DART's ``FreeJoint.convertToTransform``: ``R = exp([w]x)``, Rodrigues' formula, with its Taylor
+series below 1e-6 rad so the function stays finite at ``w = 0``).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from components.geometry import RobotGeometry, leg_fk
+
+OUTPUT_PORTS = (("q", 18), ("qd", 18), ("toe_force", 18), ("body_position", 3), ("body_rpy", 3),
+                ("foot_position", 18), ("body_contact", 1))
+"""The plant's output ports in the order of the readout vector, with their sizes."""
+
+
+def rotation_from_rotation_vector(w: ca.SX) -> ca.SX:
+    """``exp([w]x)`` (Rodrigues), finite for ``w = 0``."""
+    theta2 = ca.dot(w, w)
+    theta = ca.sqrt(ca.fmax(theta2, 1e-30))
+    small = theta2 < 1e-12
+    a = ca.if_else(small, 1 - theta2 / 6, ca.sin(theta) / theta)
+    b = ca.if_else(small, 0.5 - theta2 / 24, (1 - ca.cos(theta)) / ca.fmax(theta2, 1e-30))
+    K = ca.skew(w)
+    return ca.SX.eye(3) + a * K + b * (K @ K)
+
+
+def readout_function(geometry: RobotGeometry) -> ca.Function:
+    """The readout of a hexapod built from ``geometry`` (see the module docstring)."""
+    pos, vel = ca.SX.sym("pos", 24), ca.SX.sym("vel", 24)
+    force_world, contact = ca.SX.sym("force_world", 18), ca.SX.sym("body_contact")
+    R = rotation_from_rotation_vector(pos[:3])
+    p = pos[3:6]
+    toe, feet = [], []
+    for i, (mx, my) in enumerate(geometry.mounts):
+        alpha, beta, gamma = pos[6 + 3 * i], pos[7 + 3 * i], pos[8 + 3 * i]
+        outward, forward, h = leg_fk(geometry.leg, alpha, beta, gamma)
+        local = ca.vertcat(float(mx) + geometry.side(i) * outward, float(my) + forward, h)
+        feet.append(p + R @ local)
+        toe.append(R.T @ force_world[3 * i:3 * i + 3])
+    pitch = ca.asin(ca.fmin(1.0, ca.fmax(-1.0, R[2, 1])))
+    rpy = ca.vertcat(ca.atan2(-R[2, 0], R[2, 2]), pitch, ca.atan2(-R[0, 1], R[1, 1]))
+    out = ca.vertcat(pos[6:], vel[6:], *toe, p, rpy, *feet, contact)
+    return ca.Function("hexapod_readout", [pos, vel, force_world, contact], [ca.cse(out)],
+                       ["pos", "vel", "force_world", "body_contact"], ["out"])

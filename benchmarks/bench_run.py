@@ -7,7 +7,10 @@ co-simulation master loop, the controller's compiled C step, the plant's contact
 outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
 interleaved in the same process: the controller's compiled step on a worker thread (the default of
 a robot run, :class:`harness.native.ThreadedStep`) and on the master's own thread; medians are
-printed. ``--profile`` adds a cProfile breakdown of one more run.
+printed. The harness time is split into the plant block's own Python around ``world.step()``
+("plant py": servo forces, contact readout, outputs; its calls are timed too) and the rest
+("master+ctl": the master loop, waiting for the controller step, recording). ``--profile`` adds a
+cProfile breakdown of one more run.
 
 Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--profile]``.
 """
@@ -34,6 +37,7 @@ class TimedWorld:
         self._world = world
         self.step_time = 0.0
         self.steps = 0
+        self.plant_time = 0.0  # the plant block's set_inputs/do_step/get_outputs, world.step included
 
     def step(self) -> None:
         t0 = time.perf_counter()
@@ -52,13 +56,27 @@ def _instrument(graph) -> list[TimedWorld]:
         if isinstance(blk, DartHexapod):
             setup = blk.setup
 
-            def timed_setup(t0, blk=blk, setup=setup):
+            proxy = TimedWorld(None)
+            proxies.append(proxy)
+
+            def timed_setup(t0, blk=blk, setup=setup, proxy=proxy):
                 setup(t0)
-                proxy = TimedWorld(blk.world)
+                proxy._world = blk.world
                 blk.world = proxy
-                proxies.append(proxy)
             blk.setup = timed_setup
+            for name in ("set_inputs", "do_step", "get_outputs"):  # before the master binds them
+                setattr(blk, name, _timed(getattr(blk, name), proxy))
     return proxies
+
+
+def _timed(method, proxy: TimedWorld):
+    def call(*args):
+        t0 = time.perf_counter()
+        try:
+            return method(*args)
+        finally:
+            proxy.plant_time += time.perf_counter() - t0
+    return call
 
 
 def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
@@ -77,8 +95,10 @@ def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
         prof.disable()
     wall = time.perf_counter() - t1
     step_time = sum(p.step_time for p in proxies)
+    plant_time = sum(p.plant_time for p in proxies)
     steps = sum(p.steps for p in proxies)
     out = {"seconds": float(res.time[-1]), "wall": wall, "step_time": step_time, "steps": steps,
+           "plant_py": plant_time - step_time, "master": wall - plant_time,
            "rtf": float(res.time[-1]) / wall, "share": 1.0 - step_time / wall, "prepare": t_prepare,
            "distance": float(res[f"{setup.robot}.body_position"][-1, 1])}
     if prof:
@@ -103,13 +123,15 @@ def main(argv: list[str] | None = None) -> None:
     first = runs[next(iter(modes))][0]
     print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs each")
     print(f"  prepare (graph, compile, C library; cached after the first): {first['prepare']:.2f} s")
-    print(f"  {'mode':27s} {'wall s':>7s} {'real time':>10s} {'world.step':>11s} {'harness':>9s} {'share':>6s}  "
-          "(medians; world.step and harness in us per 1 ms step)")
+    print(f"  {'mode':27s} {'wall s':>7s} {'real time':>10s} {'world.step':>11s} {'harness':>9s} {'share':>6s} "
+          f"{'plant py':>9s} {'master+ctl':>11s}  (medians; us per 1 ms step)")
     for mode, rs in runs.items():
-        med = {k: float(np.median([r[k] for r in rs])) for k in ("wall", "rtf", "step_time", "share")}
+        med = {k: float(np.median([r[k] for r in rs]))
+               for k in ("wall", "rtf", "step_time", "share", "plant_py", "master")}
         n = rs[0]["steps"]
         print(f"  {mode:27s} {med['wall']:7.2f} {med['rtf']:9.2f}x {med['step_time'] / n * us:11.1f} "
-              f"{(med['wall'] - med['step_time']) / n * us:9.1f} {med['share']:6.0%}")
+              f"{(med['wall'] - med['step_time']) / n * us:9.1f} {med['share']:6.0%} "
+              f"{med['plant_py'] / n * us:9.1f} {med['master'] / n * us:11.1f}")
         print(f"  {'':27s} real time per run: " + ", ".join(f"{r['rtf']:.2f}x" for r in rs)
               + "; share: " + ", ".join(f"{r['share']:.0%}" for r in rs))
     a, b = (float(np.median([r["rtf"] for r in rs])) for rs in runs.values())

@@ -279,14 +279,18 @@ class BoundStep:
         self._commit = lib.cpgsim_step_commit
         self._nx, self._nz = nx, nz
 
+    def _rc(self, t: float, commit: bool) -> int:
+        """Step at ``t``: 0 done, 1 not finite (commit only: nothing moved), other: evaluation error."""
+        return self._commit(self._ctx, t, self._nx, self._nz) if commit else 2 * self._call(self._ctx, t)
+
     def __call__(self, t: float) -> None:
-        if self._call(self._ctx, t):
+        if self._rc(t, False):
             raise RuntimeError("compiled step function reported an evaluation error")
 
     def commit(self, t: float) -> bool:
         """Step at ``t`` and move ``x_next, z_next`` into ``x, z``; False (nothing moved) if a state is not finite."""
-        rc = self._commit(self._ctx, t, self._nx, self._nz)
-        if rc == 2:
+        rc = self._rc(t, True)
+        if rc not in (0, 1):
             raise RuntimeError("compiled step function reported an evaluation error")
         return rc == 0
 
@@ -299,55 +303,45 @@ class BoundStep:
         self.close()
 
 
-class ThreadedStep:
+class ThreadedStep(BoundStep):
     """A :class:`BoundStep` run by a worker thread: same interface, the caller blocks until it is done.
 
-    Pays off when the step is called between the steps of another heavy library (a physics engine)
-    on the caller's core: the step's code and data stay warm in the worker core's caches. ``spin``
-    is how many pause instructions either side busy-waits before it sleeps (about 25 ns each on the
-    benchmark machine's EPYC: 0.5 ms, longer than a robot run's whole 1 ms loop iteration).
+    Takes over ``bound``'s context. Pays off when the step is called between the steps of another
+    heavy library (a physics engine) on the caller's core: the step's code and data stay warm in
+    the worker core's caches. ``spin`` is how many pause instructions either side busy-waits
+    before it sleeps (about 25 ns each on the benchmark machine's EPYC: 0.5 ms, longer than a
+    robot run's whole loop iteration). After :meth:`stop_thread` it steps on the caller's thread.
     """
 
     def __init__(self, bound: BoundStep, spin: int = 20_000) -> None:
-        lib = bound._lib
+        super().__init__(bound._lib, bound._ctx, bound._keep, bound._nx, bound._nz)
+        bound._ctx = None  # ownership moves here
+        lib = self._lib
         lib.cpgsim_worker_start.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_long]
         lib.cpgsim_worker_start.restype = ctypes.c_void_p
         lib.cpgsim_worker_run.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int]
         lib.cpgsim_worker_run.restype = ctypes.c_int
         lib.cpgsim_worker_stop.argtypes = [ctypes.c_void_p]
-        self._bound = bound
-        self._lib = lib
-        self._handle = lib.cpgsim_worker_start(bound._ctx, bound._nx, bound._nz, spin)
+        self._handle = lib.cpgsim_worker_start(self._ctx, self._nx, self._nz, spin)
         if not self._handle:
             raise NativeUnavailable("could not start the step's worker thread")
         self._run = lib.cpgsim_worker_run
 
-    def __call__(self, t: float) -> None:
+    def _rc(self, t: float, commit: bool) -> int:
         if not self._handle:
-            return self._bound(t)
-        if self._run(self._handle, t, 0):
-            raise RuntimeError("compiled step function reported an evaluation error")
-
-    def commit(self, t: float) -> bool:
-        if not self._handle:
-            return self._bound.commit(t)
-        rc = self._run(self._handle, t, 1)
-        if rc == 2:
-            raise RuntimeError("compiled step function reported an evaluation error")
-        return rc == 0
+            return super()._rc(t, commit)
+        rc = self._run(self._handle, t, int(commit))
+        return rc if commit else 2 * rc
 
     def stop_thread(self) -> None:
-        """Stop the worker (the bound buffers stay usable through the wrapped :class:`BoundStep`)."""
-        if self._handle:
+        """Stop the worker; later steps run on the caller's thread."""
+        if getattr(self, "_handle", None):
             self._lib.cpgsim_worker_stop(self._handle)
             self._handle = None
 
     def close(self) -> None:
         self.stop_thread()
-        self._bound.close()
-
-    def __del__(self) -> None:
-        self.close()
+        super().close()
 
 
 class NativeHorizon:

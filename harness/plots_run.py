@@ -117,9 +117,10 @@ def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], refl
                     continue
                 ax.annotate(text, (ev["t"], top * 0.75), fontsize=7, color=color, xytext=(2, 0),
                             textcoords="offset points")
-    axes[0].legend(fontsize=7, ncol=3, loc="upper right")
+    axes[0].legend(fontsize=7, ncol=3, loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False)
     thr = ", ".join(f"{k} = {v:g} N" for k, v in thresholds.items())
-    axes[0].set_title(f"toe forces (body frame); thresholds {thr}; vertical lines: reflex triggers")
+    axes[0].set_title(f"toe forces (body frame); thresholds {thr}; vertical lines: reflex triggers",
+                      loc="left", fontsize=9)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -51,6 +51,7 @@ centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi f
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Mapping, Sequence
 
 import dartpy as dart
@@ -268,6 +269,7 @@ class DartHexapod(CoSimBlock):
         """The compiled sensor readout (:mod:`robots.readout`) on this plant's buffers."""
         self._pos, self._vel = np.zeros(24), np.zeros(24)
         self._force_world = np.zeros(18)
+        self._force_bytes = memoryview(self._force_world).cast("B")
         self._contact = np.zeros(1)
         self._readout_out = np.zeros(sum(n for _, n in OUTPUT_PORTS))
         fn = _readout_for(self.geometry)
@@ -423,7 +425,7 @@ class DartHexapod(CoSimBlock):
                 body = True
             else:
                 link[code - _LINK] = True  # a coxa/femur (or unsensed shank) touched something
-        self._force_world[:] = f
+        _PACK18(self._force_bytes, 0, *f)  # 0.25 us; a numpy slice assignment from a list takes 0.8
         self._body_contact = body
 
     def _update_outputs(self) -> None:
@@ -485,6 +487,7 @@ for _name, _size in OUTPUT_PORTS:
     _PORT_SLICES.append((_name, slice(_k, _k + _size)))
     _k += _size
 _ZEROS18 = [0.0] * 18
+_PACK18 = struct.Struct("18d").pack_into
 _LINK = 10  # code of leg i's unsensed links: _LINK + i
 _BODY = 100
 _OTHER = 1000  # not the robot (terrain)

@@ -29,13 +29,26 @@ from .compile import CompiledModel
 class _Plan:
     """Everything the loop needs, resolved once."""
 
-    def __init__(self, m: CompiledModel, cs: dict[str, CoSimBlock], picks, feeds) -> None:
-        free_rows = row_slices(m.free_inputs)
-        self.free_to_u = [(m.inputs.index("$" + name).slice, rows)
-                          for name, rows in zip(m.free_inputs, free_rows, strict=True)]
+    def __init__(self, m: CompiledModel, cs: dict[str, CoSimBlock], picks) -> None:
+        free_rows = dict(zip(m.free_inputs, row_slices(m.free_inputs), strict=True))
+        self.free_to_u = [(m.inputs.index("$" + name).slice, rows) for name, rows in free_rows.items()]
         self.cs_to_u = [(m.inputs.index(s.name).slice, *s.name.rsplit(".", 1))
                         for s in m.inputs.slots if not s.name.startswith("$")]
-        self.feeds = feeds
+        # each block input: ("y", signal slice), ("free", row slice), ("cs", (path, port)) or ("const", value)
+        self.feeds: dict[str, list[tuple[str, tuple[str, Any]]]] = {}
+        for path, blk in cs.items():
+            feeds = []
+            for iname, port in blk.inputs.items():
+                src = m.cosim_feeds.get(f"{path}.{iname}")
+                if src is None:
+                    feeds.append((iname, ("const", np.full(port.size, port.default))))
+                elif src.startswith("$"):
+                    feeds.append((iname, ("free", free_rows[src[1:]])))
+                elif src.rsplit(".", 1)[0] in cs:
+                    feeds.append((iname, ("cs", tuple(src.rsplit(".", 1)))))
+                else:
+                    feeds.append((iname, ("y", m.signals_layout.index(src).slice)))
+            self.feeds[path] = feeds
         self.ft_paths = [path for path, blk in cs.items() if any(blk.feedthrough.values())]
         y_picks = [(j, i) for j, (src, i, _) in enumerate(picks) if src == "y"]
         self.yj = np.array([j for j, _ in y_picks], dtype=int)
@@ -82,7 +95,7 @@ class _Plan:
 
 
 def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times: np.ndarray,
-               u_free: np.ndarray, picks, feeds, rec, order: str, progress_bar,
+               u_free: np.ndarray, picks, rec, order: str, progress_bar,
                on_block_error: Callable[[str, str, Exception], Exception],
                on_diverged: Callable[[], None]) -> None:
     """Run the macro steps ``times[0] .. times[-1]`` (see the module docstring).
@@ -93,7 +106,7 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     state (``x_next`` holds it, ``x`` the last finite one).
     """
     x, z, u, y, x_next, z_next = buffers
-    plan = _Plan(m, cs, picks, feeds)
+    plan = _Plan(m, cs, picks)
     n = len(times) - 1
     dt = m.dt
     t_list = times.tolist()

@@ -24,7 +24,7 @@ from components.core import Block, CoSimBlock, ModelError, ParameterError
 
 from .compile import CompiledModel, compile_graph
 from .graph import Graph
-from .master import row_slices, run_master
+from .master import run_master
 from .results import Results
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
@@ -320,8 +320,8 @@ class Simulator:
 
         bar = _progress(len(times) - 1, progress, m.name)
         try:
-            run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, self._cosim_feeds(cs),
-                       rec, self.order, bar, block_error, diverged)
+            run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
+                       block_error, diverged)
         except KeyboardInterrupt as exc:
             raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
                                   rec.results(False, "interrupted")) from exc
@@ -330,26 +330,6 @@ class Simulator:
             if hasattr(step, "stop_thread"):
                 step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
-
-    def _cosim_feeds(self, cs: dict[str, CoSimBlock]) -> dict[str, list[tuple[str, tuple]]]:
-        m = self.model
-        feeds: dict[str, list[tuple[str, tuple]]] = {}
-        free_names = list(m.free_inputs)
-        free_rows = dict(zip(free_names, row_slices(m.free_inputs), strict=True))
-        for path, blk in cs.items():
-            lst = []
-            for iname, port in blk.inputs.items():
-                src = m.cosim_feeds.get(f"{path}.{iname}")
-                if src is None:
-                    lst.append((iname, ("const", np.full(port.size, port.default))))
-                elif src.startswith("$"):
-                    lst.append((iname, ("free", free_rows[src[1:]])))
-                elif src.rsplit(".", 1)[0] in cs:
-                    lst.append((iname, ("cs", tuple(src.rsplit(".", 1)))))
-                else:
-                    lst.append((iname, ("y", m.signals_layout.index(src).slice)))
-            feeds[path] = lst
-        return feeds
 
 
 def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) -> np.ndarray:

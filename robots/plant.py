@@ -284,7 +284,8 @@ class DartHexapod(CoSimBlock):
     def _settle(self, seconds: float) -> None:
         """Simulate ``seconds`` with the targets held (before the clock starts)."""
         for _ in range(int(round(seconds / self.time_step))):
-            self._apply_servo_forces(self.time_step)
+            self._update_servo_forces(self.time_step)
+            self._skel.setForces(self._forces)
             self.world.step()
             self._read_contacts()
 
@@ -342,9 +343,10 @@ class DartHexapod(CoSimBlock):
         n = self._steps_for(dt)
         if abs(t - self._t) > 0.5 * self.time_step:
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
-        self._apply_servo_forces(dt)
+        self._update_servo_forces(dt)
         world, skel, forces = self.world, self._skel, self._forces
         if n == 1:
+            skel.setForces(forces)
             world.step()
             self._read_contacts()
         else:
@@ -365,8 +367,8 @@ class DartHexapod(CoSimBlock):
         self._n_steps += n
         self._update_outputs()
 
-    def _apply_servo_forces(self, dt: float) -> None:
-        """Joint forces for the next world step: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).
+    def _update_servo_forces(self, dt: float) -> None:
+        """Joint forces for the next world steps: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).
 
         DART's joint spring, at rest position 0, adds ``-kp (q + h qd) - kd qd`` implicitly, so the total
         is the servo law ``-kp (q + h qd - q_target) - kd qd`` of a spring whose rest position is the
@@ -382,7 +384,6 @@ class DartHexapod(CoSimBlock):
                 legs += v["kd"] * vel
             self._q_target_prev = self._q_target
             self._target_changed = False
-        self._skel.setForces(self._forces)
 
     def _object_code_of(self, obj) -> int:
         """Code of a collision object (leg index, ``_LINK + leg``, ``_BODY`` or ``_OTHER``), registered on

@@ -61,11 +61,13 @@ Scenario geometry (positions along the walking direction ``y``, world, from the 
   by this leg: its tibia leans forward over the foot and rests on the edge first).
 - ``prototype-step`` (Yu 6.2.2): the Table 4 robot, a 250 mm step under the right legs,
   thresholds 30 N, elevator clearance 500 mm, the same controller parameters except the search
-  amplitudes (SPEC's), plus ``reflex.ob_clear_time = 0.03`` s: the 320 kg robot's feet still drag
-  40-130 N horizontally while they unload at lift-off, which fired elevators on L3 at almost every
-  lift-off; now the elevator waits until the touchdown flag has been off for 30 ms. Measured:
-  elevators on R1 3.2 s, R2 14.0 s, R3 24.8 s, none on a left leg before 36 s (L1 at 36.6 s: a
-  3.1 kN touchdown while the body rolls on the step), 2.95 m in 45 s (1.56 m before), no fall.
+  amplitudes (SPEC's), plus two choices for the heavy robot: ``reflex.ob_clear_time = 0.03`` s
+  (its feet still drag 40-130 N horizontally while they unload at lift-off, which fired
+  elevators on L3 at almost every lift-off; now the elevator waits until the touchdown flag has
+  been off for 30 ms) and ``sensors.support_ratio = 1`` (a contact inside the friction cone of
+  the robot's feet, mu = 1, is a foothold: a 1 kN touchdown of L1 with a 470 N horizontal
+  component fired an elevator with the yu-sim ratio 0.5). Measured: elevators on R1 3.2 s, R2
+  14.0 s, R3 24.8 s and on no other leg, 3.42 m in 45 s (1.56 m before), no fall.
 """
 
 from __future__ import annotations
@@ -218,6 +220,7 @@ def ditches(sets: dict[str, float], specs: Any = None, **_: Any) -> RunSetup:
 def prototype_step(sets: dict[str, float], **_: Any) -> RunSetup:
     terrain = tr.step(0.25, 0.9, side="right")
     params = {**{k: v for k, v in PARAMS.items() if k not in SEARCH_AMPLITUDES},
-              "controller.*.reflex.ob_clear_time": PROTOTYPE_CLEAR_TIME}
+              "controller.*.reflex.ob_clear_time": PROTOTYPE_CLEAR_TIME,
+              "controller.*.sensors.support_ratio": 1.0}
     return _setup(YU_PROTOTYPE, terrain, 45.0, {"Fcx": 30.0, "Fcy": 30.0, "Fcz": 30.0}, sets,
                   {"step_height_m": 0.25, "step_y_m": 0.9}, clearance_elevator=0.5, params=params)

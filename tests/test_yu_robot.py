@@ -37,7 +37,7 @@ def step_run(tmp_path_factory):
 @pytest.fixture(scope="module")
 def prototype_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("prototype")
-    return run_scenario("prototype-step", out, t_end=30.0, progress=False, plots=False), out
+    return run_scenario("prototype-step", out, progress=False, plots=False), out
 
 
 @pytest.fixture(scope="module")
@@ -110,16 +110,16 @@ def test_step_elevator_on_right_legs_in_order(step_run):
 
 
 def test_prototype_step_elevators_on_right_legs_in_order(prototype_run):
-    """Yu 6.2.2 on the Table 4 robot (320 kg, 250 mm step, 30 N thresholds): elevators on legs 4, 5, 6 in
-    order and none on a left leg (the lift-off drag of the heavy feet fired L3 before ob_clear_time);
-    the robot climbs without falling."""
+    """Yu 6.2.2 on the Table 4 robot (320 kg, 250 mm step, 30 N thresholds), 45 s: elevators on legs 4, 5,
+    6 in order and none on a left leg (the lift-off drag of the heavy feet fired L3 before ob_clear_time,
+    a hard L1 touchdown before support_ratio = 1); the robot climbs without falling."""
     summary, _ = prototype_run
     legs = [e["leg"] for e in _elevators(summary)]
     assert not any(leg in LEFT for leg in legs), legs
     assert [legs.index(leg) for leg in RIGHT] == sorted(legs.index(leg) for leg in RIGHT), legs
     assert all(e["force_N"] > 30.0 for e in _elevators(summary))
     assert not summary["fell"]
-    assert summary["distance_m"] > 1.5
+    assert summary["distance_m"] > 2.0
 
 
 def test_step_each_right_leg_crosses_and_lands_on_the_step(step_run):

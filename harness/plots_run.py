@@ -180,22 +180,30 @@ def plot_snapshots(res: Results, robot: str, geometry: RobotGeometry, terrain, p
     q = res[f"{robot}.q"]
     pos = res[f"{robot}.body_position"]
     rpy = res[f"{robot}.body_rpy"]
-    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, 2.8), sharey=True)
     hl, ht = geometry.body_length / 2, geometry.body_thickness / 2
     corners = np.array([[0, -hl, -ht], [0, hl, -ht], [0, hl, ht], [0, -hl, ht], [0, -hl, -ht]])
-    for ax, k in zip(np.atleast_1d(axes), idx, strict=True):
+    lg = geometry.leg
+    half = max(0.35, 1.1 * (hl + lg.coxa + lg.thigh + lg.shank))  # the whole robot in every window
+    frames = []
+    for k in idx:
         R = _rotation(rpy[k])
-        body = pos[k] + corners @ R.T
+        frames.append((k, pos[k] + corners @ R.T, pos[k] + leg_points_body(geometry, q[k]) @ R.T))
+    top = max(float(np.max(p[..., 2])) for _, b, p in frames)
+    top = max(top, max(float(np.max(b[:, 2])) for _, b, _ in frames))
+    bottom = -max(0.12, 0.15 * top)  # ditches (80 mm) stay in view
+    top = max(0.35, top + 0.05 * half / 0.35)
+    height = max(1.8, 2.2 * (top - bottom) / (2 * half) + 0.9)  # equal aspect: no empty band
+    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, height), sharey=True)
+    for ax, (k, body, pts) in zip(np.atleast_1d(axes), frames, strict=True):
         ax.plot(body[:, 1], body[:, 2], color="k", lw=1.5)
-        pts = pos[k] + leg_points_body(geometry, q[k]) @ R.T
         for leg in range(6):
             ax.plot(pts[leg, :, 1], pts[leg, :, 2], "-o", ms=1.5, lw=1,
                     color="tab:blue" if leg < 3 else "tab:red", alpha=0.9)
-        y_line = np.linspace(pos[k, 1] - 0.35, pos[k, 1] + 0.35, 300)
+        y_line = np.linspace(pos[k, 1] - half, pos[k, 1] + half, 300)
         ground = np.asarray(terrain.height_at(np.full_like(y_line, 0.1), y_line), dtype=float)
-        ax.fill_between(y_line, np.where(np.isfinite(ground), ground, -0.2), -0.2, color="0.85")
-        ax.set_xlim(pos[k, 1] - 0.35, pos[k, 1] + 0.35)
-        ax.set_ylim(-0.15, max(0.35, float(pos[:, 2].max()) + 0.15))
+        ax.fill_between(y_line, np.where(np.isfinite(ground), ground, bottom - 0.05), bottom - 0.05, color="0.85")
+        ax.set_xlim(pos[k, 1] - half, pos[k, 1] + half)
+        ax.set_ylim(bottom, top)
         ax.set_aspect("equal")
         ax.set_title(f"t = {t[k]:.1f} s", fontsize=8)
         ax.tick_params(labelsize=6)

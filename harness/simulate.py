@@ -226,8 +226,11 @@ class Simulator:
         return self._bound
 
     def _use_step_thread(self) -> bool:
-        env = os.environ.get("CPGSIM_STEP_THREAD", "")
-        if env in ("0", "1"):
+        env = os.environ.get("CPGSIM_STEP_THREAD", "").strip()
+        if env:
+            if env not in ("0", "1"):
+                raise ModelError(f"CPGSIM_STEP_THREAD must be 0 (step on the master thread) or 1 (worker thread), "
+                                 f"got {env!r}")
             return env == "1"
         if self.step_thread is not None:
             return bool(self.step_thread)

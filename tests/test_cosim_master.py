@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from components.basic import Gain, Integrator
-from components.core import CoSimBlock
+from components.core import CoSimBlock, ModelError
 from harness import catalog
 from harness.graph import Graph
 from harness.native import NativeFunction
@@ -79,6 +79,9 @@ def test_step_thread_environment_override(monkeypatch):
     sim = Simulator(_leg_with_pulses(), step_thread=True)
     sim.run(0.05)
     assert type(sim._bound).__name__ == "BoundStep"
+    monkeypatch.setenv("CPGSIM_STEP_THREAD", "yes")
+    with pytest.raises(ModelError, match="CPGSIM_STEP_THREAD must be 0 .* or 1"):
+        Simulator(_leg_with_pulses()).run(0.05)
 
 
 @pytest.mark.parametrize("threaded", [False, True])

@@ -15,15 +15,20 @@ def add_set_argument(parser: argparse.ArgumentParser) -> None:
 
 def parse_sets(items: list[str]) -> dict[str, Any]:
     """``["a.b=1.5", ...]`` -> ``{"a.b": 1.5}``; malformed items raise :class:`CliError`."""
-    out: dict[str, Any] = {}
+    return parse_assignments(items, "--set", "BLOCK.PARAM=VALUE")
+
+
+def parse_assignments(items: list[str], flag: str, form: str = "NAME=VALUE") -> dict[str, float]:
+    """``["name=1.5", ...]`` given with ``flag`` -> ``{"name": 1.5}``; malformed items raise :class:`CliError`."""
+    out: dict[str, float] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
-            raise CliError(f"--set expects BLOCK.PARAM=VALUE, got {item!r}")
+            raise CliError(f"{flag} expects {form}, got {item!r}")
         try:
             out[key.strip()] = float(value)
         except ValueError:
-            raise CliError(f"--set {key.strip()}: value {value!r} is not a number") from None
+            raise CliError(f"{flag} {key.strip()}: value {value!r} is not a number") from None
     return out
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from .. import catalog
 from ..cli import CliError
-from ._common import add_set_argument, parse_sets, positive_float
+from ._common import add_set_argument, parse_assignments, parse_sets, positive_float
 
 NAME = "verify"
 HELP = "verify a stable limit cycle (period, Floquet multipliers, phase lags, sync time)"
@@ -53,19 +53,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
     p.add_argument("--sweep", action="store_true",
                    help="run the eps x b sweep of a single neuron against Yu Y4 (docs/verification.md)")
-
-
-def _pairs(items: list[str], flag: str) -> dict[str, float]:
-    out: dict[str, float] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise CliError(f"{flag} expects NAME=VALUE, got {item!r}")
-        try:
-            out[key.strip()] = float(value)
-        except ValueError:
-            raise CliError(f"{flag} {key.strip()}: value {value!r} is not a number") from None
-    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
     graph = catalog.load_graph(args.graph)
     opts = VerifyOptions(t_max=args.t_max, margin=args.margin, sync_tol=args.sync_tol, sync_samples=args.samples,
                          seed=args.seed, reference=args.reference, sync_pairs=pairs)
-    rep = verify(graph, params=parse_sets(args.sets), inputs=_pairs(args.inputs, "--input"),
-                 x0=_pairs(args.x0, "--x0"), options=opts)
+    rep = verify(graph, params=parse_sets(args.sets), inputs=parse_assignments(args.inputs, "--input"),
+                 x0=parse_assignments(args.x0, "--x0"), options=opts)
     out = Path(args.output or f"verify_{rep.graph}")
     written = [write_json(rep, out / "report.json")]
     if not args.no_plot:

@@ -5,7 +5,7 @@ Compared in the same process, median of repeated runs:
   compiled graph, casadi backend (mapaccum, no C compiler needed)
   plain Python RK4 loop over the same equations (numpy-vectorised RHS, one call per stage)
   scipy solve_ivp (RK45, rtol 1e-8) on the same RHS
-Targets (issue 2): compiled >= 20x faster than the plain loop and >= 1000x real time.
+Targets: compiled >= 20x faster than the plain loop and >= 1000x real time.
 
     python benchmarks/bench_core.py [--repeat 5]
 """

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from harness.run import build_scenario
+from harness.experiments.runner import build_scenario
 from harness.simulate import Simulator
 from robots.plant import DartHexapod
 

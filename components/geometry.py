@@ -3,7 +3,8 @@
 Conventions used everywhere in cpgsim (controller, robot, plots):
 
 - Body frame: ``x`` lateral (to the robot's right), ``y`` forward, ``z`` up. Legs 1, 2, 3 are
-  left front, middle, hind; legs 4, 5, 6 right front, middle, hind (SPEC section 2).
+  left front, middle, hind; legs 4, 5, 6 right front, middle, hind (our numbering: it matches Yu's tripod groups
+  {1, 3, 5} / {2, 4, 6} and the order 4, 5, 6 in which the right legs meet Yu's step).
 - Joints per leg: ``alpha`` (body-coxa, vertical axis), ``beta`` (coxa-femur), ``gamma``
   (femur-tibia). ``alpha > 0`` protracts the leg (foot moves forward) on both sides;
   ``beta > 0`` lifts the femur; ``gamma`` is the knee flexion: the tibia points at angle
@@ -27,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
-from .core import ParameterError
+from components.core import ParameterError
 
 LEG_NAMES = ("L1", "L2", "L3", "R1", "R2", "R3")  # Yu legs 1..6
 TRIPOD_GROUPS = ((0, 2, 4), (1, 3, 5))  # Yu groups A = {1, 3, 5}, B = {2, 4, 6}

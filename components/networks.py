@@ -18,10 +18,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from harness.graph import Graph
-
-from .core import Block, Equations, Symbols
-from .neurons import VanDerPolNeuron
+from components.core import Block, Equations, Symbols
+from components.graph import Graph
+from components.neurons import VanDerPolNeuron
 
 TABLE1_OMEGA = (0.4 * math.pi, 0.8 * math.pi, 0.8 * math.pi)
 

@@ -1,6 +1,7 @@
 """Van der Pol neuron (Yu Y1-Y4).
 
-Yu Y2 (with SPEC 1.1's coupling input ``u``, and two modulation inputs used by the reflexes)::
+Yu 2019, eq. 2 (Y2; eq. 1 as printed lacks the ``x`` in ``omega^2 x``), with an additive coupling
+input ``u`` (default 0) and two modulation inputs used by the reflexes::
 
     dx/dt = rate * y
     dy/dt = rate * (-eps*(b*x^2 - 1)*y - (omega_scale*omega)^2*x + u)
@@ -27,7 +28,7 @@ import math
 
 import casadi as ca
 
-from .core import Block, Equations, Symbols
+from components.core import Block, Equations, Symbols
 
 
 class VanDerPolNeuron(Block):

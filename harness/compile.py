@@ -23,8 +23,7 @@ import casadi as ca
 import numpy as np
 
 from components.core import Block, CoSimBlock, ModelError, Port
-
-from .graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
+from components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
 
 
 @dataclass

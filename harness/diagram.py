@@ -15,8 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import FancyBboxPatch  # noqa: E402
 
 from components.core import Block, CoSimBlock  # noqa: E402
-
-from .graph import Graph, as_graph  # noqa: E402
+from components.graph import Graph, as_graph  # noqa: E402
 
 PORT_H = 0.32
 BOX_W = 2.3

@@ -1,11 +1,24 @@
-"""User-facing CLI error (its own module so ``python -m harness.cli`` and imports share one class)."""
+"""Errors of the simulation engine: a run that stopped early carries what it recorded until then."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
-class CliError(Exception):
-    """A user-facing error: printed as one line, exit status ``code`` (2 = bad input)."""
+if TYPE_CHECKING:
+    from harness.results import Results
 
-    def __init__(self, message: str, code: int = 2) -> None:
+
+class SimulationError(RuntimeError):
+    """A simulation stopped early; ``results`` holds what was recorded until then."""
+
+    def __init__(self, message: str, results: Results | None = None) -> None:
         super().__init__(message)
-        self.code = code
+        self.results = results
+
+
+class SimulationDiverged(SimulationError):
+    """A state became NaN or infinite."""
+
+
+class CoSimulationError(SimulationError):
+    """A co-simulation block failed in ``setup``/``do_step``/``get_outputs``."""

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from components.core import CoSimBlock
-
-from .compile import CompiledModel
+from harness.compile import CompiledModel
+from harness.errors import SimulationError
 
 
 class _Plan:
@@ -181,7 +181,6 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
 
 
 def _is_simulation_error(exc: Exception) -> bool:
-    from .simulate import SimulationError
 
     return isinstance(exc, SimulationError)
 

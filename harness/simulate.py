@@ -21,34 +21,20 @@ import casadi as ca
 import numpy as np
 
 from components.core import Block, CoSimBlock, ModelError, ParameterError
-
-from .compile import CompiledModel, compile_graph
-from .graph import Graph
-from .master import run_master
-from .results import Results
+from components.graph import Graph
+from harness.compile import CompiledModel, compile_graph
+from harness.errors import CoSimulationError, SimulationDiverged, SimulationError
+from harness.master import run_master
+from harness.results import Results
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
 """Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM (a six-leg
 Yu controller step is ~11k instructions: its C took gcc 16 s at -O3 on the loaded 2-core machine, while
 the CasADi VM runs it at tens of us per step)."""
 
+__all__ = ["CoSimulationError", "SimulationDiverged", "SimulationError", "Simulator", "simulate"]
+
 InputValue = float | Sequence[float] | np.ndarray | Callable[[float], Any]
-
-
-class SimulationError(RuntimeError):
-    """A simulation stopped early; ``results`` holds what was recorded until then."""
-
-    def __init__(self, message: str, results: Results | None = None) -> None:
-        super().__init__(message)
-        self.results = results
-
-
-class SimulationDiverged(SimulationError):
-    """A state became NaN or infinite."""
-
-
-class CoSimulationError(SimulationError):
-    """A co-simulation block failed in ``setup``/``do_step``/``get_outputs``."""
 
 
 def jit_options() -> dict:
@@ -214,7 +200,7 @@ class Simulator:
         if native is not None:
             bound = native.bind(x, z, u, p, x_next, z_next, y)
             if self._use_step_thread():
-                from .native import NativeUnavailable, ThreadedStep
+                from harness.native import NativeUnavailable, ThreadedStep
 
                 try:
                     bound = ThreadedStep(bound)
@@ -245,7 +231,7 @@ class Simulator:
                 and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS):
             return None  # gcc on very large generated C takes longer than a horizon run saves
         if self._native_runner is None:
-            from .native import NativeHorizon, NativeUnavailable
+            from harness.native import NativeHorizon, NativeUnavailable
 
             try:
                 self._native_runner = NativeHorizon(self.model.step)

@@ -6,9 +6,9 @@
   forces and body pose out).
 """
 
-from .hexapod import HexapodModel, build_hexapod
-from .plant import DartHexapod, default_gains, standing_posture
-from .terrain import Terrain, ditches, flat, gaps, step
+from robots.hexapod import HexapodModel, build_hexapod
+from robots.plant import DartHexapod, default_gains, standing_posture
+from robots.terrain import Terrain, ditches, flat, gaps, step
 
 __all__ = ["DartHexapod", "HexapodModel", "Terrain", "build_hexapod", "default_gains", "ditches", "flat",
            "gaps", "standing_posture", "step"]

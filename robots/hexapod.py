@@ -1,6 +1,6 @@
 """The hexapod as a DART skeleton, built in code from a :class:`~components.geometry.RobotGeometry`.
 
-Structure (SPEC section 2; Yu Tables 3 and 4): a ``FreeJoint`` root carrying the body box, and per
+Structure (Yu 2019, Tables 3 and 4): a ``FreeJoint`` root carrying the body box, and per
 leg a chain of three ``RevoluteJoint`` s -- ``alpha`` (body-coxa, vertical axis), ``beta``
 (coxa-femur), ``gamma`` (femur-tibia) -- with box coxa, femur and tibia links and a sphere foot of
 radius ``leg.foot_radius`` centred on the tibia's end. Links are boxes, not cylinders: box-box and

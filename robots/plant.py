@@ -1,4 +1,4 @@
-"""The DART hexapod as a co-simulation block (the plant of the 1 kHz control loop, SPEC section 2).
+"""The DART hexapod as a co-simulation block (the plant of the 1 kHz control loop).
 
 Ports (units SI; joint vectors leg-major: leg 0 ``alpha, beta, gamma``, leg 1 ..., leg 5):
 
@@ -21,7 +21,7 @@ Roll turns about the forward axis ``y`` (positive: right side down), pitch about
 the same step (no direct feedthrough).
 
 Servos. Each joint is a DART joint spring and damper, ``tau = -kp (q - q_target) - kd qd``,
-integrated implicitly by DART: NOTES measured explicit Python PD torques at 1 ms to go unstable on
+integrated implicitly by DART: explicit Python PD torques at 1 ms were measured to go unstable on
 light links from ``kp >= 100`` while this scheme stayed stable up to ``kp = 1000``. The spring's
 rest position stays at 0 and the target enters as the joint force ``kp q_target`` (DART's spring
 force is ``-kp (q + h qd - q_rest)``, so this is the same law; one ``setForces`` call per step
@@ -60,10 +60,9 @@ import numpy as np
 from components.core import CoSimBlock, ModelError, ParameterError
 from components.geometry import YU_SIM, RobotGeometry, leg_ik
 from harness.native import NativeFunction, NativeUnavailable
-
-from .hexapod import HexapodModel, build_hexapod, tilt_angle
-from .readout import OUTPUT_PORTS, readout_function
-from .terrain import Terrain, flat
+from robots.hexapod import HexapodModel, build_hexapod, tilt_angle
+from robots.readout import OUTPUT_PORTS, readout_function
+from robots.terrain import Terrain, flat
 
 GRAVITY = 9.81
 _free_to_transform = dart.dynamics.FreeJoint.convertToTransform
@@ -211,7 +210,7 @@ class DartHexapod(CoSimBlock):
         world.setTimeStep(self.time_step)
         world.setGravity(np.array([0.0, 0.0, -GRAVITY]))
         world.setCollisionDetector(DETECTORS[self.detector]())
-        opts = world.getDeactivationOptions()  # NOTES: 6.20 puts resting bodies to sleep otherwise
+        opts = world.getDeactivationOptions()  # dartpy 6.20 puts resting bodies to sleep (contacts read 0)
         opts.mEnabled = False
         world.setDeactivationOptions(opts)
         self._terrain_skel = self.terrain.add_to(world)
@@ -302,7 +301,7 @@ class DartHexapod(CoSimBlock):
         return float(np.max(ground[ok] + self.geometry.leg.foot_radius - feet[ok, 2]))
 
     def terminate(self) -> None:
-        """Drop the world (contacts of a removed world must not be touched again: NOTES)."""
+        """Drop the world (contacts of a removed world must not be touched again: reading them segfaulted)."""
         self.world = None
         self.model = None
         self._shapes = []

@@ -1,4 +1,5 @@
-"""Terrains for the robot scenarios (SPEC section 2: flat, step, ditches; plus bottomless gaps).
+"""Terrains for the robot scenarios (Yu 2019, Sec. 6: flat, step, ditches; plus bottomless gaps for
+Fukuhara 2022).
 
 A terrain is a list of static boxes in the world frame (``x`` lateral right, ``y`` forward, ``z``
 up; the undisturbed ground surface is ``z = 0`` and the robot starts at the origin facing ``+y``).

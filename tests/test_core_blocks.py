@@ -10,10 +10,10 @@ from scipy.integrate import solve_ivp
 
 from components.basic import Constant, Demux, Gain, Integrator, Mux, Product, StepSource, Sum
 from components.core import Block, DeclarationError, Equations, ParameterError
+from components.graph import Graph
 from components.library import hexapod_network, single_vdp
 from components.networks import leader_follower_network
 from components.neurons import VanDerPolNeuron
-from harness.graph import Graph
 from harness.simulate import simulate
 
 
@@ -34,7 +34,7 @@ def test_vdp_settles_to_first_order_amplitude_and_period():
 
 
 def _y5_rhs(_t, s, eps=0.1, b=4.0, om=(0.4 * math.pi, 0.8 * math.pi, 0.8 * math.pi), k=0.1):
-    """Yu Y5 written out independently (SPEC 1.2), the reference for the compiled graph."""
+    """Yu Y5 written out independently (Yu 2019, eq. 5 and Table 1), the reference for the compiled graph."""
     x1, y1, x2, y2, x3, y3 = s
 
     def vdp(x, y, w):

@@ -12,8 +12,8 @@ import pytest
 
 from components.basic import Gain, Integrator
 from components.core import CoSimBlock, ModelError
-from harness import catalog
-from harness.graph import Graph
+from components.graph import Graph
+from harness.cli import catalog
 from harness.native import NativeFunction
 from harness.simulate import SimulationDiverged, Simulator
 from robots.plant import DartHexapod

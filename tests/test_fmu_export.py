@@ -1,4 +1,4 @@
-"""Native FMU export (issue 5): validation, exact CS match with the simulator, ME within tolerance,
+"""Native FMU export: validation, exact CS match with the simulator, ME within tolerance,
 no Python in the binary, discrete behaviour, other masters (C host, libcosimpy), errors via the logger."""
 
 from __future__ import annotations
@@ -27,13 +27,13 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 from components.core import Block, CoSimBlock, Equations
+from components.graph import Graph
 from components.neurons import VanDerPolNeuron
-from fmus.export import ExportError, export_fmu
-from fmus.host import build_host, extract_fmu, run_host
+from fmus.export.exporter import ExportError, export_fmu
+from fmus.export.host import build_host, extract_fmu, run_host
 from fmus.units import unit_definition
-from harness import catalog
-from harness.cli import main as cli_main
-from harness.graph import Graph
+from harness.cli import catalog
+from harness.cli.main import main as cli_main
 from harness.simulate import Simulator
 
 NETWORK_OUT = {"x1": "z1.x", "y1": "z1.y", "x2": "z2.x", "y2": "z2.y", "x3": "z3.x", "y3": "z3.y"}
@@ -232,19 +232,18 @@ def _yu_block_classes():
     import inspect
     import pkgutil
 
-    import components
+    import components.yu
 
     out = []
-    for info in pkgutil.iter_modules(components.__path__):
-        if info.name.startswith("yu_"):
-            mod = importlib.import_module(f"components.{info.name}")
-            out += [obj for _, obj in inspect.getmembers(mod, inspect.isclass)
-                    if issubclass(obj, Block) and obj.__module__ == mod.__name__ and obj is not Block]
+    for info in pkgutil.iter_modules(components.yu.__path__):
+        mod = importlib.import_module(f"components.yu.{info.name}")
+        out += [obj for _, obj in inspect.getmembers(mod, inspect.isclass)
+                if issubclass(obj, Block) and obj.__module__ == mod.__name__ and obj is not Block]
     return out
 
 
 def test_yu_blocks_export(tmp_path):
-    """Every Yu block (components/yu_*.py) that can be built from its name alone exports and validates
+    """Every Yu block (components/yu/) that can be built from its name alone exports and validates
     (all in one FMU: one compilation); the leg and controller graphs below cover the others."""
     blocks = []
     for cls in _yu_block_classes():
@@ -253,7 +252,7 @@ def test_yu_blocks_export(tmp_path):
         except TypeError:
             continue  # needs constructor arguments
     if not blocks:
-        pytest.skip("no Yu blocks (components/yu_*.py) yet")
+        pytest.skip("no Yu blocks (components/yu/) yet")
     fmu = export_fmu(side_by_side("yu_blocks", blocks), tmp_path / "yu.fmu", optimize="-O0")
     assert validate_fmu(str(fmu.path)) == []
     md = read_model_description(str(fmu.path))
@@ -262,11 +261,11 @@ def test_yu_blocks_export(tmp_path):
 
 
 def yu_graph(name: str) -> Graph:
-    """A Yu graph from the catalog, or straight from components.yu_leg until it is registered there."""
+    """A Yu graph from the catalog, or straight from components.yu.leg until it is registered there."""
     if name in catalog.BUILTIN:
         return catalog.load_graph(name)
     try:
-        from components import yu_leg
+        from components.yu import leg as yu_leg
     except ImportError:
         pytest.skip(f"the {name!r} graph does not exist yet")
     return getattr(yu_leg, name.replace("-", "_"))()

@@ -1,4 +1,4 @@
-"""FMU import (fmus.fmu_import): typed blocks from FMUs built by independent tools and by our own
+"""FMU import (fmus.importer.block): typed blocks from FMUs built by independent tools and by our own
 export, the co-simulation master with FMUs (Jacobi / Gauss-Seidel, direct feedthrough, algebraic
 loops), hostile and broken FMUs, isolation in a child process, and the CLI.
 
@@ -22,10 +22,10 @@ import pytest
 
 from components.basic import Constant, Gain, Integrator, Sum
 from components.core import Block, Equations
-from fmus.description import FmuWarning, describe_fmu
-from fmus.fmu_errors import FmuFileError, MissingBinaryError, ModelDescriptionError, UnsafeArchiveError
-from fmus.fmu_import import FmuBlock, fmu_graph
-from harness.graph import AlgebraicLoopError, Graph
+from components.graph import AlgebraicLoopError, Graph
+from fmus.errors import FmuFileError, MissingBinaryError, ModelDescriptionError, UnsafeArchiveError
+from fmus.importer.block import FmuBlock, fmu_graph
+from fmus.importer.description import FmuWarning, describe_fmu
 from harness.simulate import CoSimulationError, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -407,7 +407,7 @@ NETWORK_COLUMNS = {"net.x1": "net.z1.x", "net.y1": "net.z1.y", "net.x2": "net.z2
 
 @pytest.mark.parametrize("fmi,kind", [(2, "cs"), (2, "me"), (3, "cs"), (3, "me")])
 def test_round_trip_network_matches_native(tmp_path, fmi, kind):
-    export = pytest.importorskip("fmus.export")
+    export = pytest.importorskip("fmus.export.exporter")
     from components.networks import leader_follower_network
 
     t_end = 3.0
@@ -447,8 +447,8 @@ def _leg_around(leg) -> Graph:
 
 @pytest.mark.parametrize("fmi,kind", [(2, "cs"), (3, "me")])
 def test_round_trip_leg_matches_native(tmp_path, fmi, kind):
-    export = pytest.importorskip("fmus.export")
-    from harness import catalog
+    export = pytest.importorskip("fmus.export.exporter")
+    from harness.cli import catalog
 
     if "leg" not in catalog.BUILTIN:
         pytest.skip("no built-in 'leg' graph in the catalog yet")
@@ -512,7 +512,7 @@ def test_missing_file_and_not_a_zip(tmp_path):
     ("../evil.txt", "'..'"), ("resources/../../evil.txt", "'..'"), ("/tmp/evil.txt", "absolute path"),
     ("C:/evil.txt", "absolute path"), ("resources\\..\\evil.txt", "backslash")])
 def test_archive_with_escaping_paths_is_refused(tmp_path, fmus2, member, why):
-    from fmus.archive import safe_extract
+    from fmus.importer.archive import safe_extract
 
     evil = _rewrite(fmus2["integrator"], tmp_path / "evil.fmu", add={member: b"pwned"})
     with pytest.raises(UnsafeArchiveError, match=why) as err:
@@ -635,7 +635,7 @@ def test_isolated_timeout(fmus2, tmp_path):
 # --------------------------------------------------------------------------------------------------
 def _cli(*args, cwd):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "harness.cli", *map(str, args)], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "harness.cli.main", *map(str, args)], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=120)
 
 

@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.fukuhara_blocks import (
+from components.fukuhara.blocks import (
     DEFAULTS,
     EARLY_STANCE,
     LATE_STANCE,
@@ -19,13 +19,13 @@ from components.fukuhara_blocks import (
     LimbModeController,
     swing_height,
 )
-from components.fukuhara_controller import fukuhara_controller, initial_joint_targets, set_initial
+from components.fukuhara.controller import fukuhara_controller, initial_joint_targets, set_initial
 from components.geometry import YU_SIM, leg_fk, leg_ik_plane
+from components.graph import Graph, as_graph
 from harness.compile import compile_graph
-from harness.gait_classifier import classify, debounce, template
-from harness.graph import Graph, as_graph
+from harness.experiments.gait_classifier import classify, debounce, template
+from harness.experiments.sweep import wilson_interval
 from harness.simulate import simulate
-from harness.sweep import wilson_interval
 
 AEP, PEP = DEFAULTS["theta_AEP"], DEFAULTS["theta_PEP"]
 

@@ -6,11 +6,11 @@ import pytest
 
 from components.basic import Constant, Gain, Integrator, Sum
 from components.core import Block, Equations
+from components.graph import AlgebraicLoopError, Graph, UnconnectedInputError, WiringError
 from components.library import damped_oscillator
 from components.networks import leader_follower_network
 from components.neurons import VanDerPolNeuron
 from harness.compile import compile_graph
-from harness.graph import AlgebraicLoopError, Graph, UnconnectedInputError, WiringError
 from harness.simulate import simulate
 
 

@@ -1,4 +1,4 @@
-"""Results files (atomic CSV/npz, partial results on divergence) and the CLI of the core issue."""
+"""Results files (atomic CSV/npz, partial results on divergence) and the CLI of the core engine."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from components.basic import Gain, Integrator
-from harness.cli import main
-from harness.graph import Graph
+from components.graph import Graph
+from harness.cli.main import main
 from harness.results import Results
 from harness.simulate import SimulationDiverged, simulate
 
@@ -99,7 +99,7 @@ def test_cli_graph_writes_svg(tmp_path):
     (["graph", "missing_file.py:build"], "does not exist"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", *argv], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "harness.cli.main", *argv], capture_output=True, text=True,
                           cwd=tmp_path, env={"PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1]),
                                              "PATH": "/usr/bin:/bin"})
     assert proc.returncode == 2, proc.stderr
@@ -120,7 +120,7 @@ def test_cli_user_graph_from_file(tmp_path):
 def test_cli_divergence_exits_1_and_writes_partial(tmp_path, capsys):
     src = tmp_path / "blow.py"
     src.write_text(
-        "from components.basic import Gain, Integrator\nfrom harness.graph import Graph\n"
+        "from components.basic import Gain, Integrator\nfrom components.graph import Graph\n"
         "def build():\n    g = Graph('blow')\n    g.add(Integrator('i', x0=1.0))\n"
         "    g.add(Gain('k', k=1e4, unit='1', out_unit='1/s'))\n"
         "    g.connect('i.y', 'k.u')\n    g.connect('k.y', 'i.u')\n    return g\n")

@@ -1,5 +1,5 @@
 """Tests of the DART robot package: kinematics agree with components.geometry, the robot stands,
-contacts are sensed per foot, terrains report their height, parameters are validated (SPEC section 2).
+contacts are sensed per foot, terrains report their height, parameters are validated (Yu 2019, Tables 3 and 4).
 """
 
 from __future__ import annotations

@@ -14,10 +14,10 @@ import pytest
 from test_fmu_import import INTEGRATOR_FMI2, _build, _shipped_fmu
 
 from components.basic import Gain
-from fmus.fmu_errors import ModelDescriptionError, UnsafeArchiveError
-from fmus.fmu_import import FmuBlock
+from components.graph import Graph
+from fmus.errors import ModelDescriptionError, UnsafeArchiveError
+from fmus.importer.block import FmuBlock
 from fmus.ssp import SspError, export_ssp, import_ssp
-from harness.graph import Graph
 from harness.simulate import simulate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -96,7 +96,7 @@ def test_ssp_of_openmodelica_fmus_in_a_loop(tmp_path):
 def test_ssp_with_native_blocks_exported_as_fmus(tmp_path, integrator):
     """Equation blocks are exported natively into the SSP; the system imported back matches the
     graph it came from."""
-    pytest.importorskip("fmus.export")
+    pytest.importorskip("fmus.export.exporter")
     from components.networks import leader_follower_network
 
     g = Graph("mixed")
@@ -184,7 +184,7 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
 
     def cli(*args):
-        return subprocess.run([sys.executable, "-m", "harness.cli", *map(str, args)], cwd=tmp_path, env=env,
+        return subprocess.run([sys.executable, "-m", "harness.cli.main", *map(str, args)], cwd=tmp_path, env=env,
                               capture_output=True, text=True, timeout=120)
 
     r = cli("inspect", ssp)

@@ -10,9 +10,9 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from harness.cli import main
+from harness.cli.main import main
+from harness.experiments.sweep import parse_vary, run_sweep, run_trial
 from harness.results import Results
-from harness.sweep import parse_vary, run_sweep, run_trial
 
 SETS = {"setting": 1.0}
 T_END = 3.0

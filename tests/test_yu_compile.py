@@ -12,12 +12,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.yu_converter import YuConverter
-from components.yu_fsm import YuGaitFSM
-from components.yu_leg import LegFK, hexapod_controller, leg
-from components.yu_reflexes import SettableVanDerPolNeuron, YuReflexLogic
-from components.yu_sensors import YuSensoryNeurons
-from harness.cli import main
+from components.yu.converter import YuConverter
+from components.yu.fsm import YuGaitFSM
+from components.yu.leg import LegFK, hexapod_controller, leg
+from components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
+from components.yu.sensors import YuSensoryNeurons
+from harness.cli.main import main
 from harness.compile import compile_graph
 from harness.simulate import Simulator
 

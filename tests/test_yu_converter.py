@@ -11,8 +11,8 @@ import pytest
 
 from components.core import ParameterError
 from components.geometry import YU_PROTOTYPE, YU_SIM, leg_ik_plane
-from components.yu_converter import YuConverter, converter_coefficients, locked_orbit
-from components.yu_leg import foot_positions, leg, nominal_targets
+from components.yu.converter import YuConverter, converter_coefficients, locked_orbit
+from components.yu.leg import foot_positions, leg, nominal_targets
 from harness.simulate import Simulator
 
 MM = 1e-3

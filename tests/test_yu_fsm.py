@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from components.core import ParameterError
-from components.yu_fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG, YuGaitFSM
-from components.yu_leg import hexapod_controller
+from components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG, YuGaitFSM
+from components.yu.leg import hexapod_controller
 from harness.simulate import Simulator
 
 A, B = (0, 2, 4), (1, 3, 5)

@@ -9,10 +9,10 @@ import pytest
 
 from components.core import ParameterError
 from components.geometry import YU_SIM
-from components.yu_converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING
-from components.yu_leg import foot_positions, leg, nominal_targets
-from components.yu_sensors import YuSensoryNeurons
-from harness.figures_yu import elevator_force, hole_force
+from components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING
+from components.yu.leg import foot_positions, leg, nominal_targets
+from components.yu.sensors import YuSensoryNeurons
+from harness.experiments.yu.figures import elevator_force, hole_force
 from harness.simulate import Simulator, simulate
 
 MM = 1e-3

@@ -1,7 +1,8 @@
-"""Closed loop: the Yu hexapod controller walking the DART robot (issue 7 acceptance tests).
+"""Closed loop: the Yu hexapod controller walking the DART robot (acceptance tests).
 
 Each scenario is run once per test session (module-scoped fixtures) and its summary/results are
-checked against the SPEC's expectations (scenario choices: ``harness/scenarios_yu.py``).
+checked against the paper's reported behaviour (Yu 2019, Sec. 6); scenario choices:
+``harness/experiments/yu/scenarios.py``.
 """
 
 from __future__ import annotations
@@ -11,11 +12,11 @@ import json
 import numpy as np
 import pytest
 
-from components.yu_converter import converter_coefficients, locked_orbit
-from components.yu_leg import foot_positions, nominal_targets
+from components.yu.converter import converter_coefficients, locked_orbit
+from components.yu.leg import foot_positions, nominal_targets
+from harness.experiments.runner import run_scenario
+from harness.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
 from harness.results import Results
-from harness.run import run_scenario
-from harness.scenarios_yu import CONTROLLER, LEGS, ROBOT, YU_RUN
 
 RIGHT, LEFT = (3, 4, 5), (0, 1, 2)
 R_FOOT = YU_RUN.leg.foot_radius

@@ -1,7 +1,7 @@
-"""The Yu controller's additions for walking the DART robot (issue 7), on scripted toe forces.
+"""The Yu controller's additions for walking the DART robot, on scripted toe forces.
 
-Each test pins one choice documented in the blocks' docstrings (``components/yu_*.py``) and used by
-the robot scenarios (``harness/scenarios_yu.py``); defaults stay Yu's/SPEC's behaviour.
+Each test pins one choice documented in the blocks' docstrings (``components/yu/``) and used by
+the robot scenarios (``harness/experiments/yu/scenarios.py``); defaults stay Yu's behaviour.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from components.geometry import YU_SIM
-from components.yu_converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING, WITHDRAW
-from components.yu_fsm import STANCE
-from components.yu_leg import foot_positions, hexapod_controller, leg, nominal_targets
-from components.yu_reflexes import elevator_descent_rate
-from components.yu_sensors import YuSensoryNeurons
-from harness.figures_yu import elevator_force, hole_force
+from components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING, WITHDRAW
+from components.yu.fsm import STANCE
+from components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets
+from components.yu.reflexes import elevator_descent_rate
+from components.yu.sensors import YuSensoryNeurons
+from harness.experiments.yu.figures import elevator_force, hole_force
 from harness.simulate import Simulator, simulate
 
 MM = 1e-3
@@ -115,9 +115,9 @@ def test_elevator_late_descent_keeps_the_foot_high():
 
 def test_elevator_gates_after_liftoff_and_support_veto():
     """In the second swing (5.0 to 7.5 s): a push on a foot that never left the ground is no obstacle with
-    ob_after_liftoff; a push on a supporting contact is none with ob_support_veto (defaults: SPEC)."""
+    ob_after_liftoff; a push on a supporting contact is none with ob_support_veto (defaults: Yu's rule)."""
     push_grounded = elevator_force(5.5)  # Fz = 5 N all the time: the foot never left the ground
-    assert _run(6.5, push_grounded)["reflex.n_ert"][-1] == 1  # SPEC default
+    assert _run(6.5, push_grounded)["reflex.n_ert"][-1] == 1  # Yu's rule (default)
     assert _run(6.5, push_grounded, **{"reflex.ob_after_liftoff": 1.0})["reflex.n_ert"][-1] == 0
 
     def lifted_then_hit(t):

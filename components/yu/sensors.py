@@ -1,0 +1,95 @@
+"""Yu sensory neurons SN_ob and SN_td (Yu 2019, eqs. 7-9) with a persistence debounce.
+
+Input: the toe force ``F = (Fx lateral, Fy forward, Fz vertical)`` (N), the ground's force on the
+foot (``Fz > 0`` standing)::
+
+    raw_ob = |Fx| > Fcx  or  |Fy| > Fcy        (Y8: a binary OR)
+    raw_td = |Fz| > Fcz                        (Y9)
+
+Support (a choice, for the reflex logic's early touchdown and, optionally, the end of a search):
+``raw_sup = Fz > Fcz`` and ``sqrt(Fx^2 + Fy^2) < support_ratio * Fz`` -- the ground pushes the
+foot up, within ``atan(support_ratio)`` of the vertical (default 0.5: 27 degrees). Y9 uses
+``|Fz|``, so a foot sliding down (or up) a step's face reads ``lambda_td = 1`` from the friction
+alone; on the DART robot a swing that met the 40 mm step's face while descending was then taken
+for an early touchdown on the step (the foot stood against the face and slid off) before the
+horizontal force reached ``Fcy``. With friction 1 a contact force can lean 45 degrees on any
+surface, and a 45-degree cone still let a foot that met the step's edge at the top of its swing
+count as standing on the corner; within 27 degrees such an edge contact keeps pushing until the
+obstacle flag (elevator) or a real foothold decides. Footholds measured on the DART robot lean
+less than 17 degrees (horizontal/vertical below 0.3). ``support`` tells a foothold from a face.
+
+Debounce (a choice: touchdowns in DART spike to 50-150 N for a sample or two, contact
+forces being impulses over the step): a flag ``lambda`` takes the raw value only after the raw value has
+differed from it for ``debounce`` seconds (both edges), sampled at the macro step; the time of
+the last agreement is a discrete state, so the filter does not depend on the step size.
+``debounce = 0`` follows the raw value at once. Default 5 ms (five 1 kHz samples): an impact
+spike of one or two samples is ignored, a foot pushing on a step face or standing is not.
+
+| port / state | dir | unit | meaning |
+|---|---|---|---|
+| ``toe_force`` | in (3) | N | ``(Fx, Fy, Fz)`` |
+| ``lambda_ob`` / ``lambda_td`` | out | 1 | debounced flags (0/1), the discrete states |
+| ``raw_ob`` / ``raw_td`` | out | 1 | thresholded, not debounced |
+| ``support`` / ``raw_sup`` | out | 1 | foothold-like contact (debounced / raw) |
+
+Parameters: ``Fcx``, ``Fcy``, ``Fcz`` (N, >= 0; Yu simulation 10, 10, 2 N, prototype 30 N),
+``debounce`` (s, >= 0), ``support_ratio`` (>= 0). ``lambda_td`` and ``support`` start at 1 (standing),
+``lambda_ob`` at 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from components.core import Block, Equations, Symbols
+
+
+def debounced(flag, t_agree, raw, t, debounce):
+    """Persistence filter: ``(flag+, t_agree+)`` after a sample of ``raw`` at time ``t``."""
+    agree = flag == raw
+    switch = ca.logic_and(ca.logic_not(agree), t - t_agree >= debounce - 1e-9)
+    new_flag = ca.if_else(switch, raw, flag)
+    new_t = ca.if_else(ca.logic_or(agree, switch), t, t_agree)
+    return new_flag, new_t
+
+
+class YuSensoryNeurons(Block):
+    """SN_ob and SN_td of Yu Fig. 5 (see the module docstring)."""
+
+    def declare(self) -> None:
+        self.add_parameter("Fcx", 10.0, "N", (0, math.inf), "lateral obstacle threshold (Y8)")
+        self.add_parameter("Fcy", 10.0, "N", (0, math.inf), "forward obstacle threshold (Y8)")
+        self.add_parameter("Fcz", 2.0, "N", (0, math.inf), "touchdown threshold (Y9)")
+        self.add_parameter("debounce", 0.005, "s", (0, math.inf), "a flag follows the raw value after this long")
+        self.add_parameter("support_ratio", 0.5, "1", (0, math.inf),
+                           "support: horizontal force below this times the vertical one")
+        self.add_input("toe_force", 3, "N", description="ground force on the foot (Fx lateral, Fy forward, Fz up)")
+        self.add_discrete_state("lambda_ob", 0.0, description="debounced obstacle flag")
+        self.add_discrete_state("lambda_td", 1.0, description="debounced touchdown flag")
+        self.add_discrete_state("t_ob", 0.0, "s", "last time raw_ob agreed with lambda_ob")
+        self.add_discrete_state("t_td", 0.0, "s", "last time raw_td agreed with lambda_td")
+        self.add_discrete_state("support", 1.0, description="debounced support flag")
+        self.add_discrete_state("t_sup", 0.0, "s", "last time raw_sup agreed with support")
+        self.add_output("lambda_ob", unit="1", description="elevator trigger signal (Y8), debounced")
+        self.add_output("lambda_td", unit="1", description="touchdown signal (Y9), debounced")
+        self.add_output("raw_ob", unit="1", description="Y8 without debounce")
+        self.add_output("raw_td", unit="1", description="Y9 without debounce")
+        self.add_output("support", unit="1", description="foothold-like contact (Fz > Fcz, within 45 deg), debounced")
+        self.add_output("raw_sup", unit="1", description="support without debounce")
+
+    def define(self, v: Symbols) -> Equations:
+        f, p, z = v.u["toe_force"], v.p, v.z
+        raw_ob = ca.if_else(ca.logic_or(ca.fabs(f[0]) > p["Fcx"], ca.fabs(f[1]) > p["Fcy"]), 1, 0)
+        raw_td = ca.if_else(ca.fabs(f[2]) > p["Fcz"], 1, 0)
+        ob, t_ob = debounced(z["lambda_ob"], z["t_ob"], raw_ob, v.t, p["debounce"])
+        td, t_td = debounced(z["lambda_td"], z["t_td"], raw_td, v.t, p["debounce"])
+        raw_sup = ca.if_else(ca.logic_and(f[2] > p["Fcz"], f[0] ** 2 + f[1] ** 2 < (p["support_ratio"] * f[2]) ** 2),
+                             1, 0)
+        sup, t_sup = debounced(z["support"], z["t_sup"], raw_sup, v.t, p["debounce"])
+        return Equations(
+            outputs={"lambda_ob": z["lambda_ob"], "lambda_td": z["lambda_td"], "raw_ob": raw_ob, "raw_td": raw_td,
+                     "support": z["support"], "raw_sup": raw_sup},
+            updates={"lambda_ob": ob, "t_ob": t_ob, "lambda_td": td, "t_td": t_td, "support": sup, "t_sup": t_sup},
+        )

@@ -1,0 +1,151 @@
+"""Safe reading and extraction of FMU and SSP archives (zip files from untrusted sources).
+
+:func:`check_archive` inspects the central directory without writing anything and refuses:
+a file that is not a zip archive; members with absolute paths, drive letters, backslashes or
+``..`` components; symbolic links; encrypted members; duplicate names; more than
+``MAX_MEMBERS`` members; a member over ``MAX_MEMBER_BYTES`` or a total over ``MAX_TOTAL_BYTES``
+(uncompressed); a compression ratio over ``MAX_RATIO`` (zip bombs). :func:`safe_extract`
+checks the same and then streams each member into a fresh directory, counting bytes as it
+writes (a lying header cannot make it write more than the limits), with ordinary file modes.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import tempfile
+import zipfile
+from pathlib import Path, PurePosixPath
+
+from fmus.errors import FmuFileError, UnsafeArchiveError
+
+MAX_MEMBERS = 20_000
+MAX_MEMBER_BYTES = 1 << 30  # 1 GiB
+MAX_TOTAL_BYTES = 2 << 30  # 2 GiB
+MAX_RATIO = 200.0  # uncompressed / compressed, for members over 1 MiB
+MAX_XML_BYTES = 64 << 20
+
+
+def open_zip(path: str | os.PathLike, what: str = "FMU") -> zipfile.ZipFile:
+    """Open ``path`` as a zip archive or raise :class:`FmuFileError` naming the file and the cause."""
+    p = Path(path)
+    if not p.exists():
+        raise FmuFileError(f"{what} file {p} does not exist")
+    if not p.is_file():
+        raise FmuFileError(f"{what} file {p} is not a regular file")
+    try:
+        return zipfile.ZipFile(p, "r")
+    except zipfile.BadZipFile as exc:
+        raise FmuFileError(f"{what} file {p} is not a zip archive ({exc})") from None
+    except OSError as exc:
+        raise FmuFileError(f"{what} file {p} cannot be read: {exc.strerror or exc}") from None
+
+
+def _member_problem(info: zipfile.ZipInfo) -> str | None:
+    name = info.filename
+    if "\x00" in name:
+        return "contains a NUL character"
+    if "\\" in name:
+        return "contains a backslash"
+    if name.startswith("/") or (len(name) > 1 and name[1] == ":"):
+        return "is an absolute path"
+    parts = PurePosixPath(name).parts
+    if any(part == ".." for part in parts):
+        return "contains '..' (path escapes the extraction directory)"
+    mode = (info.external_attr >> 16) & 0xFFFF
+    if stat.S_ISLNK(mode):
+        return "is a symbolic link"
+    if mode and not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)) and stat.S_IFMT(mode):
+        return "is not a regular file or directory"
+    if info.flag_bits & 0x1:
+        return "is encrypted"
+    if info.file_size > MAX_MEMBER_BYTES:
+        return f"is too large ({info.file_size} bytes uncompressed, limit {MAX_MEMBER_BYTES})"
+    if info.file_size > (1 << 20) and info.file_size > MAX_RATIO * max(info.compress_size, 1):
+        return f"has a suspicious compression ratio ({info.file_size} / {info.compress_size} bytes)"
+    return None
+
+
+def check_archive(zf: zipfile.ZipFile, path: str | os.PathLike, what: str = "FMU") -> list[zipfile.ZipInfo]:
+    """Refuse unsafe archives (see module docstring); return the member list."""
+    infos = zf.infolist()
+    if len(infos) > MAX_MEMBERS:
+        raise UnsafeArchiveError(f"{what} {path}: too many archive members ({len(infos)}, limit {MAX_MEMBERS})")
+    seen: set[str] = set()
+    total = 0
+    for info in infos:
+        problem = _member_problem(info)
+        if problem:
+            raise UnsafeArchiveError(f"{what} {path}: refusing archive member {info.filename!r}: it {problem}")
+        key = info.filename.rstrip("/")
+        if key in seen:
+            raise UnsafeArchiveError(f"{what} {path}: archive member {info.filename!r} appears twice")
+        seen.add(key)
+        total += info.file_size
+        if total > MAX_TOTAL_BYTES:
+            raise UnsafeArchiveError(f"{what} {path}: archive expands to more than {MAX_TOTAL_BYTES} bytes")
+    return infos
+
+
+def read_member(zf: zipfile.ZipFile, name: str, limit: int = MAX_XML_BYTES) -> bytes | None:
+    """The bytes of member ``name`` (None if absent), refusing more than ``limit`` bytes."""
+    try:
+        info = zf.getinfo(name)
+    except KeyError:
+        return None
+    if info.file_size > limit:
+        raise UnsafeArchiveError(f"{zf.filename}: member {name} is too large ({info.file_size} bytes)")
+    with zf.open(info) as f:
+        data = f.read(limit + 1)
+    if len(data) > limit:
+        raise UnsafeArchiveError(f"{zf.filename}: member {name} is larger than its header says")
+    return data
+
+
+def safe_extract(path: str | os.PathLike, workdir: str | os.PathLike | None = None, what: str = "FMU",
+                 prefix: str = "cpgsim_fmu_") -> Path:
+    """Extract archive ``path`` into a new directory under ``workdir`` (default: the system temp
+    directory) and return it. Unsafe archives raise :class:`UnsafeArchiveError` and leave nothing
+    behind; the caller removes the directory (:func:`remove_tree`) when done."""
+    with open_zip(path, what) as zf:
+        infos = check_archive(zf, path, what)
+        dest = Path(tempfile.mkdtemp(prefix=prefix, dir=None if workdir is None else str(workdir)))
+        try:
+            root = dest.resolve()
+            written = 0
+            for info in infos:
+                target = (dest / info.filename).resolve()
+                if target != root and root not in target.parents:
+                    raise UnsafeArchiveError(
+                        f"{what} {path}: member {info.filename!r} escapes the extraction directory")
+                if info.is_dir():
+                    target.mkdir(parents=True, exist_ok=True)
+                    continue
+                target.parent.mkdir(parents=True, exist_ok=True)
+                remaining = info.file_size
+                with zf.open(info) as src, open(target, "xb") as dst:
+                    while True:
+                        chunk = src.read(1 << 20)
+                        if not chunk:
+                            break
+                        remaining -= len(chunk)
+                        written += len(chunk)
+                        if remaining < 0 or written > MAX_TOTAL_BYTES:
+                            raise UnsafeArchiveError(
+                                f"{what} {path}: member {info.filename!r} is larger than its header says")
+                        dst.write(chunk)
+                os.chmod(target, 0o644)
+        except zipfile.BadZipFile as exc:  # corrupt data (bad CRC) behind a valid directory
+            remove_tree(dest)
+            raise FmuFileError(f"{what} {path}: corrupt archive ({exc})") from None
+        except BaseException:
+            remove_tree(dest)
+            raise
+    return dest
+
+
+def remove_tree(path: str | os.PathLike | None) -> None:
+    """Remove an extraction directory (best effort, never raises)."""
+    if path:
+        shutil.rmtree(path, ignore_errors=True)

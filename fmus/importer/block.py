@@ -1,0 +1,197 @@
+"""Import an FMU (FMI 2.0 or 3.0, co-simulation or model exchange) as a typed block.
+
+>>> from fmus.importer.block import FmuBlock
+>>> blk = FmuBlock("plant", "Mass_Damper.fmu", damper_d=20.0)   # doctest: +SKIP
+>>> blk.inputs["f"].unit, blk.parameters["damper_d"].unit      # doctest: +SKIP
+('N', 'N.s/m')
+
+Ports, parameters, kinds, units, start values and direct feedthrough come from the FMU's
+``modelDescription.xml`` (:mod:`fmus.importer.description` says how FMI names and types are mapped). The
+block is a :class:`~components.core.CoSimBlock`: the co-simulation master exchanges its values
+at every macro step.
+
+- ``kind="cs"``: the FMU's own solver advances it with ``doStep(t, dt)``.
+- ``kind="me"``: the FMU's derivatives are integrated by our solver -- fixed-step RK4 at the
+  macro step (``substeps`` per step), inputs held over the step, events handled at step ends
+  (:mod:`fmus.importer.runtime`). The compiler cannot put an FMU inside its CasADi functions, so ME
+  states are not integrated in the same RK4 stages as the equation blocks: the coupling to the
+  rest of the graph is sampled at the macro step, as for a CS FMU.
+- ``kind="auto"`` (default): CS if the FMU has it, else ME.
+- ``isolate=True``: the FMU runs in a child process (:mod:`fmus.importer.isolation`); a crash there
+  (segmentation fault, abort) becomes an :class:`~fmus.errors.FmuCrashedError`, which the
+  master reports with the results recorded so far, instead of killing the harness.
+- ``feedthrough``: override the direct feedthrough read from ``ModelStructure`` (``{output:
+  {inputs}}``); an FMU that lists no dependencies is taken to feed every input through, which
+  makes any loop around it an :class:`~components.graph.AlgebraicLoopError`.
+
+Every problem with the file raises a specific :class:`~fmus.errors.FmuError` at construction
+(missing file, not a zip, unsafe archive, bad or missing XML, no binary for this platform).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from components.core import CoSimBlock, ModelError
+from components.graph import Graph, as_graph
+from fmus.errors import FmuError
+from fmus.importer.description import FmuDescription, check_binary, describe_fmu, identifier
+
+__all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation"]
+
+
+class FmuBlock(CoSimBlock):
+    """An FMU as a co-simulation block (see the module docstring).
+
+    ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"`` or ``"me"``; ``substeps``: RK4
+    steps per macro step for ME; ``isolate``: run in a child process; ``timeout``: seconds an
+    isolated FMU may take for one call (None: no limit); ``workdir``: where the FMU is extracted
+    (default: the system temp directory; removed at ``terminate``); ``strict``: refuse an XML
+    that fails the FMI schema; keyword arguments set parameters (by their block names).
+    """
+
+    def __init__(self, name: str, path: str | Path, *, kind: str = "auto", substeps: int = 1,
+                 isolate: bool = False, timeout: float | None = None, workdir: str | Path | None = None,
+                 strict: bool = False, feedthrough: Mapping[str, Any] | None = None,
+                 description: FmuDescription | None = None, **params: Any) -> None:
+        self.path = Path(path)
+        self.info = description if description is not None else describe_fmu(self.path, strict=strict)
+        if kind == "auto":
+            kind = "cs" if self.info.cs_identifier else "me"
+        if kind not in ("cs", "me"):
+            raise ModelError(f"FMU block {name!r}: kind must be 'auto', 'cs' or 'me', got {kind!r}")
+        if kind not in self.info.kinds:
+            raise FmuError(f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.info.kinds)})")
+        check_binary(self.info, kind)
+        if int(substeps) != substeps or substeps < 1:
+            raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
+        self.kind = kind
+        self.substeps = int(substeps)
+        self.isolate = bool(isolate)
+        self.timeout = timeout
+        self.workdir = workdir
+        self.strict = strict
+        self._feed_override = feedthrough
+        self._runtime: Any = None
+        super().__init__(name, **params)
+
+    # -- declaration ------------------------------------------------------------------------------
+    def declare(self) -> None:
+        d = self.info
+        for p in d.inputs.values():
+            self.add_input(p.name, p.shape, p.unit, p.kind, p.description, default=p.default)
+        for p in d.outputs.values():
+            self.add_output(p.name, p.shape, p.unit, p.kind, p.description)
+        for q in d.parameters.values():
+            default = q.start if q.start is not None else (0.0 if q.bounds[0] <= 0.0 <= q.bounds[1] else q.bounds[0])
+            if q.kind == "integer" and not float(default).is_integer():
+                default = float(round(default))
+            self.add_parameter(q.name, default, q.unit, q.bounds, q.description, kind=q.kind)
+        feed = d.feedthrough if self._feed_override is None else self._feed_override
+        for out, ins in feed.items():
+            if out not in self.outputs:
+                raise ModelError(f"FMU block {self.name!r}: feedthrough names unknown output {out!r}")
+            bad = set(ins) - set(self.inputs)
+            if bad:
+                raise ModelError(
+                    f"FMU block {self.name!r}: feedthrough of {out!r} names unknown input(s) {sorted(bad)}")
+        self.feedthrough = {out: set(ins) for out, ins in feed.items() if ins}
+
+    @property
+    def fmi_version(self) -> int:
+        return self.info.fmi_version
+
+    def changed_parameters(self) -> dict[str, float]:
+        """Parameters whose value differs from the FMU's start value (the ones sent to the FMU)."""
+        out = {}
+        for name, spec in self.info.parameters.items():
+            v = self.values[name]
+            if spec.start is None or not math.isclose(v, spec.start, rel_tol=0.0, abs_tol=0.0):
+                out[name] = v
+        return out
+
+    # -- co-simulation interface --------------------------------------------------------------------
+    def setup(self, t0: float) -> None:
+        self.terminate()
+        args = dict(path=str(self.path), kind=self.kind, instance_name=self.name,
+                    workdir=None if self.workdir is None else str(self.workdir), substeps=self.substeps,
+                    strict=self.strict)
+        if self.isolate:
+            from fmus.importer.isolation import IsolatedRuntime
+
+            rt = IsolatedRuntime(args, timeout=self.timeout)
+        else:
+            from fmus.importer.runtime import FmuRuntime
+
+            rt = FmuRuntime(desc=self.info, **args)
+        self._runtime = rt
+        self._finalizer = weakref.finalize(self, _close, rt)
+        rt.setup(float(t0), self.changed_parameters(), {})
+
+    def _rt(self):
+        if self._runtime is None:
+            raise ModelError(f"FMU block {self.name!r} is not set up (call setup(t0) first)")
+        return self._runtime
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        return self._rt().get_outputs()
+
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        self._rt().set_inputs(values)
+
+    def do_step(self, t: float, dt: float) -> None:
+        self._rt().do_step(t, dt)
+
+    def terminate(self) -> None:
+        rt, self._runtime = self._runtime, None
+        if rt is not None:
+            fin = getattr(self, "_finalizer", None)
+            if fin is not None:
+                fin.detach()
+            rt.terminate()
+
+    def __repr__(self) -> str:
+        return f"FmuBlock({self.name!r}, {str(self.path)!r}, kind={self.kind!r})"
+
+
+def _close(rt: Any) -> None:
+    try:
+        rt.terminate()
+    except Exception:  # noqa: BLE001 - finalizer: best effort
+        pass
+
+
+def fmu_blocks(graph: Any) -> list[FmuBlock]:
+    """Every :class:`FmuBlock` in a graph (nested graphs included), or ``[graph]`` for a block."""
+    if isinstance(graph, FmuBlock):
+        return [graph]
+    if not isinstance(graph, Graph):
+        return []
+    out: list[FmuBlock] = []
+    for blk in graph.blocks.values():
+        out += fmu_blocks(blk)
+    return out
+
+
+def set_isolation(graph: Any, isolate: bool = True, timeout: float | None = None) -> int:
+    """Run every FMU block of ``graph`` in (or out of) a child process; returns how many there are."""
+    blocks = fmu_blocks(graph)
+    for blk in blocks:
+        blk.isolate = isolate
+        if timeout is not None:
+            blk.timeout = timeout
+    return len(blocks)
+
+
+def fmu_graph(path: str | Path, name: str | None = None, **kw: Any) -> Any:
+    """A bare FMU as a graph: one :class:`FmuBlock` with every input exposed (default: its start
+    value) and every output exposed. ``kw`` goes to :class:`FmuBlock`."""
+    path = Path(path)
+    blk = FmuBlock(name or identifier(path.stem, set()), path, **kw)
+    return as_graph(blk)

@@ -1,0 +1,455 @@
+"""The typed interface of an FMU, read from its ``modelDescription.xml`` (FMI 2.0 and 3.0).
+
+:func:`describe_fmu` opens the archive safely (:mod:`fmus.importer.archive`), parses the XML with fmpy
+(schema validation first; an FMU that only fails the schema is still read, with a warning, unless
+``strict``), and maps it onto the block library's types:
+
+- ports: ``causality="input"`` / ``"output"`` variables. Kinds: Real/Float32/Float64 -> real;
+  Integer, Int8..UInt64, Enumeration -> integer; Boolean -> boolean. String, Binary and Clock
+  variables cannot be ports: they are listed in ``skipped``. FMI 3 arrays with fixed dimensions
+  become vector ports; FMI 2 scalars ``q[1]..q[n]`` (or ``q[0]..q[n-1]``) of one type and unit
+  are grouped into a vector port ``q``;
+- parameters: ``causality="parameter"`` scalars (fixed or tunable) with their start value, unit,
+  ``min``/``max`` bounds and description;
+- units: the variable's ``unit`` or its declared type's; no unit means dimensionless (``"1"``);
+- names: FMI names (``damper.d``, ``der(x)``, ``a[2]``) are turned into identifiers
+  (``damper_d``, ``der_x``, ``a_2``); ``fmi_names`` keeps the mapping;
+- direct feedthrough per output from ``ModelStructure/Outputs`` dependencies (an output without
+  a ``dependencies`` attribute depends on every input, as the standard says).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from components.core import normalize_unit
+from fmus.errors import MissingBinaryError, ModelDescriptionError, one_line
+from fmus.importer.archive import check_archive, open_zip, read_member
+
+REAL_TYPES = {"Real", "Float64", "Float32"}
+INT_TYPES = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration"}
+BOOL_TYPES = {"Boolean"}
+_NAME_BAD = re.compile(r"[^A-Za-z0-9_]+")
+_INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
+
+
+class FmuWarning(UserWarning):
+    """A usable FMU with a defect (schema violation, unsupported variables ...)."""
+
+
+@dataclass(frozen=True)
+class Element:
+    """Where one port's values live in the FMU: value references of one FMI type."""
+
+    type: str  # FMI type name (Real, Float64, Int32, Boolean, ...)
+    vrs: tuple[int, ...]
+    count: int  # number of values (> len(vrs) for FMI 3 arrays)
+
+
+@dataclass(frozen=True)
+class PortSpec:
+    """A block port built from one FMI variable (or a group of indexed scalars)."""
+
+    name: str
+    direction: str  # "in" / "out"
+    shape: tuple[int, ...]
+    unit: str
+    kind: str
+    description: str
+    start: tuple[float, ...] | None
+    element: Element
+    fmi_names: tuple[str, ...]
+    variability: str
+
+    @property
+    def size(self) -> int:
+        return int(math.prod(self.shape))
+
+    @property
+    def default(self) -> float | None:
+        """The port default (for an unconnected input): the start value if it is uniform."""
+        if not self.start:
+            return None
+        return self.start[0] if all(v == self.start[0] for v in self.start) else None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A block parameter built from a scalar FMI parameter."""
+
+    name: str
+    fmi_name: str
+    vr: int
+    type: str
+    kind: str
+    unit: str
+    start: float | None
+    bounds: tuple[float, float]
+    description: str
+    variability: str
+
+
+@dataclass
+class FmuDescription:
+    """Everything the importer needs from ``modelDescription.xml``, as typed data."""
+
+    path: Path
+    fmi_version: int
+    model_name: str
+    generation_tool: str
+    guid: str
+    description: str
+    cs_identifier: str | None
+    me_identifier: str | None
+    n_states: int
+    n_event_indicators: int
+    inputs: dict[str, PortSpec]
+    outputs: dict[str, PortSpec]
+    parameters: dict[str, ParamSpec]
+    feedthrough: dict[str, set[str]]
+    default_step: float | None
+    platforms: list[str]
+    has_sources: bool
+    needs_execution_tool: bool = False
+    skipped: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    members: frozenset[str] = field(default_factory=frozenset, repr=False)
+
+    @property
+    def kinds(self) -> list[str]:
+        return [k for k, ident in (("cs", self.cs_identifier), ("me", self.me_identifier)) if ident]
+
+    def identifier(self, kind: str) -> str:
+        ident = self.cs_identifier if kind == "cs" else self.me_identifier
+        if not ident:
+            raise ModelDescriptionError(
+                f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.kinds)})")
+        return ident
+
+    def binary_member(self, kind: str) -> str:
+        """The archive path of the shared library for this platform."""
+        import fmpy
+
+        plat = fmpy.platform if self.fmi_version == 2 else fmpy.platform_tuple
+        return f"binaries/{plat}/{self.identifier(kind)}{fmpy.sharedLibraryExtension}"
+
+    def summary(self) -> str:
+        """A human-readable table of the FMU's ports and parameters (``cpgsim inspect``)."""
+        lines = [f"{self.path.name}: FMI {self.fmi_version} {'+'.join(k.upper() for k in self.kinds)}, "
+                 f"model {self.model_name!r}, generated by {self.generation_tool or 'unknown tool'}",
+                 f"  continuous states: {self.n_states}, event indicators: {self.n_event_indicators}, "
+                 f"binaries: {', '.join(self.platforms) or 'none'}"
+                 + (", sources included" if self.has_sources else "")]
+        if self.default_step:
+            lines.append(f"  default step size: {self.default_step:g} s")
+        for title, table in (("inputs", self.inputs), ("outputs", self.outputs)):
+            lines.append(f"  {title} ({len(table)}):")
+            for p in table.values():
+                shape = "" if p.shape == (1,) else f" shape={p.shape}"
+                start = "" if p.start is None else f" start={_fmt(p.start)}"
+                feed = ""
+                if p.direction == "out" and self.feedthrough.get(p.name):
+                    feed = f" feedthrough from {', '.join(sorted(self.feedthrough[p.name]))}"
+                fmi = "" if p.fmi_names == (p.name,) else f" (FMI {_names(p.fmi_names)})"
+                lines.append(f"    {p.name:24s} [{p.unit}] {p.kind}{shape}{start}{feed}{fmi}")
+        lines.append(f"  parameters ({len(self.parameters)}):")
+        for q in self.parameters.values():
+            fmi = "" if q.fmi_name == q.name else f" (FMI {q.fmi_name})"
+            bounds = "" if q.bounds == (-math.inf, math.inf) else f" bounds=[{q.bounds[0]:g}, {q.bounds[1]:g}]"
+            start = "" if q.start is None else f" = {q.start:g}"
+            lines.append(f"    {q.name:24s} [{q.unit}] {q.kind}{start}{bounds}{fmi}")
+        for s in self.skipped:
+            lines.append(f"  skipped: {s}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
+        return "\n".join(lines)
+
+
+def _fmt(values: Sequence[float]) -> str:
+    return f"{values[0]:g}" if len(values) == 1 else "[" + ", ".join(f"{v:g}" for v in values[:6]) + (
+        ", ...]" if len(values) > 6 else "]")
+
+
+def _names(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]}"
+
+
+def kind_of(fmi_type: str) -> str | None:
+    if fmi_type in REAL_TYPES:
+        return "real"
+    if fmi_type in INT_TYPES:
+        return "integer"
+    if fmi_type in BOOL_TYPES:
+        return "boolean"
+    return None
+
+
+def identifier(name: str, taken: set[str]) -> str:
+    """A valid, unused identifier for FMI name ``name`` (``damper.d`` -> ``damper_d``)."""
+    base = _NAME_BAD.sub("_", name).strip("_") or "v"
+    base = re.sub(r"_+", "_", base)
+    if base[0].isdigit():
+        base = "v_" + base
+    out, i = base, 2
+    while out in taken:
+        out, i = f"{base}_{i}", i + 1
+    taken.add(out)
+    return out
+
+
+def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float, ...] | None:
+    raw = var.start
+    if raw is None:
+        return None
+    text = str(raw).strip()
+    if fmi_type in BOOL_TYPES:
+        vals = [1.0 if t in ("true", "1") else 0.0 for t in text.split()]
+    else:
+        try:
+            vals = [float(t) for t in text.split()]
+        except ValueError:
+            raise ModelDescriptionError(f"variable {var.name!r}: start value {raw!r} is not a number") from None
+    if len(vals) == 1 and count > 1:
+        vals = vals * count
+    if len(vals) != count:
+        raise ModelDescriptionError(f"variable {var.name!r}: {len(vals)} start values for {count} elements")
+    return tuple(vals)
+
+
+def _attr(var: Any, name: str) -> Any:
+    value = getattr(var, name, None)
+    if value is None and getattr(var, "declaredType", None) is not None:
+        value = getattr(var.declaredType, name, None)
+    return value
+
+
+def _dims(var: Any, by_vr: dict[int, Any]) -> tuple[int, ...] | None:
+    """Fixed shape of an FMI 3 array variable, () for a scalar, None if it cannot be resolved."""
+    dims = getattr(var, "dimensions", None) or []
+    shape = []
+    for d in dims:
+        if d.start is not None:
+            shape.append(int(d.start))
+        elif d.valueReference is not None and d.valueReference in by_vr and by_vr[d.valueReference].start is not None:
+            shape.append(int(by_vr[d.valueReference].start))
+        else:
+            return None
+    return tuple(shape)
+
+
+def _check_xml(data: bytes, path: Path) -> None:
+    head = data[:4096].lower()
+    if b"<!doctype" in head or b"<!entity" in data.lower():
+        raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares a DTD or entities (refused)")
+
+
+def describe_fmu(path: str | Path, strict: bool = False) -> FmuDescription:
+    """Read and check an FMU file; raise a specific :class:`~fmus.errors.FmuError` if it is unusable."""
+    import fmpy
+    from fmpy.model_description import ValidationError
+
+    path = Path(path)
+    with open_zip(path, "FMU") as zf:
+        infos = check_archive(zf, path, "FMU")
+        data = read_member(zf, "modelDescription.xml")
+        names = [i.filename for i in infos]
+    if data is None:
+        raise ModelDescriptionError(f"FMU {path} has no modelDescription.xml at the archive root")
+    _check_xml(data, path)
+    problems: list[str] = []
+    try:
+        md = fmpy.read_model_description(io.BytesIO(_rezip(data)), validate=True)
+    except Exception as exc:  # noqa: BLE001 - ValidationError, lxml XMLSyntaxError, fmpy's bare Exceptions
+        problems = list(exc.problems) if isinstance(exc, ValidationError) else [str(exc)]
+        if strict or type(exc).__name__ == "XMLSyntaxError":
+            first = one_line(problems[0]) if problems else one_line(exc)
+            more = f" (and {len(problems) - 1} more problem(s))" if len(problems) > 1 else ""
+            raise ModelDescriptionError(f"FMU {path}: invalid modelDescription.xml: {first}{more}") from None
+        try:
+            md = fmpy.read_model_description(io.BytesIO(_rezip(data)), validate=False)
+        except Exception:  # noqa: BLE001
+            raise ModelDescriptionError(
+                f"FMU {path}: cannot read modelDescription.xml: {one_line(problems[0])}") from None
+    try:
+        desc = _build(md, path, names)
+    except ModelDescriptionError as exc:
+        raise ModelDescriptionError(f"FMU {path}: {exc}") from None
+    except (AttributeError, TypeError, ValueError, KeyError, IndexError) as exc:
+        raise ModelDescriptionError(f"FMU {path}: inconsistent modelDescription.xml: {one_line(exc)}") from None
+    if problems:
+        msg = (f"modelDescription.xml fails FMI validation ({len(problems)} problem(s), "
+               f"first: {one_line(problems[0], 160)})")
+        desc.warnings.append(msg)
+        warnings.warn(f"FMU {path}: {msg}", FmuWarning, stacklevel=2)
+    return desc
+
+
+def _rezip(xml: bytes) -> bytes:
+    """fmpy reads a model description from a file-like zip: wrap the (checked) XML in one in memory."""
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr("modelDescription.xml", xml)
+    return buf.getvalue()
+
+
+def check_binary(desc: FmuDescription, kind: str) -> None:
+    """Raise :class:`MissingBinaryError` if the FMU ships no library for this platform and ``kind``."""
+    import fmpy
+
+    member = desc.binary_member(kind)
+    plat = fmpy.platform if desc.fmi_version == 2 else fmpy.platform_tuple
+    if member not in desc.members:
+        have = ", ".join(desc.platforms) or "none"
+        hint = " (it ships C sources: compile them, e.g. `python -m fmpy compile`)" if desc.has_sources else ""
+        raise MissingBinaryError(
+            f"FMU {desc.path} has no binary for this platform ({plat}): expected {member}; "
+            f"binaries for: {have}{hint}")
+
+
+def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
+    major = int(str(md.fmiVersion).split(".")[0])
+    if major not in (2, 3):
+        raise ModelDescriptionError(f"FMI version {md.fmiVersion} is not supported (need 2.0 or 3.0)")
+    cs = md.coSimulation.modelIdentifier if md.coSimulation is not None else None
+    me = md.modelExchange.modelIdentifier if md.modelExchange is not None else None
+    if not cs and not me:
+        raise ModelDescriptionError("declares neither CoSimulation nor ModelExchange")
+    by_vr = {v.valueReference: v for v in md.modelVariables}
+    taken: set[str] = set()
+    skipped: list[str] = []
+    inputs: dict[str, PortSpec] = {}
+    outputs: dict[str, PortSpec] = {}
+    params: dict[str, ParamSpec] = {}
+    var_port: dict[int, str] = {}  # id(variable) -> port name
+
+    # --- ports: group FMI 2 indexed scalars, keep FMI 3 arrays ---------------------------------
+    port_vars = [v for v in md.modelVariables if v.causality in ("input", "output")]
+    groups: list[list[Any]] = []
+    by_base: dict[tuple, list[Any]] = {}
+    for v in port_vars:
+        m = _INDEXED.match(v.name)
+        if m and not getattr(v, "dimensions", None):
+            key = (m.group(1), v.causality, v.type, normalize_unit(_attr(v, "unit") or ""))
+            if key not in by_base:
+                by_base[key] = []
+                groups.append(by_base[key])
+            by_base[key].append(v)
+        else:
+            groups.append([v])
+    final: list[list[Any]] = []
+    for g in groups:
+        if len(g) > 1:
+            idx = [int(_INDEXED.match(v.name).group(2)) for v in g]
+            order = sorted(range(len(g)), key=lambda i: idx[i])
+            sidx = [idx[i] for i in order]
+            if sidx in (list(range(1, len(g) + 1)), list(range(len(g)))):
+                final.append([g[i] for i in order])
+                continue
+            final.extend([v] for v in g)
+        else:
+            final.append(g)
+    for g in final:
+        v = g[0]
+        kind = kind_of(v.type)
+        if kind is None:
+            skipped.append(f"{v.causality} {v.name!r} of type {v.type} (not real/integer/boolean)")
+            continue
+        if len(g) > 1:
+            shape: tuple[int, ...] | None = (len(g),)
+            base = _INDEXED.match(v.name).group(1)
+        else:
+            shape = _dims(v, by_vr)
+            base = v.name
+            if shape is None:
+                skipped.append(f"{v.causality} {v.name!r}: array with variable dimensions")
+                continue
+            shape = shape or (1,)
+        count = int(math.prod(shape))
+        if len(g) > 1:
+            starts = [_parse_start(x, x.type, 1) for x in g]
+            start = None if any(s is None for s in starts) else tuple(s[0] for s in starts)  # type: ignore[index]
+        else:
+            start = _parse_start(v, v.type, count)
+        name = identifier(base, taken)
+        spec = PortSpec(
+            name=name, direction="in" if v.causality == "input" else "out", shape=shape,
+            unit=normalize_unit(_attr(v, "unit") or ""), kind=kind,
+            description=one_line(v.description or "", 200), start=start,
+            element=Element(v.type, tuple(x.valueReference for x in g), count),
+            fmi_names=tuple(x.name for x in g), variability=v.variability or "continuous")
+        (inputs if spec.direction == "in" else outputs)[name] = spec
+        for x in g:
+            var_port[id(x)] = name
+
+    # --- parameters ----------------------------------------------------------------------------
+    for v in md.modelVariables:
+        if v.causality != "parameter":
+            continue
+        kind = kind_of(v.type)
+        if kind is None:
+            skipped.append(f"parameter {v.name!r} of type {v.type}")
+            continue
+        if getattr(v, "dimensions", None):
+            skipped.append(f"parameter {v.name!r}: array parameters are not supported")
+            continue
+        if v.variability not in ("fixed", "tunable", None):
+            skipped.append(f"parameter {v.name!r} with variability {v.variability}")
+            continue
+        start = _parse_start(v, v.type, 1)
+        lo = _attr(v, "min")
+        hi = _attr(v, "max")
+        bounds = (float(lo) if lo is not None else -math.inf, float(hi) if hi is not None else math.inf)
+        s0 = start[0] if start else None
+        if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
+            skipped.append(f"bounds of parameter {v.name!r} ignored: start {s0:g} is outside "
+                           f"[{bounds[0]:g}, {bounds[1]:g}]")
+            bounds = (-math.inf, math.inf)
+        if kind == "boolean":
+            bounds = (0.0, 1.0)
+        name = identifier(v.name, taken)
+        params[name] = ParamSpec(name=name, fmi_name=v.name, vr=v.valueReference, type=v.type, kind=kind,
+                                 unit=normalize_unit(_attr(v, "unit") or ""), start=s0, bounds=bounds,
+                                 description=one_line(v.description or "", 200), variability=v.variability or "fixed")
+
+    # --- feedthrough from ModelStructure ---------------------------------------------------------
+    feed: dict[str, set[str]] = {name: set() for name in outputs}
+    listed: set[str] = set()
+    for unknown in md.outputs:
+        out = var_port.get(id(unknown.variable))
+        if out is None or out not in outputs:
+            continue
+        listed.add(out)
+        if unknown.dependencies is None:
+            feed[out] |= set(inputs)
+        else:
+            feed[out] |= {var_port[id(d)] for d in unknown.dependencies if var_port.get(id(d)) in inputs}
+    for out in outputs:  # an output missing from ModelStructure: assume the worst
+        if out not in listed:
+            feed[out] = set(inputs)
+
+    step = None
+    if md.defaultExperiment is not None and md.defaultExperiment.stepSize is not None:
+        try:
+            step = float(md.defaultExperiment.stepSize)
+        except (TypeError, ValueError):
+            step = None
+    platforms = sorted({m.split("/")[1] for m in members if m.startswith("binaries/") and m.count("/") >= 2
+                        and m.split("/")[1]})
+    desc = FmuDescription(
+        path=path, fmi_version=major, model_name=md.modelName or "", generation_tool=md.generationTool or "",
+        guid=md.guid or "", description=md.description or "", cs_identifier=cs, me_identifier=me,
+        n_states=int(md.numberOfContinuousStates or 0), n_event_indicators=int(md.numberOfEventIndicators or 0),
+        inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
+        platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
+        needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
+        skipped=skipped, members=frozenset(members))
+    return desc

@@ -1,0 +1,244 @@
+"""Run an FMU in a child process, so that a crash inside it cannot kill the harness.
+
+:class:`IsolatedRuntime` has the interface of :class:`fmus.importer.runtime.FmuRuntime` and forwards each
+call over a socket pair to ``python -m fmus.importer.isolation FD``, a child that owns the FMU. The child
+is a fresh interpreter (not a fork: FMU libraries and CasADi state are never shared), its stdout
+goes to stderr (an FMU printing cannot corrupt the protocol) and it ignores SIGINT (the parent
+decides). One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``,
+whose reply carries the outputs after the step; ``get_outputs`` asks the child only when inputs
+changed since the last answer (direct feedthrough).
+
+If the child dies (segmentation fault, abort, out of memory, killed) the call raises
+:class:`~fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal; with
+``timeout`` a call that takes longer kills the child and raises
+:class:`~fmus.errors.FmuTimeoutError`. The master turns both into a ``CoSimulationError``
+with the results recorded so far.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
+from fmus.importer.archive import remove_tree
+
+_ERRORS = {cls.__name__: cls for cls in (FmuRuntimeError, FmuCrashedError, FmuTimeoutError)}
+_STARTUP_TIMEOUT = 120.0
+
+
+def _signal_name(returncode: int | None) -> str:
+    if returncode is None:
+        return "no exit status"
+    if returncode < 0:
+        try:
+            return f"signal {signal.Signals(-returncode).name}"
+        except ValueError:
+            return f"signal {-returncode}"
+    return f"exit status {returncode}"
+
+
+class IsolatedRuntime:
+    """An :class:`~fmus.importer.runtime.FmuRuntime` living in a child process (see module docstring)."""
+
+    def __init__(self, args: Mapping[str, Any], timeout: float | None = None) -> None:
+        self.args = dict(args)
+        # the child extracts and works in a scratch directory the parent removes, even after a crash
+        self.scratch = Path(tempfile.mkdtemp(prefix="cpgsim_fmu_", dir=self.args.get("workdir") or None))
+        self.args["workdir"] = str(self.scratch)
+        self.path = Path(self.args["path"])
+        self.name = self.args["instance_name"]
+        self.timeout = timeout
+        self._pending: dict[str, np.ndarray] = {}
+        self._sent: dict[str, np.ndarray] = {}
+        self._outputs: dict[str, np.ndarray] | None = None
+        self._time = 0.0
+        parent, child = socket.socketpair()
+        root = str(Path(__file__).resolve().parents[2])
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+        env.setdefault("PYTHONDONTWRITEBYTECODE", "1")
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "fmus.importer.isolation", str(child.fileno())], pass_fds=(child.fileno(),),
+                stdin=subprocess.DEVNULL, stdout=sys.stderr.fileno() if _has_fileno(sys.stderr) else None,
+                env=env, cwd=str(self.scratch), close_fds=True)
+        except BaseException:
+            remove_tree(self.scratch)
+            raise
+        finally:
+            child.close()
+        self.conn = Connection(parent.detach())
+
+    # -- protocol ---------------------------------------------------------------------------------
+    def _call(self, what: str, *payload: Any, timeout: float | None = None) -> Any:
+        where = f"FMU {self.path.name} (block {self.name!r}, isolated process pid {self.proc.pid})"
+        try:
+            self.conn.send((what, payload))
+        except (BrokenPipeError, ConnectionError, OSError):
+            self._raise_dead(where, what)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self.conn.poll(0.2):
+            if self.proc.poll() is not None and not self.conn.poll(0):
+                self._raise_dead(where, what)
+            if deadline is not None and time.monotonic() > deadline:
+                self.kill()
+                raise FmuTimeoutError(f"{where}: {what} at t={self._time:g} took longer than {timeout:g} s; "
+                                      f"the process was killed")
+        try:
+            reply = self.conn.recv()
+        except (EOFError, ConnectionError, OSError):
+            self._raise_dead(where, what)
+        status, value = reply
+        if status == "ok":
+            return value
+        cls_name, message = value
+        if cls_name in _ERRORS:
+            raise _ERRORS[cls_name](message)
+        if cls_name == "load":
+            raise FmuError(message)
+        raise FmuRuntimeError(f"{where}: {what} failed: {message}")
+
+    def _raise_dead(self, where: str, what: str) -> None:
+        try:
+            rc = self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            rc = self.proc.returncode
+        self._close_conn()
+        raise FmuCrashedError(f"{where} crashed ({_signal_name(rc)}) during {what} at t={self._time:g} s")
+
+    # -- runtime interface --------------------------------------------------------------------------
+    def setup(self, t0: float, params: Mapping[str, float] | None = None,
+              inputs: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
+        self._time = float(t0)
+        limit = _STARTUP_TIMEOUT if self.timeout is None else max(self.timeout, _STARTUP_TIMEOUT)
+        self._outputs = self._call("setup", self.args, float(t0), dict(params or {}), dict(inputs or {}),
+                                   timeout=limit)
+        return self._outputs
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        if self._pending or self._outputs is None:
+            self._outputs = self._call("outputs", self._pending, timeout=self.timeout)
+            self._sent.update(self._pending)
+            self._pending = {}
+        return self._outputs
+
+    def set_inputs(self, values: Mapping[str, Any]) -> None:
+        """Buffer inputs; values equal to those the FMU already has are not sent again."""
+        for k, v in values.items():
+            arr = np.array(v, dtype=float, copy=True)
+            if k in self._sent and k not in self._pending and np.array_equal(self._sent[k], arr):
+                continue
+            self._pending[k] = arr
+
+    def do_step(self, t: float, dt: float) -> None:
+        self._time = float(t)
+        self._outputs = self._call("step", self._pending, float(t), float(dt), timeout=self.timeout)
+        self._sent.update(self._pending)
+        self._pending = {}
+        self._time = float(t) + float(dt)
+
+    def terminate(self) -> None:
+        if self.proc.poll() is None and not self.conn.closed:
+            try:
+                self._call("terminate", timeout=30.0)
+            except FmuRuntimeError:
+                pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.kill()
+        self._close_conn()
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:  # pragma: no cover
+                pass
+        self._close_conn()
+
+    def _close_conn(self) -> None:
+        if not self.conn.closed:
+            self.conn.close()
+        if self.proc.poll() is not None:
+            remove_tree(self.scratch)
+
+
+def _has_fileno(stream: Any) -> bool:
+    try:
+        stream.fileno()
+        return True
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+# -- the child ----------------------------------------------------------------------------------------
+def _serve(fd: int) -> None:
+    from fmus.errors import one_line
+    from fmus.importer.runtime import FmuRuntime
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    conn = Connection(fd)
+    rt: FmuRuntime | None = None
+    while True:
+        try:
+            what, payload = conn.recv()
+        except (EOFError, OSError):
+            break
+        try:
+            if what == "setup":
+                args, t0, params, inputs = payload
+                rt = FmuRuntime(**args)
+                value: Any = rt.setup(t0, params, inputs)
+            elif what == "outputs":
+                assert rt is not None
+                if payload[0]:
+                    rt.set_inputs(payload[0])
+                value = rt.get_outputs()
+            elif what == "step":
+                assert rt is not None
+                inputs, t, dt = payload
+                if inputs:
+                    rt.set_inputs(inputs)
+                rt.do_step(t, dt)
+                value = rt.get_outputs()
+            elif what == "terminate":
+                if rt is not None:
+                    rt.terminate()
+                conn.send(("ok", None))
+                break
+            else:
+                raise FmuRuntimeError(f"unknown request {what!r}")
+            conn.send(("ok", value))
+        except FmuError as exc:
+            conn.send(("err", ("load", str(exc))))
+        except Exception as exc:  # noqa: BLE001 - report every failure to the parent
+            name = type(exc).__name__
+            conn.send(("err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS
+                               else f"{name}: {one_line(exc)}")))
+    if rt is not None:
+        rt.terminate()
+    conn.close()
+
+
+if __name__ == "__main__":
+    os.dup2(2, 1)  # anything the FMU prints goes to stderr, never into the protocol
+    _serve(int(sys.argv[1]))
+    sys.stderr.flush()
+    # the FMU is terminated and freed: skip interpreter finalisation, where libraries that embed
+    # Python (PythonFMU) were seen to corrupt the heap
+    os._exit(0)

@@ -1,0 +1,375 @@
+"""Run one FMU instance in this process through fmpy: co-simulation (FMI 2/3) or model exchange.
+
+:class:`FmuRuntime` is what an :class:`~fmus.importer.block.FmuBlock` drives (directly, or from a
+child process with ``isolate=True``, see :mod:`fmus.importer.isolation`). Values cross its interface as
+``{port: numpy array}`` with the ports of :mod:`fmus.importer.description`.
+
+Model exchange ("integrated by our solver"): the FMU's continuous states are integrated by
+classic fixed-step RK4 -- the same scheme the compiler uses for equation blocks -- with
+``substeps`` steps per macro step and the inputs held over the macro step. Events are handled
+at step ends, without localisation: after each step ``completedIntegratorStep`` is called, the
+event indicators are compared with their signs before the step and time events are checked;
+any event puts the FMU in event mode, and the event iteration (``newDiscreteStates`` /
+``updateDiscreteStates``) runs when the inputs at that instant are set (:meth:`FmuRuntime.set_inputs`,
+or the next step), as an FMI master does; outputs read before that are the values just before the
+event (the master re-reads the outputs of blocks with direct feedthrough after setting their inputs).
+A change of a discrete (integer/boolean) input is applied in event mode at once.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Mapping
+from ctypes import POINTER, byref, c_double
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fmus.errors import FmuRuntimeError, MissingBinaryError, one_line
+from fmus.importer.archive import remove_tree, safe_extract
+from fmus.importer.description import FmuDescription, check_binary, describe_fmu
+
+_FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8", "UInt8": "getUInt8",
+             "Int16": "getInt16", "UInt16": "getUInt16", "Int32": "getInt32", "UInt32": "getUInt32",
+             "Int64": "getInt64", "UInt64": "getUInt64", "Enumeration": "getInt64", "Boolean": "getBoolean"}
+_FMI2_GET = {"Real": "getReal", "Integer": "getInteger", "Enumeration": "getInteger", "Boolean": "getBoolean"}
+_STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
+_ABANDONED: list = []  # instances that reported fmiFatal: not freed, library and logger kept alive
+
+
+def _convert(fmi_type: str, values: np.ndarray) -> list:
+    if fmi_type == "Boolean":
+        return [bool(v > 0.5) for v in values]
+    if fmi_type in ("Real", "Float64", "Float32"):
+        return [float(v) for v in values]
+    return [int(round(float(v))) for v in values]
+
+
+class FmuRuntime:
+    """One instance of an FMU (see module docstring). ``kind`` is ``"cs"`` or ``"me"``."""
+
+    def __init__(self, path: str | Path, kind: str, instance_name: str, workdir: str | Path | None = None,
+                 substeps: int = 1, strict: bool = False, desc: FmuDescription | None = None) -> None:
+        self.path = Path(path)
+        self.desc = desc if desc is not None else describe_fmu(self.path, strict)
+        if kind not in self.desc.kinds:
+            raise FmuRuntimeError(
+                f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.desc.kinds)})")
+        check_binary(self.desc, kind)
+        self.kind = kind
+        self.instance_name = instance_name
+        self.workdir = workdir
+        self.substeps = max(1, int(substeps))
+        self.fmu: Any = None
+        self.unzipdir: Path | None = None
+        self.log: collections.deque[str] = collections.deque(maxlen=20)
+        self._callbacks: Any = None
+        self._state = "new"
+        self._discrete_inputs = {n for n, p in self.desc.inputs.items()
+                                 if p.kind != "real" or p.variability in ("discrete", "fixed", "tunable")}
+        self._last_discrete: dict[str, np.ndarray] = {}
+        self._time = 0.0
+        self._in_event_mode = False
+        self._next_event: float | None = None
+        self._last_set: dict[str, np.ndarray] = {}
+        groups: dict[str, tuple[list[int], list[tuple[str, int, int]], list[int]]] = {}
+        for name, p in self.desc.outputs.items():
+            vrs, parts, count = groups.setdefault(p.element.type, ([], [], [0]))
+            parts.append((name, count[0], p.size))
+            vrs.extend(p.element.vrs)
+            count[0] += p.element.count
+        self._out_groups = [(t, tuple(v), c[0], parts) for t, (v, parts, c) in groups.items()]
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _where(self, what: str) -> str:
+        return f"FMU {self.path.name} (instance {self.instance_name!r}) {what}"
+
+    def _fail(self, what: str, exc: BaseException) -> FmuRuntimeError:
+        status = getattr(exc, "status", None)
+        if status == 4:  # fmiFatal: the instance must not be called again, not even to free it
+            self._state = "fatal"
+        elif status == 3 and self._state == "running":  # fmiError: only freeInstance is allowed
+            self._state = "instantiated"
+        tail = f"; FMU log: {one_line(' | '.join(list(self.log)[-3:]), 240)}" if self.log else ""
+        return FmuRuntimeError(f"{self._where(what)} failed: {one_line(exc)}{tail}")
+
+    def _log2(self, env, instance, status, category, message) -> None:  # FMI 2 logger (via fmpy's proxy)
+        self.log.append(f"[{_STATUS[status] if 0 <= status < 6 else status}] {_dec(message)}")
+
+    def _log3(self, env, status, category, message) -> None:  # FMI 3 logMessage
+        self.log.append(f"[{_STATUS[status] if 0 <= status < 6 else status}] {_dec(message)}")
+
+    def _get(self, fmi_type: str, vrs: tuple[int, ...], count: int) -> np.ndarray:
+        if self.desc.fmi_version == 2:
+            vals = getattr(self.fmu, _FMI2_GET[fmi_type])(list(vrs))
+        else:
+            vals = getattr(self.fmu, _FMI3_GET[fmi_type])(list(vrs), nValues=count)
+        return np.asarray(vals, dtype=float).ravel()
+
+    def _set(self, fmi_type: str, vrs: tuple[int, ...], values: np.ndarray) -> None:
+        vals = _convert(fmi_type, np.atleast_1d(np.asarray(values, dtype=float)).ravel())
+        if self.desc.fmi_version == 2:
+            getattr(self.fmu, _FMI2_GET[fmi_type].replace("get", "set"))(list(vrs), vals)
+        else:
+            getattr(self.fmu, _FMI3_GET[fmi_type].replace("get", "set"))(list(vrs), vals)
+
+    def _set_port(self, name: str, value: Any) -> None:
+        spec = self.desc.inputs[name]
+        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        if arr.size == 1 and spec.size > 1:
+            arr = np.full(spec.size, float(arr[0]))
+        if arr.size != spec.size:
+            raise FmuRuntimeError(f"{self._where('input ' + name)} needs {spec.size} value(s), got {arr.size}")
+        last = self._last_set.get(name)
+        if last is not None and np.array_equal(last, arr):
+            return  # the FMU already has this value
+        self._set(spec.element.type, spec.element.vrs, arr)
+        self._last_set[name] = arr.copy()
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def setup(self, t0: float, params: Mapping[str, float] | None = None,
+              inputs: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
+        """Extract, load, instantiate and initialise at ``t0``; returns the outputs at ``t0``."""
+        import fmpy
+        from fmpy import fmi2, fmi3
+
+        self.unzipdir = safe_extract(self.path, self.workdir)
+        ident = self.desc.identifier(self.kind)
+        kw = dict(guid=self.desc.guid, unzipDirectory=str(self.unzipdir), modelIdentifier=ident,
+                  instanceName=self.instance_name)
+        cls = {(2, "cs"): fmi2.FMU2Slave, (2, "me"): fmi2.FMU2Model,
+               (3, "cs"): fmi3.FMU3Slave, (3, "me"): fmi3.FMU3Model}[(self.desc.fmi_version, self.kind)]
+        try:
+            self.fmu = cls(**kw)
+        except Exception as exc:  # noqa: BLE001 - fmpy raises bare Exceptions for load failures
+            raise MissingBinaryError(f"FMU {self.path}: cannot load its shared library: {one_line(exc)}") from None
+        self._state = "loaded"
+        self._time = float(t0)
+        try:
+            if self.desc.fmi_version == 2:
+                cb = fmi2.fmi2CallbackFunctions()
+                cb.logger = fmi2.fmi2CallbackLoggerTYPE(self._log2)
+                cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+                cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
+                try:
+                    from fmpy.logging import addLoggerProxy
+
+                    addLoggerProxy(byref(cb))
+                except Exception:  # noqa: BLE001 - no proxy: messages arrive unformatted
+                    pass
+                self._callbacks = cb
+                self.fmu.instantiate(callbacks=cb, loggingOn=True)
+                self._state = "instantiated"
+                self.fmu.setupExperiment(startTime=float(t0))
+            else:
+                self.fmu.instantiate(loggingOn=True, logMessage=self._log3)
+                self._state = "instantiated"
+            for name, value in (params or {}).items():
+                spec = self.desc.parameters[name]
+                self._set(spec.type, (spec.vr,), np.array([value]))
+            if self.desc.fmi_version == 2:
+                self.fmu.enterInitializationMode()
+            else:
+                self.fmu.enterInitializationMode(startTime=float(t0))
+            for name, value in (inputs or {}).items():
+                self._set_port(name, value)
+            self.fmu.exitInitializationMode()
+            self._state = "running"
+            if self.kind == "me":
+                self._me_start()
+                if not self.desc.inputs:
+                    self._leave_event_mode()
+        except FmuRuntimeError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"initialisation at t={t0:g}", exc) from None
+        return self.get_outputs()
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        try:
+            if self.kind == "me" and self._in_event_mode and not self.desc.inputs:
+                self._leave_event_mode()
+            out: dict[str, np.ndarray] = {}
+            for fmi_type, vrs, count, parts in self._out_groups:  # one FMI call per type
+                vals = self._get(fmi_type, vrs, count)
+                for name, start, size in parts:
+                    out[name] = vals[start:start + size].copy()
+            return out
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"reading outputs at t={self._time:g}", exc) from None
+
+    def set_inputs(self, values: Mapping[str, Any]) -> None:
+        try:
+            if self.kind == "me":
+                changed = {}
+                for name, value in values.items():
+                    if name in self._discrete_inputs:
+                        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+                        if name not in self._last_discrete or not np.array_equal(arr, self._last_discrete[name]):
+                            changed[name] = arr
+                    else:
+                        self._set_port(name, value)
+                if changed and not self._in_event_mode:
+                    self.fmu.enterEventMode()
+                    self._in_event_mode = True
+                for name, arr in changed.items():
+                    self._set_port(name, arr)
+                    self._last_discrete[name] = arr.copy()
+                self._leave_event_mode()
+            else:
+                for name, value in values.items():
+                    self._set_port(name, value)
+        except FmuRuntimeError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"setting inputs at t={self._time:g}", exc) from None
+
+    def do_step(self, t: float, dt: float) -> None:
+        try:
+            if self.kind == "cs":
+                if self.desc.fmi_version == 2:
+                    self.fmu.doStep(currentCommunicationPoint=float(t), communicationStepSize=float(dt))
+                else:
+                    _event, terminate, _early, _last = self.fmu.doStep(
+                        currentCommunicationPoint=float(t), communicationStepSize=float(dt))
+                    if terminate:
+                        raise FmuRuntimeError(f"{self._where('doStep')} requested termination at t={t + dt:g}")
+            else:
+                self._me_step(float(t), float(dt))
+        except FmuRuntimeError:
+            raise
+        except Exception as exc:  # noqa: BLE001
+            name = "fmi2DoStep" if self.desc.fmi_version == 2 else "fmi3DoStep"
+            raise self._fail(f"{name if self.kind == 'cs' else 'RK4 step'} at t={t:g}", exc) from None
+        self._time = float(t) + float(dt)
+
+    def terminate(self) -> None:
+        """Terminate and free the instance, unload the library, remove the extracted files."""
+        fmu, self.fmu = self.fmu, None
+        try:
+            if fmu is not None and self._state == "running":
+                try:
+                    fmu.terminate()
+                except Exception:  # noqa: BLE001 - an FMU in error state may refuse; free it anyway
+                    pass
+            if fmu is not None and self._state in ("instantiated", "running"):
+                try:
+                    if self.desc.fmi_version == 2:
+                        fmu.fmi2FreeInstance(fmu.component)
+                    else:
+                        fmu.fmi3FreeInstance(fmu.component)
+                except Exception:  # noqa: BLE001
+                    pass
+            if fmu is not None and self._state == "fatal":  # never touched again: keep it and its callbacks
+                _ABANDONED.append((fmu, self._callbacks, self))
+            elif fmu is not None:
+                try:
+                    fmu.freeLibrary()
+                except Exception:  # noqa: BLE001
+                    pass
+        finally:
+            self._state = "terminated"
+            remove_tree(self.unzipdir)
+            self.unzipdir = None
+
+    # -- model exchange ---------------------------------------------------------------------------
+    def _me_start(self) -> None:
+        """After ``exitInitializationMode`` the FMU is in event mode: the event iteration waits for
+        the inputs at ``t0`` (the first :meth:`set_inputs`), see :meth:`_leave_event_mode`."""
+        d = self.desc
+        nx = d.n_states
+        if d.fmi_version == 3:
+            try:
+                nx = self.fmu.getNumberOfContinuousStates()
+            except Exception:  # noqa: BLE001
+                nx = d.n_states
+        self.nx = int(nx)
+        self.nz = int(d.n_event_indicators)
+        self.x = np.zeros(self.nx)
+        self.dx = np.zeros(self.nx)
+        self.z = np.zeros(self.nz)
+        self._px = self.x.ctypes.data_as(POINTER(c_double))
+        self._pz = self.z.ctypes.data_as(POINTER(c_double))
+        self._xs = np.zeros(self.nx)
+        self._pxs = self._xs.ctypes.data_as(POINTER(c_double))
+        self._pdx = self.dx.ctypes.data_as(POINTER(c_double))
+        self._get_dx = self.fmu.getDerivatives if d.fmi_version == 2 else self.fmu.getContinuousStateDerivatives
+        for name in self._discrete_inputs:  # remember the start values of discrete inputs
+            spec = d.inputs[name]
+            if spec.start is not None:
+                self._last_discrete[name] = np.asarray(spec.start, dtype=float)
+        self._in_event_mode = True
+
+    def _leave_event_mode(self) -> None:
+        """If in event mode: iterate the discrete states, enter continuous-time mode, re-read states.
+
+        Events found at the end of a step (and the initial one) are handled here, once the inputs
+        at that instant have been set, as an FMI master does before it reads the outputs."""
+        if not self._in_event_mode:
+            return
+        update = self.fmu.newDiscreteStates if self.desc.fmi_version == 2 else self.fmu.updateDiscreteStates
+        self._next_event = None
+        for _ in range(1000):
+            (needed, terminate, _nominals, _changed, next_defined, next_time) = update()
+            if next_defined:
+                self._next_event = float(next_time)
+            if terminate:
+                raise FmuRuntimeError(f"{self._where('event iteration')} requested termination at t={self._time:g}")
+            if not needed:
+                break
+        else:
+            raise FmuRuntimeError(f"{self._where('event iteration')} did not converge at t={self._time:g}")
+        self.fmu.enterContinuousTimeMode()
+        self._in_event_mode = False
+        if self.nx:
+            self.fmu.getContinuousStates(self._px, self.nx)
+        if self.nz:
+            self.fmu.getEventIndicators(self._pz, self.nz)
+
+    def _deriv(self, t: float, x: np.ndarray) -> np.ndarray:
+        self.fmu.setTime(t)
+        if self.nx:
+            self._xs[:] = x
+            self.fmu.setContinuousStates(self._pxs, self.nx)
+            self._get_dx(self._pdx, self.nx)
+        return self.dx.copy()
+
+    def _me_step(self, t: float, dt: float) -> None:
+        self._leave_event_mode()
+        h = dt / self.substeps
+        x = self.x.copy()
+        for i in range(self.substeps):
+            ti = t + i * h
+            if self.nx:
+                k1 = self._deriv(ti, x)
+                k2 = self._deriv(ti + h / 2, x + h / 2 * k1)
+                k3 = self._deriv(ti + h / 2, x + h / 2 * k2)
+                k4 = self._deriv(ti + h, x + h * k3)
+                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        t1 = t + dt
+        self.fmu.setTime(t1)
+        self._time = t1
+        if self.nx:
+            if not np.all(np.isfinite(x)):
+                raise FmuRuntimeError(f"{self._where('RK4 step')}: a state became non-finite at t={t1:g}")
+            self.x[:] = x
+            self.fmu.setContinuousStates(self._px, self.nx)
+        step_event, terminate = self.fmu.completedIntegratorStep()
+        if terminate:
+            raise FmuRuntimeError(f"{self._where('completedIntegratorStep')} requested termination at t={t1:g}")
+        state_event = False
+        if self.nz:
+            before = self.z.copy()
+            self.fmu.getEventIndicators(self._pz, self.nz)
+            state_event = bool(np.any((before < 0) != (self.z < 0)) or np.any((before > 0) & (self.z == 0)))
+        time_event = self._next_event is not None and t1 >= self._next_event - 1e-9 * dt
+        if step_event or state_event or time_event:
+            self.fmu.enterEventMode()
+            self._in_event_mode = True
+
+
+def _dec(b: Any) -> str:
+    if isinstance(b, bytes):
+        return b.decode("utf-8", "replace")
+    return "" if b is None else str(b)

@@ -1,0 +1,82 @@
+"""Built-in graphs by name, and loading user graphs from ``path/to/module.py:function``.
+
+Entries are ``"module:function"`` strings imported on demand, so the CLI starts fast and a
+broken optional dependency only affects the graph that needs it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from components.core import Block, ModelError
+from components.graph import Graph
+
+BUILTIN: dict[str, tuple[str, str]] = {
+    # name: ("module:function", one-line description)
+    "vdp": ("components.library:single_vdp", "one Van der Pol neuron, Yu Y2 (eps 0.1, b 4, omega 0.4pi)"),
+    "network": ("components.networks:leader_follower_network", "Yu Y5 leader-follower network, Table 1"),
+    "network-searching": ("components.library:searching_network", "Yu Y13 searching-mode network"),
+    "hexapod-network": ("components.library:hexapod_network", "six Y5 networks (18 neurons), legs 1-6"),
+    "damped-oscillator": ("components.library:damped_oscillator",
+                          "damped linear oscillator from generic blocks (no limit cycle)"),
+    "leg": ("components.yu.leg:leg", "Yu single-leg controller: network, sensory neurons, reflexes, converter "
+            "(input toe_force)"),
+    "hexapod-controller": ("components.yu.leg:hexapod_controller", "Yu six-leg controller + gait FSM "
+                           "(in: toe_force[18] N; out: q_target[18] rad)"),
+    "fukuhara-controller": ("components.fukuhara.controller:fukuhara_controller",
+                            "Fukuhara 2022 six-leg controller, rules 1-4 + Appendix A (in: toe_force[18] N; "
+                            "out: q_target[18] rad)"),
+}
+
+
+class GraphNotFound(ModelError):
+    """A graph name or ``module.py:function`` reference cannot be resolved."""
+
+
+def names() -> list[str]:
+    return sorted(BUILTIN)
+
+
+def _import_target(target: str) -> Callable[[], Any]:
+    module, _, func = target.partition(":")
+    mod = importlib.import_module(module)
+    return getattr(mod, func)
+
+
+def load_graph(spec: str) -> Graph | Block:
+    """Resolve a built-in name, ``path/to/module.py:function`` or an ``.fmu``/``.ssp`` file to a graph (or block)."""
+    if spec.lower().endswith((".fmu", ".ssp")):
+        from fmus.loader import load_fmu_graph
+
+        return load_fmu_graph(spec)
+    if spec in BUILTIN:
+        builder = _import_target(BUILTIN[spec][0])
+    elif ":" in spec:
+        path_str, _, func = spec.rpartition(":")
+        path = Path(path_str)
+        if not path.exists():
+            raise GraphNotFound(f"graph file {path} does not exist")
+        mod_name = f"cpgsim_user_{abs(hash(path.resolve()))}"
+        spec_obj = importlib.util.spec_from_file_location(mod_name, path)
+        if spec_obj is None or spec_obj.loader is None:
+            raise GraphNotFound(f"cannot import {path} as a Python module")
+        module = importlib.util.module_from_spec(spec_obj)
+        sys.modules[mod_name] = module
+        try:
+            spec_obj.loader.exec_module(module)
+        except Exception as exc:  # noqa: BLE001 - user code: report, don't crash
+            raise GraphNotFound(f"importing {path} failed: {type(exc).__name__}: {exc}") from exc
+        if not hasattr(module, func):
+            raise GraphNotFound(f"{path} has no function {func!r}")
+        builder = getattr(module, func)
+    else:
+        raise GraphNotFound(f"unknown graph {spec!r}: use one of {', '.join(names())} or path/to/module.py:function")
+    graph = builder()
+    if not isinstance(graph, (Graph, Block)):
+        raise GraphNotFound(f"{spec} returned {type(graph).__name__}, not a Graph or Block")
+    return graph

@@ -1,0 +1,99 @@
+"""Find a graph's periodic orbit by shooting (CasADi), compute its Floquet multipliers and say whether it
+is a stable limit cycle; compare Van der Pol neurons with Yu Y4; measure how fast followers synchronize.
+
+GRAPH is a built-in name (vdp, network, network-searching, damped-oscillator, ...) or
+path/to/module.py:function returning a Graph. Free graph inputs must be held constant (--input) unless
+they declare a default. Writes DIR/report.json and DIR/orbit.png.
+
+Exit status: 0 stable limit cycle; 1 no stable cycle (diverges, converges to an equilibrium, period not
+found, no common period, unstable orbit) with the reason; 2 bad input.
+
+Examples:
+  cpgsim verify network -o out/network
+  cpgsim verify vdp --set z.eps=0.5 --json
+  cpgsim verify network --x0 z1.x=1          # legs 2, 4, 6 leader start [1, 0]
+  cpgsim verify --sweep -o out/sweep          # eps x b table of docs/verification.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from harness.cli import catalog
+from harness.cli.common import CliError, add_set_argument, parse_assignments, parse_sets, positive_float
+
+NAME = "verify"
+HELP = "verify a stable limit cycle (period, Floquet multipliers, phase lags, sync time)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("graph", nargs="?", help="built-in graph name or path/to/module.py:function")
+    p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    p.add_argument("-o", "--output", default=None, metavar="DIR",
+                   help="report directory (default verify_<graph>, or verify_sweep with --sweep)")
+    add_set_argument(p)
+    p.add_argument("--input", dest="inputs", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold a free graph input constant (repeatable)")
+    p.add_argument("--x0", action="append", default=[], metavar="STATE=VALUE",
+                   help="initial value of a continuous state, e.g. z1.x=1 (repeatable)")
+    p.add_argument("--t-max", type=positive_float, default=400.0, help="longest simulated time in s (default 400)")
+    p.add_argument("--margin", type=positive_float, default=1e-3,
+                   help="stability margin: non-trivial multipliers need |mu| < 1 - margin (default 1e-3)")
+    p.add_argument("--sync-tol", type=positive_float, default=0.01,
+                   help="follower agreement tolerance relative to the amplitude (default 0.01)")
+    p.add_argument("--samples", type=int, default=8, help="random initial states for convergence statistics")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random initial states")
+    p.add_argument("--reference", default=None, metavar="STATE", help="reference state of the phase lags")
+    p.add_argument("--sync", action="append", default=None, metavar="BLOCK_A,BLOCK_B",
+                   help="blocks whose states must agree (default: identical coupled Van der Pol neurons)")
+    p.add_argument("--no-plot", action="store_true", help="do not write the plot")
+    p.add_argument("--sweep", action="store_true",
+                   help="run the eps x b sweep of a single neuron against Yu Y4 (docs/verification.md)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from harness.verify.report import format_report, plot_report, sweep, sweep_markdown, write_json
+    from harness.verify.result import VerifyOptions
+    from harness.verify.shooting import verify
+
+    if args.sweep:
+        if args.graph:
+            raise CliError("--sweep takes no GRAPH (it sweeps a single Van der Pol neuron)")
+        out = Path(args.output or "verify_sweep")
+        rows = sweep()
+        table = sweep_markdown(rows)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "sweep.md").write_text(table + "\n")
+        (out / "sweep.json").write_text(json.dumps(rows, indent=2))
+        print(json.dumps(rows, indent=2) if args.json else table)
+        print(f"wrote {out / 'sweep.md'}, {out / 'sweep.json'}", file=sys.stderr)
+        return 0 if all(r["status"] == "stable-cycle" for r in rows) else 1
+    if not args.graph:
+        raise CliError("missing GRAPH (a built-in name or path/to/module.py:function), or use --sweep")
+    if args.samples < 0:
+        raise CliError("--samples must be >= 0")
+    pairs = None
+    if args.sync is not None:
+        pairs = []
+        for item in args.sync:
+            a, sep, b = item.partition(",")
+            if not sep or not a.strip() or not b.strip():
+                raise CliError(f"--sync expects BLOCK_A,BLOCK_B, got {item!r}")
+            pairs.append((a.strip(), b.strip()))
+    if args.margin >= 1 or args.sync_tol >= 1:
+        raise CliError("--margin and --sync-tol must be below 1")
+    graph = catalog.load_graph(args.graph)
+    opts = VerifyOptions(t_max=args.t_max, margin=args.margin, sync_tol=args.sync_tol, sync_samples=args.samples,
+                         seed=args.seed, reference=args.reference, sync_pairs=pairs)
+    rep = verify(graph, params=parse_sets(args.sets), inputs=parse_assignments(args.inputs, "--input"),
+                 x0=parse_assignments(args.x0, "--x0"), options=opts)
+    out = Path(args.output or f"verify_{rep.graph}")
+    written = [write_json(rep, out / "report.json")]
+    if not args.no_plot:
+        written.append(plot_report(rep, out / "orbit.png"))
+    print(json.dumps(rep.to_json(), indent=2) if args.json else format_report(rep))
+    print("wrote " + ", ".join(map(str, written)), file=sys.stderr)
+    return rep.exit_code

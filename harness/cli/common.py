@@ -1,0 +1,48 @@
+"""What every subcommand shares: the user-facing :class:`CliError` and argument helpers."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit status ``code`` (2 = bad input)."""
+
+    def __init__(self, message: str, code: int = 2) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def add_set_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--set", dest="sets", action="append", default=[], metavar="BLOCK.PARAM=VALUE",
+                        help="set a parameter by path (globs allowed, e.g. '*.eps=0.2'); repeatable")
+
+
+def parse_sets(items: list[str]) -> dict[str, Any]:
+    """``["a.b=1.5", ...]`` -> ``{"a.b": 1.5}``; malformed items raise :class:`CliError`."""
+    return parse_assignments(items, "--set", "BLOCK.PARAM=VALUE")
+
+
+def parse_assignments(items: list[str], flag: str, form: str = "NAME=VALUE") -> dict[str, float]:
+    """``["name=1.5", ...]`` given with ``flag`` -> ``{"name": 1.5}``; malformed items raise :class:`CliError`."""
+    out: dict[str, float] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise CliError(f"{flag} expects {form}, got {item!r}")
+        try:
+            out[key.strip()] = float(value)
+        except ValueError:
+            raise CliError(f"{flag} {key.strip()}: value {value!r} is not a number") from None
+    return out
+
+
+def positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not v > 0 or v != v or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a positive finite number")
+    return v

@@ -1,0 +1,213 @@
+"""Pictures of a robot run, made from its results file (so they can be remade without re-running).
+
+- ``gait.png``: stick (gait) diagram, stance as black bars per leg (Yu Fig. 15c style), reflexes marked;
+- ``feet_sagittal.png``: foot paths in the sagittal plane (forward vs height) over the terrain (Fig. 14b);
+- ``toe_forces.png``: toe forces per leg with the sensory thresholds and reflex triggers (Fig. 14c);
+- ``body.png``: body height, forward position and tilt over time;
+- ``snapshots.png``: a strip of side-view stick figures of the robot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from components.geometry import LEG_NAMES, RobotGeometry  # noqa: E402
+from harness.results import Results  # noqa: E402
+
+LEG_LABELS = [f"{n} (leg {i + 1})" for i, n in enumerate(LEG_NAMES)]
+REFLEX_COLORS = {"elevator": "tab:red", "searching": "tab:blue", "found": "tab:green", "giveup": "black",
+                 "withdraw": "tab:purple"}
+
+
+def stance_from_forces(res: Results, robot: str, fz_threshold: float) -> np.ndarray:
+    """Stance per leg (time x 6, bool): vertical toe force above ``fz_threshold``."""
+    f = res[f"{robot}.toe_force"].reshape(len(res.time), 6, 3)
+    return f[:, :, 2] > fz_threshold
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Start/end indices of the True runs of a boolean vector."""
+    d = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    return list(zip(np.where(d == 1)[0], np.where(d == -1)[0], strict=True))
+
+
+def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: Path, title: str = "") -> Path:
+    t = res.time
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    for leg in range(6):
+        row = 5 - leg
+        for a, b in _runs(stance[:, leg]):
+            ax.add_patch(plt.Rectangle((t[a], row - 0.35), t[min(b, len(t) - 1)] - t[a], 0.7, color="black"))
+    for ev in reflexes:
+        ax.plot(ev["t"], 5 - ev["leg"], marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"), ms=8)
+    for kind in sorted({ev["kind"] for ev in reflexes} | {"elevator", "searching"}, key=list(REFLEX_COLORS).index):
+        ax.plot([], [], "v", color=REFLEX_COLORS.get(kind, "tab:green"),
+                label=f"{kind} reflex" if kind in ("elevator", "searching") else kind)
+    ax.set_yticks(range(6), LEG_LABELS[::-1])
+    ax.set_xlim(t[0], t[-1])
+    ax.set_ylim(-0.7, 5.7)
+    ax.set_xlabel("time [s]")
+    ax.set_title(title or "gait diagram (black: stance)", loc="left", fontsize=10)
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=5, frameon=False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_feet_sagittal(res: Results, robot: str, terrain, path: Path, geometry: RobotGeometry) -> Path:
+    feet = res[f"{robot}.foot_position"].reshape(len(res.time), 6, 3)
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    for side, ax in enumerate(axes):
+        legs = range(3) if side == 0 else range(3, 6)
+        ys = feet[:, list(legs), 1]
+        y_line = np.linspace(ys.min() - 0.05, ys.max() + 0.05, 800)
+        for leg in legs:
+            x_mean = float(np.median(feet[:, leg, 0]))
+            ax.plot(feet[:, leg, 1], feet[:, leg, 2] - geometry.leg.foot_radius, lw=0.9, label=LEG_LABELS[leg])
+            ground = np.asarray(terrain.height_at(np.full_like(y_line, x_mean), y_line), dtype=float)
+            ground = np.where(np.isfinite(ground), ground, np.nan)
+            ax.plot(y_line, ground, color="0.5", lw=2, alpha=0.35)
+        ax.set_ylabel("foot height [m]")
+        ax.set_title(("left" if side == 0 else "right") + " legs (grey: terrain under each leg)", fontsize=9)
+        ax.legend(fontsize=7, loc="upper left")
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[-1].set_xlabel("forward position y [m]")
+    fig.suptitle("foot trajectories in the sagittal plane (sole height)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], reflexes: Sequence[dict],
+                    path: Path) -> Path:
+    t = res.time
+    f = res[f"{robot}.toe_force"].reshape(len(t), 6, 3)
+    fig, axes = plt.subplots(6, 1, figsize=(11, 11), sharex=True)
+    for leg, ax in enumerate(axes):
+        ax.plot(t, f[:, leg, 0], lw=0.6, label="Fx lateral")
+        ax.plot(t, f[:, leg, 1], lw=0.6, label="Fy forward")
+        ax.plot(t, f[:, leg, 2], lw=0.8, label="Fz vertical", color="k")
+        for key, style in (("Fcx", ":"), ("Fcy", "--"), ("Fcz", "-.")):
+            if key in thresholds:
+                ax.axhline(thresholds[key], color="tab:gray", ls=style, lw=0.8)
+        ax.set_ylabel(f"{LEG_NAMES[leg]} [N]")
+        top = np.percentile(np.abs(f[:, leg, :]), 99.5) * 1.3 + 1
+        ax.set_ylim(-top, top)
+        for ev in reflexes:
+            if ev["leg"] == leg:
+                color = REFLEX_COLORS.get(ev["kind"], "tab:green")
+                ax.axvline(ev["t"], color=color, lw=1.0)
+                if ev["kind"] == "elevator":
+                    text = f"elevator {ev.get('force_N', 0):.0f} N"
+                    if "peak_force_N" in ev:
+                        text += f" (peak {ev['peak_force_N']:.0f} N)"
+                elif ev["kind"] in ("searching", "giveup"):
+                    text = ev["kind"]
+                else:
+                    continue
+                ax.annotate(text, (ev["t"], top * 0.75), fontsize=7, color=color, xytext=(2, 0),
+                            textcoords="offset points")
+    axes[0].legend(fontsize=7, ncol=3, loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False)
+    thr = ", ".join(f"{k} = {v:g} N" for k, v in thresholds.items())
+    axes[0].set_title(f"toe forces (body frame); thresholds {thr}; vertical lines: reflex triggers",
+                      loc="left", fontsize=9)
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_body(res: Results, robot: str, path: Path) -> Path:
+    t = res.time
+    pos = res[f"{robot}.body_position"]
+    rpy = res[f"{robot}.body_rpy"]
+    fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
+    axes[0].plot(t, pos[:, 1])
+    axes[0].set_ylabel("forward y [m]")
+    axes[1].plot(t, pos[:, 2])
+    axes[1].set_ylabel("height z [m]")
+    axes[2].plot(t, np.degrees(rpy[:, 0]), label="roll")
+    axes[2].plot(t, np.degrees(rpy[:, 1]), label="pitch")
+    axes[2].set_ylabel("tilt [deg]")
+    axes[2].legend(fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title("body position and attitude")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _rotation(rpy: np.ndarray) -> np.ndarray:
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
+    Rx = np.array([[1.0, 0, 0], [0, cp, -sp], [0, sp, cp]])
+    Ry = np.array([[cr, 0, sr], [0, 1.0, 0], [-sr, 0, cr]])
+    return Rz @ Rx @ Ry
+
+
+def leg_points_body(geometry: RobotGeometry, q: np.ndarray) -> np.ndarray:
+    """Mount, coxa end, knee and foot of each leg in the body frame: shape (6, 4, 3)."""
+    leg = geometry.leg
+    pts = np.zeros((6, 4, 3))
+    for i, (mx, my) in enumerate(geometry.mounts):
+        side = geometry.side(i)
+        a, b, g = q[3 * i:3 * i + 3]
+        radial = [0.0, leg.coxa, leg.coxa + leg.thigh * np.cos(b),
+                  leg.coxa + leg.thigh * np.cos(b) + leg.shank * np.cos(b - g)]
+        height = [0.0, 0.0, leg.thigh * np.sin(b), leg.thigh * np.sin(b) + leg.shank * np.sin(b - g)]
+        for k in range(4):
+            pts[i, k] = [mx + side * radial[k] * np.cos(a), my + radial[k] * np.sin(a), height[k]]
+    return pts
+
+
+def plot_snapshots(res: Results, robot: str, geometry: RobotGeometry, terrain, path: Path, n: int = 8) -> Path:
+    """Side-view (y-z) stick figures at ``n`` instants, left legs blue, right legs red."""
+    t = res.time
+    idx = np.linspace(0, len(t) - 1, n).astype(int)
+    q = res[f"{robot}.q"]
+    pos = res[f"{robot}.body_position"]
+    rpy = res[f"{robot}.body_rpy"]
+    hl, ht = geometry.body_length / 2, geometry.body_thickness / 2
+    corners = np.array([[0, -hl, -ht], [0, hl, -ht], [0, hl, ht], [0, -hl, ht], [0, -hl, -ht]])
+    lg = geometry.leg
+    half = max(0.35, 1.1 * (hl + lg.coxa + lg.thigh + lg.shank))  # the whole robot in every window
+    frames = []
+    for k in idx:
+        R = _rotation(rpy[k])
+        frames.append((k, pos[k] + corners @ R.T, pos[k] + leg_points_body(geometry, q[k]) @ R.T))
+    top = max(float(np.max(p[..., 2])) for _, b, p in frames)
+    top = max(top, max(float(np.max(b[:, 2])) for _, b, _ in frames))
+    bottom = -max(0.12, 0.15 * top)  # ditches (80 mm) stay in view
+    top = max(0.35, top + 0.05 * half / 0.35)
+    height = max(1.8, 2.2 * (top - bottom) / (2 * half) + 0.9)  # equal aspect: no empty band
+    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, height), sharey=True)
+    for ax, (k, body, pts) in zip(np.atleast_1d(axes), frames, strict=True):
+        ax.plot(body[:, 1], body[:, 2], color="k", lw=1.5)
+        for leg in range(6):
+            ax.plot(pts[leg, :, 1], pts[leg, :, 2], "-o", ms=1.5, lw=1,
+                    color="tab:blue" if leg < 3 else "tab:red", alpha=0.9)
+        y_line = np.linspace(pos[k, 1] - half, pos[k, 1] + half, 300)
+        ground = np.asarray(terrain.height_at(np.full_like(y_line, 0.1), y_line), dtype=float)
+        ax.fill_between(y_line, np.where(np.isfinite(ground), ground, bottom - 0.05), bottom - 0.05, color="0.85")
+        ax.set_xlim(pos[k, 1] - half, pos[k, 1] + half)
+        ax.set_ylim(bottom, top)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {t[k]:.1f} s", fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.suptitle("side view (blue: left legs, red: right legs; ground under the right legs)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

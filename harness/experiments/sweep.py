@@ -1,0 +1,322 @@
+"""Sweeps: many trials of a scenario, one seed each, on dask.distributed (or serially).
+
+Trial ``i`` of a sweep with base seed ``S`` runs the scenario with seed ``S + i`` (the same seeds in
+every group of a ``vary`` sweep, so the groups are paired: the same initial conditions with and
+without, e.g., rule 2). A trial is :func:`run_trial` -- a top-level, picklable function -- which
+runs :func:`harness.experiments.runner.run_scenario` into its own directory and returns a small record; any
+exception in the trial is caught there and recorded as ``status = "failed"`` with its error, and a
+worker that dies is recorded the same way by the master, so the sweep always goes on.
+
+Output directory::
+
+    sweep.json      scenario, sets, seeds, per group: success count, ratio, Wilson 95 % interval,
+                    and per trial: seed, status, error, outcome (success, fell, distance, gait, ...)
+    sweep.png       success ratio per group with its interval, and the per-trial outcome
+    <group>/trial_<i>_seed<seed>/   the run's results.csv/npz, summary.json (and pictures with plots=True)
+
+Determinism: a trial is a deterministic function of (scenario, seed, sets, t_end) -- CasADi and DART
+compute the same floating-point numbers for the same inputs -- so a sweep on a cluster gives the same
+per-trial records as the serial loop (``tests/test_sweep.py`` checks it).
+
+Confidence intervals: Wilson score interval at 95 % (``z = 1.96``), which stays inside [0, 1] and
+behaves at 0 or n successes, unlike the normal approximation.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from components.core import ModelError
+from harness.results import atomic_write
+
+Z95 = 1.959963984540054
+OUTCOME_KEYS = ("success", "complete", "fell", "fell_time_s", "fell_reason", "distance_m", "speed_m_s", "gait",
+                "gait_from_contacts", "walks", "crossed_time_s", "max_y_m", "goal_y_m", "t_end", "wall_time_s")
+
+
+def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion (``(nan, nan)`` for ``n = 0``)."""
+    if n <= 0:
+        return float("nan"), float("nan")
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    lo = 0.0 if successes == 0 else max(0.0, centre - half)  # exact ends, no rounding residue
+    hi = 1.0 if successes == n else min(1.0, centre + half)
+    return lo, hi
+
+
+def run_trial(scenario: str, seed: int, sets: dict[str, float] | None, out_dir: str,
+              t_end: float | None = None, plots: bool = False) -> dict[str, Any]:
+    """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``."""
+    from harness.experiments.runner import run_scenario
+
+    t0 = time.perf_counter()
+    record: dict[str, Any] = {"seed": int(seed), "dir": str(out_dir), "status": "ok", "error": None, "outcome": {}}
+    try:
+        summary = run_scenario(scenario, out_dir, t_end=t_end, sets=dict(sets or {}), progress=False, plots=plots,
+                               step_thread=False, seed=int(seed))
+        record["outcome"] = {k: summary[k] for k in OUTCOME_KEYS if k in summary}
+    except Exception as exc:  # noqa: BLE001 - a trial must never stop the sweep
+        record["status"] = "failed"
+        record["error"] = f"{type(exc).__name__}: {exc}"
+        record["traceback"] = traceback.format_exc(limit=6)
+        summary_path = Path(out_dir) / "summary.json"
+        if summary_path.exists():  # partial run: keep what the summary says
+            try:
+                summary = json.loads(summary_path.read_text())
+                record["outcome"] = {k: summary[k] for k in OUTCOME_KEYS if k in summary}
+            except (OSError, ValueError):
+                pass
+    record["trial_wall_s"] = time.perf_counter() - t0
+    return record
+
+
+@dataclass
+class Group:
+    """Trials run with the same sets (one value of the varied parameter)."""
+
+    label: str
+    sets: dict[str, float]
+    trials: list[dict[str, Any]] = field(default_factory=list)
+
+    def stats(self) -> dict[str, Any]:
+        n = len(self.trials)
+        ok = [t for t in self.trials if t["status"] == "ok"]
+        succ = sum(1 for t in ok if t["outcome"].get("success"))
+        lo, hi = wilson_interval(succ, n)
+        return {"label": self.label, "sets": self.sets, "n": n, "failed": n - len(ok), "successes": succ,
+                "success_ratio": succ / n if n else float("nan"), "ci95": [lo, hi],
+                "ci_method": "Wilson score interval, 95 %, failed trials count as unsuccessful"}
+
+
+def parse_vary(text: str | None) -> tuple[str, list[float]] | None:
+    """``"rule2=1,0"`` -> ``("rule2", [1.0, 0.0])``."""
+    if not text:
+        return None
+    key, sep, values = text.partition("=")
+    if not sep or not key.strip():
+        raise ModelError(f"--vary expects KEY=V1,V2,..., got {text!r}")
+    try:
+        vals = [float(v) for v in values.split(",") if v.strip()]
+    except ValueError:
+        raise ModelError(f"--vary {key}: values must be numbers, got {values!r}") from None
+    if not vals:
+        raise ModelError(f"--vary {key}: no values")
+    return key.strip(), vals
+
+
+def _groups(sets: dict[str, float], vary: tuple[str, list[float]] | None) -> list[Group]:
+    if vary is None:
+        return [Group("all", dict(sets))]
+    key, values = vary
+    return [Group(f"{key}={v:g}", {**sets, key: v}) for v in values]
+
+
+def _trial_dir(out: Path, group: Group, n_groups: int, i: int, seed: int) -> Path:
+    base = out / group.label.replace("=", "_").replace("/", "_") if n_groups > 1 else out
+    return (base / f"trial_{i:03d}_seed{seed}").resolve()
+
+
+def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict[str, float] | None = None,
+              vary: tuple[str, list[float]] | None = None, scheduler: str | None = None, workers: int = 2,
+              serial: bool = False, t_end: float | None = None, plots: bool = False, progress: bool = True,
+              trial_fn: Callable[..., dict[str, Any]] = run_trial, client: Any = None) -> dict[str, Any]:
+    """Run ``trials`` trials (per group) and write ``sweep.json`` and ``sweep.png`` into ``out``.
+
+    ``scheduler``: address of a running dask scheduler (``tcp://host:8786``); default: a LocalCluster
+    of ``workers`` single-threaded worker processes for this sweep. ``serial``: run in this process
+    (the reference for determinism and the benchmark). ``client``: an existing ``distributed.Client``
+    to use (not closed). The trial directories are absolute paths: workers on other machines need the
+    same filesystem.
+    """
+    from harness.experiments.runner import SCENARIOS
+
+    if scenario not in SCENARIOS:
+        raise ModelError(f"unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})")
+    if int(trials) < 1:
+        raise ModelError(f"--trials must be >= 1, got {trials}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    groups = _groups(dict(sets or {}), vary)
+    tasks = [(g, i, int(seed) + i) for g in groups for i in range(int(trials))]
+    t0 = time.perf_counter()
+    records: dict[tuple[str, int], dict[str, Any]] = {}
+    info: dict[str, Any] = {"executor": "serial"}
+    own: list[Any] = []
+    if not serial:
+        client, own = _connect(scheduler, workers, client, info)
+    bar = _bar(len(tasks), progress, scenario)
+    try:
+        if serial:
+            for g, i, s in tasks:
+                d = str(_trial_dir(out, g, len(groups), i, s))
+                try:
+                    records[(g.label, i)] = trial_fn(scenario, s, g.sets, d, t_end, plots)
+                except Exception as exc:  # noqa: BLE001 - same record as a failed dask task
+                    records[(g.label, i)] = {"seed": s, "dir": d, "status": "failed",
+                                             "error": f"{type(exc).__name__}: {exc}", "outcome": {}}
+                _tick(bar, records[(g.label, i)])
+        else:
+            records = _run_dask(client, scenario, tasks, groups, out, t_end, plots, trial_fn, bar)
+    finally:
+        bar.close()
+        for obj in own:  # our client, then our cluster
+            obj.close()
+    wall = time.perf_counter() - t0
+    for g in groups:
+        g.trials = [records[(g.label, i)] for i in range(int(trials))]
+    doc = {
+        "scenario": scenario, "trials_per_group": int(trials), "base_seed": int(seed),
+        "seeds": [int(seed) + i for i in range(int(trials))], "sets": dict(sets or {}),
+        "vary": {"key": vary[0], "values": vary[1]} if vary else None, "t_end": t_end,
+        "wall_time_s": wall, **info,
+        "groups": [{**g.stats(), "trials": g.trials} for g in groups],
+    }
+    doc["report"] = report_lines(doc)
+    atomic_write(out / "sweep.json", lambda f: json.dump(doc, f, indent=2, default=_json_default), text=True)
+    doc["picture"] = str(plot_sweep(doc, out / "sweep.png"))
+    return doc
+
+
+def _connect(scheduler: str | None, workers: int, client: Any, info: dict[str, Any]) -> tuple[Any, list[Any]]:
+    """The dask client to use and the objects this sweep must close (client, cluster)."""
+    from distributed import Client, LocalCluster
+
+    own: list[Any] = []
+    if client is not None:
+        info["executor"] = "dask (given client)"
+    elif scheduler:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ModelError(f"cannot connect to the dask scheduler at {scheduler}: {exc}") from exc
+        own = [client]
+        info["executor"] = f"dask scheduler {scheduler}"
+    else:
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                               dashboard_address=":0", silence_logs=40)
+        client = Client(cluster)
+        own = [client, cluster]
+        info["executor"] = f"dask LocalCluster, {int(workers)} worker processes x 1 thread"
+    info["n_workers"] = len(client.scheduler_info().get("workers", {}))
+    return client, own
+
+
+def _run_dask(client, scenario, tasks, groups, out, t_end, plots, trial_fn, bar) -> dict:
+    from distributed import as_completed
+
+    futures = {}
+    for g, i, s in tasks:
+        d = str(_trial_dir(out, g, len(groups), i, s))
+        fut = client.submit(trial_fn, scenario, s, g.sets, d, t_end, plots, pure=False,
+                            key=f"trial-{g.label}-{i}-{time.time_ns()}")
+        futures[fut] = (g, i, s, d)
+    records = {}
+    for fut in as_completed(list(futures)):
+        g, i, s, d = futures[fut]
+        try:
+            rec = fut.result()
+        except Exception as exc:  # noqa: BLE001 - worker died or the task could not run
+            rec = {"seed": s, "dir": d, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                   "outcome": {}}
+        records[(g.label, i)] = rec
+        _tick(bar, rec)
+    return records
+
+
+def _bar(total: int, enabled: bool, name: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=f"sweep {name}", unit="trial", disable=not enabled, leave=True)
+
+
+def _tick(bar, rec: dict[str, Any]) -> None:
+    bar.update(1)
+    if rec["status"] != "ok":
+        bar.write(f"trial seed {rec['seed']} failed: {rec['error']}")
+
+
+def report_lines(doc: dict[str, Any]) -> list[str]:
+    """Human-readable lines: per group successes/n, ratio and Wilson 95 % interval."""
+    lines = [f"{doc['scenario']}: {doc['trials_per_group']} trial(s) per group, seeds "
+             f"{doc['seeds'][0]}..{doc['seeds'][-1]}"]
+    for g in doc["groups"]:
+        lo, hi = g["ci95"]
+        lines.append(f"  {g['label']:>12s}: {g['successes']}/{g['n']} successful = {g['success_ratio']:.0%} "
+                     f"(95% Wilson CI {lo:.0%}-{hi:.0%}), {g['failed']} crashed")
+    return lines
+
+
+def plot_sweep(doc: dict[str, Any], path: Path) -> Path:
+    """Success ratio per group with its Wilson interval, and each trial's outcome."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = doc["groups"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [1, 2.2]})
+    x = range(len(groups))
+    ratios = [g["success_ratio"] for g in groups]
+    err = [[max(0.0, r - g["ci95"][0]) for r, g in zip(ratios, groups, strict=True)],
+           [max(0.0, g["ci95"][1] - r) for r, g in zip(ratios, groups, strict=True)]]
+    ax1.bar(x, ratios, color="tab:blue", alpha=0.6)
+    ax1.errorbar(x, ratios, yerr=err, fmt="none", ecolor="k", capsize=6)
+    for k, g in zip(x, groups, strict=True):
+        ax1.text(k, min(1.0, g["ci95"][1]) + 0.03, f"{g['successes']}/{g['n']}", ha="center", fontsize=9)
+    ax1.set_xticks(list(x), [g["label"] for g in groups])
+    ax1.set_ylim(0, 1.12)
+    ax1.set_ylabel("success ratio (95% Wilson CI)")
+    ax1.set_title("success per group", fontsize=10)
+    metric = _metric(groups)
+    for k, g in enumerate(groups):
+        for j, t in enumerate(g["trials"]):
+            y = t["outcome"].get(metric)
+            if t["status"] != "ok":
+                ax2.plot(j, 0 if y is None else y, "x", color="tab:red", ms=8)
+                continue
+            ok = bool(t["outcome"].get("success"))
+            ax2.plot(j + 0.15 * (k - (len(groups) - 1) / 2), y if y is not None else float("nan"),
+                     "o" if ok else "s", color=f"C{k}", mfc=f"C{k}" if ok else "none", ms=6)
+        ax2.plot([], [], "o", color=f"C{k}", label=f"{g['label']} (filled: success)")
+    goals = {t["outcome"].get("goal_y_m") for g in groups for t in g["trials"]} - {None}
+    if metric == "max_y_m" and len(goals) == 1:
+        ax2.axhline(goals.pop(), color="0.4", ls="--", lw=1, label="goal (success line)")
+    ax2.plot([], [], "x", color="tab:red", label="crashed")
+    ax2.set_xlabel("trial (seed = base seed + trial)")
+    ax2.set_ylabel(metric)
+    ax2.legend(fontsize=8)
+    ax2.set_title(f"{doc['scenario']}: per-trial outcome", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _metric(groups: Sequence[dict[str, Any]]) -> str:
+    for key in ("max_y_m", "distance_m"):
+        if any(key in t["outcome"] for g in groups for t in g["trials"]):
+            return key
+    return "distance_m"
+
+
+def _json_default(obj: Any) -> Any:
+    try:
+        import numpy as np
+
+        if isinstance(obj, (np.floating, np.integer, np.bool_)):
+            return obj.item()
+        if isinstance(obj, np.ndarray):
+            return obj.tolist()
+    except ImportError:  # pragma: no cover
+        pass
+    return str(obj)

@@ -1,0 +1,225 @@
+"""Yu 2019 robot scenarios (Yu 2019, Sec. 6): the hexapod controller closed around the DART plant.
+
+Wiring (co-simulation at 1 kHz): ``robot.toe_force -> controller.toe_force`` and
+``controller.q_target -> robot.q_target``. The robot never knows the terrain. The robot starts in
+the controller's initial posture and settles under its weight for 0.2 s before ``t = 0``.
+
+**The robot** (:data:`YU_RUN`): Yu's Table 3 leg and body (``YU_SIM``) with the stance line 75 mm
+from the alpha joints instead of 100 mm (Yu gives no stance width). With 100 mm the 115 mm stride
+almost equals the 120 mm spacing of the leg mounts, and a tripod's support triangle then passes
+2 mm from the centre of mass at both ends of every stance (computed with the link masses; on
+the DART robot the body pitched at each stance end, and any disturbance -- a leg standing 40 mm
+higher on the step, a shifted foothold -- tipped it: legs unloaded, others touched down early).
+75 mm gives an 87 mm stride and a 15 mm margin. The flat walk then makes 0.67 m in 20 s
+(7.8 strides).
+
+**Controller parameters** (:data:`PARAMS`, all settable with ``--set``; each block's docstring
+has the details, measured on this robot):
+
+- ``converter.height_memory = 1``: a leg that lands on something higher (the step) aims its
+  next swings at that height; Yu's converter aims every swing at the nominal ground, so on the
+  step each swing met the surface at its apex and the captured shift moved the next PEP half a
+  stride back.
+- ``converter.d_alpha, d_beta, d_gamma = 12, 6, 6 deg`` (Yu: 7.5, 4, 2.5): Yu's amplitudes were
+  chosen for Yu's leg ("roughly 0 to 28 mm"); on this leg they search 15 mm deep and pull the foot
+  10 mm back towards the hip at every dip. ``d_beta = d_gamma`` makes each dip vertical, 6 deg makes
+  it 25-27 mm deep (Yu: 28); 12 deg lets the foot explore 27 mm forward over the search.
+- ``reflex.x1_apex = 0.6``, ``reflex.rate_descent = elevator_descent_rate(0.6)``: after an
+  elevator retraction the foot moves forward at the raised apex until the leader is 80 % through
+  its forward stroke, then descends (faster) onto its AEP; an obstacle met late in a swing is
+  then cleared too.
+- ``reflex.found_support = 1``, ``reflex.ob_support_veto = 1``, ``reflex.ob_after_liftoff = 1``:
+  a search ends only on a contact that supports the foot (not on a ditch wall touched with
+  friction), a supporting contact is never an obstacle, and a foot still dragged at lift-off is
+  no obstacle either (the sensory neurons' ``support`` flag: vertical force above ``Fcz`` with the
+  horizontal force below half of it).
+- ``reflex.withdraw = 1``, ``converter.withdraw_alpha = 0``: after a failed search the foot
+  returns to its AEP (Yu) and then steps back onto the stance midpoint (the regulation Yu leaves
+  open); without it the next stance of that leg left two feet on the ground and the robot fell.
+
+Unchanged: the sensory thresholds (Yu's simulation: Fcx = Fcy = 10 N, Fcz = 2 N), the 5 ms debounce, the
+elevator trigger window (``-0.98 < x1 < 0.9``), the servo gains, the shank sensing of the plant
+(a shank on a step's edge is felt; without it the hind leg's elevator came a cycle late).
+
+Scenario geometry (positions along the walking direction ``y``, world, from the body's start):
+
+- ``flat``: flat ground, 20 s.
+- ``step`` (Yu 6.1.1): a 40 mm step under the right legs from ``y = 0.355 m``; Fcx = Fcy = 10 N,
+  Fcz = 2 N; the elevator raises the clearance to 80 mm (200 % of the obstacle); 30 s (R3's
+  reflex ends near 24 s). The position puts the front right leg's face contact early in its
+  second swing; as the stride is 33 mm shorter than the mount spacing the middle and hind legs
+  meet the face at other points of their swings; 0.347 to 0.362 m all gave elevator reflexes on
+  R1, R2, R3 in that order (measured).
+- ``ditches`` (Yu 6.1.2): ditches 18, 40 and 80 mm deep under the right legs at ``y = 0.316,
+  0.487, 0.664 m``, 89, 83 and 86 mm wide; Fcz = 2 N; 48 s. In a tripod gait with this stride
+  each right leg steps about 34 mm behind the one in front of it, so the ditches are placed on the
+  front right leg's footholds (R2's foot lands 4 to 9 mm before each near edge, and every foot
+  passes over the ditches afterwards): one leg searches per ditch. The 18 mm ditch is found by the first
+  dip; the 40 and 80 mm ones are deeper than this robot's 27 mm search, so the foot returns to its
+  AEP after the 10 s search and withdraws onto the ground behind (Yu reports "multi-step" for
+  40 mm; a deeper search or the ditch's far edge would be needed -- the far edge cannot be found
+  by this leg: its tibia leans forward over the foot and rests on the edge first).
+- ``prototype-step`` (Yu 6.2.2): the Table 4 robot, a 250 mm step under the right legs,
+  thresholds 30 N, elevator clearance 500 mm, the same controller parameters except the search
+  amplitudes (Yu's), plus two choices for the heavy robot: ``reflex.ob_clear_time = 0.03`` s
+  (its feet still drag 40-130 N horizontally while they unload at lift-off, which fired
+  elevators on L3 at almost every lift-off; now the elevator waits until the touchdown flag has
+  been off for 30 ms) and ``sensors.support_ratio = 1`` (a contact inside the friction cone of
+  the robot's feet, mu = 1, is a foothold: a 1 kN touchdown of L1 with a 470 N horizontal
+  component fired an elevator with the yu-sim ratio 0.5). Measured: elevators on R1 3.2 s, R2
+  14.0 s, R3 24.8 s and on no other leg, 3.42 m in 45 s (1.56 m before), no fall.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from components.geometry import YU_PROTOTYPE, YU_SIM, RobotGeometry
+from components.graph import Graph
+from components.yu.leg import hexapod_controller
+from components.yu.reflexes import elevator_descent_rate
+from harness.compile import compile_graph
+from harness.experiments.runner import RunSetup
+from harness.results import Results
+from robots import terrain as tr
+from robots.plant import DartHexapod
+
+CONTROLLER = "controller"
+ROBOT = "robot"
+RECORD = [f"{ROBOT}.*", f"{CONTROLLER}.q_target", f"{CONTROLLER}.swing", f"{CONTROLLER}.reflex",
+          f"{CONTROLLER}.mode", f"{CONTROLLER}.lambda_ob", f"{CONTROLLER}.lambda_td", f"{CONTROLLER}.x1",
+          f"{CONTROLLER}.state", f"{CONTROLLER}.rate", f"{CONTROLLER}.*.reflex.n_*", f"{CONTROLLER}.*.network.x?",
+          f"{CONTROLLER}.*.converter.q"]
+LEGS = ("L1", "L2", "L3", "R1", "R2", "R3")
+
+
+def initial_targets(controller: Graph) -> np.ndarray:
+    """The controller's joint targets at ``t = 0`` (the robot starts in this posture)."""
+    model = compile_graph(controller)
+    u = np.concatenate([np.full(s.size, model.free_inputs[s.name[1:]].default or 0.0)
+                        for s in model.inputs.slots]) if model.inputs.size else np.zeros(0)
+    y = np.asarray(model.signals(0.0, model.x0, model.z0, u, model.p0)).ravel()
+    return y[model.signals_layout.index(model.graph_outputs["q_target"]).slice]
+
+
+def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[str, float],
+                sets: dict[str, float], clearance_elevator: float | None = None) -> tuple[Graph, DartHexapod]:
+    """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``)."""
+    ctrl = hexapod_controller(CONTROLLER, geometry=geometry, clearance_elevator=clearance_elevator)
+    for key, value in thresholds.items():
+        ctrl.set_param(f"*.sensors.{key}", value)
+    robot = DartHexapod(ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2)
+    g = Graph("yu_closed_loop", f"Yu hexapod controller on the DART {geometry.name} robot")
+    g.add(ctrl)
+    g.add(robot)
+    g.connect(f"{ROBOT}.toe_force", f"{CONTROLLER}.toe_force")
+    g.connect(f"{CONTROLLER}.q_target", f"{ROBOT}.q_target")
+    for path, value in sets.items():
+        g.set_param(path, value)
+    return g, robot
+
+
+def stance_of(res: Results) -> np.ndarray:
+    """Stance per leg from the controller: the FSM has the leg out of its Swing state and no reflex
+    moves it (a leg waiting in SwingProlong/StanceProlong stands; searching, elevator, return and
+    withdraw are in the air). The legs' own swing flag is not enough: a leg frozen just past its PEP
+    (StanceProlong while another leg searches) has its leader in the protraction half."""
+    return (res[f"{CONTROLLER}.state"] > 0.5) & (res[f"{CONTROLLER}.reflex"] < 0.5)
+
+
+EVENTS = (("elevator", "n_ert"), ("searching", "n_srt"), ("found", "n_found"), ("giveup", "n_giveup"),
+          ("withdraw", "n_withdraw"))
+"""Reflex event kinds and the leg counters they come from (``found``: a search or withdraw ended on a
+foothold; ``giveup``: a search ended without one, the foot returns to its AEP)."""
+
+
+def reflex_events(res: Results) -> list[dict[str, Any]]:
+    """Reflex events from the legs' event counters: ``{leg, kind, t, force_N}`` (+ ``peak_force_N``).
+
+    ``force_N`` is the horizontal toe force ``max(|Fx|, |Fy|)`` at an elevator trigger (the largest
+    in the 20 ms before it, as the controller saw it) and the vertical one otherwise;
+    ``peak_force_N`` (elevator) is the largest horizontal force of that collision, from 20 ms
+    before the trigger to 100 ms after it (the leg retracts from there) -- what Yu's Fig. 14c
+    reports.
+    """
+    force = res[f"{ROBOT}.toe_force"].reshape(len(res.time), 6, 3)
+    events = []
+    for leg, name in enumerate(LEGS):
+        for kind, counter in EVENTS:
+            col = f"{CONTROLLER}.{name}.reflex.{counter}"
+            if col not in res:
+                continue
+            steps = np.where(np.diff(res[col]) > 0.5)[0] + 1
+            for k in steps:
+                ev = {"leg": leg, "kind": kind, "t": float(res.time[k])}
+                if kind == "elevator":
+                    ev["force_N"] = float(np.abs(force[max(0, k - 20):k + 1, leg, :2]).max())
+                    ev["peak_force_N"] = float(np.abs(force[max(0, k - 20):k + 101, leg, :2]).max())
+                else:
+                    ev["force_N"] = float(force[k, leg, 2])
+                events.append(ev)
+    return sorted(events, key=lambda e: (e["t"], e["leg"]))
+
+
+def _setup(geometry: RobotGeometry, terrain: tr.Terrain, t_end: float, thresholds: dict[str, float],
+           sets: dict[str, float], info: dict[str, Any], clearance_elevator: float | None = None,
+           params: dict[str, float] | None = None) -> RunSetup:
+    chosen = {**(params or {}), **sets}  # the user's --set wins
+    graph, _ = closed_loop(geometry, terrain, thresholds, chosen, clearance_elevator)
+    return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=t_end, robot=ROBOT,
+                    thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD,
+                    info={"terrain": terrain.describe(), "stance_width_m": geometry.stance_width,
+                          "parameters": chosen, **info})
+
+
+YU_RUN = YU_SIM.with_(stance_width=0.075)
+"""The robot of the Yu scenarios: Table 3 with a 75 mm stance line (module docstring)."""
+X1_APEX = 0.6
+SEARCH_AMPLITUDES = {"controller.*.converter.d_alpha": float(np.radians(12.0)),
+                     "controller.*.converter.d_beta": float(np.radians(6.0)),
+                     "controller.*.converter.d_gamma": float(np.radians(6.0))}
+PARAMS = {"controller.*.converter.height_memory": 1.0,
+          **SEARCH_AMPLITUDES,
+          "controller.*.reflex.x1_apex": X1_APEX,
+          "controller.*.reflex.rate_descent": round(elevator_descent_rate(X1_APEX), 4),
+          "controller.*.reflex.found_support": 1.0,
+          "controller.*.reflex.ob_support_veto": 1.0,
+          "controller.*.reflex.ob_after_liftoff": 1.0,
+          "controller.*.reflex.withdraw": 1.0,
+          "controller.*.converter.withdraw_alpha": 0.0}
+"""Controller parameters of the Yu scenarios (module docstring: why each)."""
+THRESHOLDS = {"Fcx": 10.0, "Fcy": 10.0, "Fcz": 2.0}
+PROTOTYPE_CLEAR_TIME = 0.03
+"""s the prototype's touchdown flag must be off before an elevator may fire (module docstring)."""
+STEP_Y = 0.355
+DITCHES = ((0.018, 0.089, 0.316), (0.040, 0.083, 0.487), (0.080, 0.086, 0.664))
+"""(depth, width, position_y) of the ditches under the right legs (m)."""
+
+
+def flat(sets: dict[str, float], **_: Any) -> RunSetup:
+    return _setup(YU_RUN, tr.flat(), 20.0, THRESHOLDS, sets, {}, params=PARAMS)
+
+
+def step(sets: dict[str, float], position_y: float | None = None, **_: Any) -> RunSetup:
+    y = STEP_Y if position_y is None else float(position_y)
+    terrain = tr.step(0.04, y, side="right")
+    return _setup(YU_RUN, terrain, 30.0, THRESHOLDS, sets, {"step_height_m": 0.04, "step_y_m": y},
+                  clearance_elevator=0.08, params=PARAMS)
+
+
+def ditches(sets: dict[str, float], specs: Any = None, **_: Any) -> RunSetup:
+    spec = tuple(tuple(float(x) for x in d) for d in (specs or DITCHES))
+    terrain = tr.ditches(spec, side="right")
+    return _setup(YU_RUN, terrain, 48.0, THRESHOLDS, sets,
+                  {"ditches_depth_width_y_m": [list(d) for d in spec]}, params=PARAMS)
+
+
+def prototype_step(sets: dict[str, float], **_: Any) -> RunSetup:
+    terrain = tr.step(0.25, 0.9, side="right")
+    params = {**{k: v for k, v in PARAMS.items() if k not in SEARCH_AMPLITUDES},
+              "controller.*.reflex.ob_clear_time": PROTOTYPE_CLEAR_TIME,
+              "controller.*.sensors.support_ratio": 1.0}
+    return _setup(YU_PROTOTYPE, terrain, 45.0, {"Fcx": 30.0, "Fcy": 30.0, "Fcz": 30.0}, sets,
+                  {"step_height_m": 0.25, "step_y_m": 0.9}, clearance_elevator=0.5, params=params)

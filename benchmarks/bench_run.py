@@ -5,23 +5,29 @@ The plant's ``world.step()`` is wrapped in a timing accumulator (a proxy around 
 installed right after the plant's ``setup``); "harness" is everything else in the run: the
 co-simulation master loop, the controller's compiled C step, the plant's contact readout and
 outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
-interleaved in the same process: the controller's compiled step on a worker thread (the default of
-a robot run, :class:`harness.native.ThreadedStep`) and on the master's own thread; medians are
-printed. The harness time is split into the plant block's own Python around ``world.step()``
+interleaved in the same process: the controller's compiled step on a worker thread
+(``CPGSIM_STEP_THREAD=1``, :class:`harness.native.ThreadedStep`) and on the master's own thread (the
+default); medians are printed. Both run twice: on the machine as it is ("idle") and with ``--load``
+busy-looping processes started by the benchmark itself ("loaded", default 2: one per core of the
+benchmark machine), and the thread / no-thread ratio is printed for each.
+The harness time is split into the plant block's own Python around ``world.step()``
 ("plant py": servo forces, contact readout, outputs; its calls are timed too) and the rest
 ("master+ctl": the master loop, waiting for the controller step, recording). ``--profile`` adds a
 cProfile breakdown of one more run.
 
-Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--profile]``.
+Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import io
+import multiprocessing as mp
 import pstats
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -108,21 +114,37 @@ def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
     return out
 
 
-def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--profile", action="store_true")
-    args = ap.parse_args(argv)
+def _busy() -> None:
+    while True:
+        pass
+
+
+@contextlib.contextmanager
+def busy_processes(n: int) -> Iterator[None]:
+    """``n`` processes that spin on a core each until the block ends (the "loaded machine")."""
+    procs = [mp.Process(target=_busy, daemon=True) for _ in range(n)]
+    for proc in procs:
+        proc.start()
+    try:
+        yield
+    finally:
+        for proc in procs:
+            proc.terminate()
+            proc.join()
+
+
+def measure(seconds: float, repeat: int) -> dict[str, list[dict[str, float]]]:
     modes = {"step on a worker thread": True, "step on the master thread": False}
     runs: dict[str, list[dict[str, float]]] = {m: [] for m in modes}
-    for _ in range(args.repeat):  # interleaved, so both see the same machine load
+    for _ in range(repeat):  # interleaved, so both see the same machine load
         for mode, threaded in modes.items():
-            runs[mode].append(bench(args.seconds, step_thread=threaded))
+            runs[mode].append(bench(seconds, step_thread=threaded))
+    return runs
+
+
+def report(label: str, runs: dict[str, list[dict[str, float]]]) -> float:
     us = 1e6
-    first = runs[next(iter(modes))][0]
-    print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs each")
-    print(f"  prepare (graph, compile, C library; cached after the first): {first['prepare']:.2f} s")
+    print(f"  {label}:")
     print(f"  {'mode':27s} {'wall s':>7s} {'real time':>10s} {'world.step':>11s} {'harness':>9s} {'share':>6s} "
           f"{'plant py':>9s} {'master+ctl':>11s}  (medians; us per 1 ms step)")
     for mode, rs in runs.items():
@@ -135,10 +157,31 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  {'':27s} real time per run: " + ", ".join(f"{r['rtf']:.2f}x" for r in rs)
               + "; share: " + ", ".join(f"{r['share']:.0%}" for r in rs))
     a, b = (float(np.median([r["rtf"] for r in rs])) for rs in runs.values())
-    print(f"  worker thread / master thread: {a / b:.2f}x faster; targets: >= 5x real time, <= 25% share; "
+    print(f"  {label}: worker thread / master thread = {a / b:.2f} (above 1: the thread is faster)")
+    return a / b
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--load", type=int, default=2, help="busy processes for the loaded configuration (0: skip it)")
+    ap.add_argument("--profile", action="store_true")
+    args = ap.parse_args(argv)
+    idle = measure(args.seconds, args.repeat)
+    first = idle["step on the master thread"][0]
+    print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs each")
+    print(f"  prepare (graph, compile, C library; cached after the first): {first['prepare']:.2f} s; "
           f"distance {first['distance']:.3f} m")
+    ratios = {"idle": report("idle", idle)}
+    if args.load:
+        with busy_processes(args.load):
+            ratios[f"loaded ({args.load} busy processes)"] = report(f"loaded ({args.load} busy processes)",
+                                                                   measure(args.seconds, args.repeat))
+    print("thread / no-thread real-time ratio: " + ", ".join(f"{k} {v:.2f}" for k, v in ratios.items())
+          + "; default: no thread")
     if args.profile:
-        r = bench(args.seconds, profile=True)
+        r = bench(args.seconds, profile=True, step_thread=False)
         print(f"cProfile run (overhead inflates Python frames): wall {r['wall']:.2f} s")
         print(r["profile"])
 

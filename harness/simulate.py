@@ -52,9 +52,11 @@ class Simulator:
     CasADi looped in C, :mod:`harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
     when a C compiler works). ``jit`` compiles the per-step function used by the co-simulation
     master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
-    worker thread (:class:`harness.native.ThreadedStep`); ``None`` (default) does so when the step
-    is large (above ``NATIVE_AUTO_MAX_INSTRUCTIONS``) and the process may use two CPUs, unless the
-    environment sets ``CPGSIM_STEP_THREAD=0`` (or ``=1`` to force it).
+    worker thread (:class:`harness.native.ThreadedStep`); ``None`` (default) keeps it on the master's
+    thread unless the environment sets ``CPGSIM_STEP_THREAD=1``. The worker pays on an idle machine
+    (1.0-1.4x faster robot runs) but its hand-off busy-waits, which on a loaded machine takes the core the
+    master needs (2.3x slower at load 4-5, 5-7x at load 7-15: ``benchmarks/bench_run.py``), so a default
+    that must never be slower than one thread cannot turn it on.
     """
 
     def __init__(self, graph: Graph | Block, dt: float = 1e-3, substeps: int = 1,
@@ -218,10 +220,7 @@ class Simulator:
                 raise ModelError(f"CPGSIM_STEP_THREAD must be 0 (step on the master thread) or 1 (worker thread), "
                                  f"got {env!r}")
             return env == "1"
-        if self.step_thread is not None:
-            return bool(self.step_thread)
-        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        return cpus >= 2 and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS
+        return bool(self.step_thread)
 
     def _native(self, always: bool = False):
         """The C step library, or None when the backend is 'casadi' or no compiler works."""

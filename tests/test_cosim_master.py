@@ -14,6 +14,7 @@ from components.basic import Gain, Integrator
 from components.core import CoSimBlock, ModelError
 from components.graph import Graph
 from harness.cli import catalog
+from harness.compile import compile_graph
 from harness.native import NativeFunction
 from harness.simulate import SimulationDiverged, Simulator
 from robots.plant import DartHexapod
@@ -68,6 +69,20 @@ def test_threaded_step_gives_bit_identical_results_and_stops_its_thread():
     assert a.columns == b.columns
     assert np.array_equal(a.data, b.data)
     assert np.ptp(a["obstacle.force"][:, 1]) == 60.0  # the pushes reached the record
+
+
+def test_step_thread_is_off_by_default_even_for_large_steps(monkeypatch):
+    """The worker thread's hand-off busy-waits and made loaded machines 2-7x slower: never the default,
+    not even for the six-leg controller's step (the size that used to switch it on)."""
+    monkeypatch.delenv("CPGSIM_STEP_THREAD", raising=False)
+    from components.yu.leg import hexapod_controller
+    from harness.simulate import NATIVE_AUTO_MAX_INSTRUCTIONS
+
+    sim = Simulator(_leg_with_pulses())
+    sim.run(0.05)
+    assert type(sim._bound).__name__ == "BoundStep"
+    assert not Simulator(hexapod_controller())._use_step_thread()
+    assert compile_graph(hexapod_controller()).step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS
 
 
 def test_step_thread_environment_override(monkeypatch):

@@ -1,0 +1,1 @@
+"""Fukuhara 2022 experiments: gaits by speed, amputation and the gap-crossing trials."""

@@ -1,0 +1,1 @@
+"""Limit-cycle verification: periodic orbits by shooting, Floquet multipliers, synchronisation, reports."""

@@ -1,0 +1,158 @@
+"""The package layout is the architecture: imports point down the layers and never form a cycle.
+
+Layers, lowest first (a module may import only from its own layer or a lower one):
+
+0. ``components``            the block kit and each paper's blocks
+1. ``harness`` (its root)    the engine: compile, native, simulate, master, results, diagram, errors
+2. ``harness.verify``, ``fmus``, ``robots``   built on the engine, independent of each other
+3. ``harness.experiments``   the papers' robot experiments
+4. ``harness.cli``           the ``cpgsim`` command
+
+Every ``import`` counts, including those inside functions (a lazy import hides a cycle, it does not
+remove it); only ``if TYPE_CHECKING:`` blocks are skipped, since they never run.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("components", "harness", "fmus", "robots")
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def project_modules() -> dict[str, Path]:
+    return {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+
+
+def _type_checking_block(node: ast.AST) -> bool:
+    test = getattr(node, "test", None)
+    return isinstance(node, ast.If) and (
+        (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING")
+        or (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"))
+
+
+def imported_modules(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """Project modules that ``name`` imports (``from pkg import mod`` resolves to ``pkg.mod``)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+
+    def visit(node: ast.AST) -> None:
+        if _type_checking_block(node):
+            return
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            for alias in node.names:
+                candidate = f"{base}.{alias.name}"
+                found.add(candidate if candidate in modules else base)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(path.read_text(), filename=str(path)))
+    return {m for m in found if m in modules and m != name}
+
+
+def import_graph() -> dict[str, set[str]]:
+    modules = project_modules()
+    return {name: imported_modules(name, path, modules) for name, path in modules.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan), each as a sorted list."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            strongconnect(v)
+    return out
+
+
+def layer(module: str) -> int:
+    for prefix, level in (("harness.cli", 4), ("harness.experiments", 3), ("harness.verify", 2), ("fmus", 2),
+                          ("robots", 2), ("harness", 1), ("components", 0)):
+        if module == prefix or module.startswith(prefix + "."):
+            return level
+    raise AssertionError(f"module {module} belongs to no layer")
+
+
+def side(module: str) -> str:
+    """Which of the independent layer-2 parts a module belongs to."""
+    return "harness.verify" if module.startswith("harness.verify") else module.split(".")[0]
+
+
+def test_cycle_finder_finds_a_planted_cycle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_import_resolution_sees_lazy_and_relative_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "b.py").write_text("")
+    (pkg / "a.py").write_text("def f():\n    from . import b\n\nfrom typing import TYPE_CHECKING\n"
+                              "if TYPE_CHECKING:\n    import pkg.c\n")
+    modules = {"pkg": pkg / "__init__.py", "pkg.a": pkg / "a.py", "pkg.b": pkg / "b.py", "pkg.c": pkg / "b.py"}
+    assert imported_modules("pkg.a", pkg / "a.py", modules) == {"pkg.b"}
+
+
+def test_no_import_cycle_among_project_modules():
+    found = cycles(import_graph())
+    assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
+
+
+def test_imports_point_down_the_layers():
+    wrong = []
+    for module, deps in import_graph().items():
+        for dep in deps:
+            if layer(dep) > layer(module) or (layer(dep) == layer(module) == 2 and side(dep) != side(module)):
+                wrong.append(f"{module} -> {dep}")
+    assert not wrong, "imports against the layers: " + ", ".join(sorted(wrong))
+
+
+def test_engine_root_stays_small():
+    root_modules = [p.stem for p in (ROOT / "harness").glob("*.py") if p.stem != "__init__"]
+    assert len(root_modules) <= 12, sorted(root_modules)
+
+
+@pytest.mark.parametrize("package", sorted(m for m, p in project_modules().items() if p.name == "__init__.py"))
+def test_every_package_says_its_role(package):
+    doc = ast.get_docstring(ast.parse(project_modules()[package].read_text()))
+    assert doc and len(doc) > 30, f"package {package} has no docstring saying its role"

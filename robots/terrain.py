@@ -108,27 +108,29 @@ def _check_side(side: str) -> str:
     return side
 
 
-def _positive(name: str, value: float) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise ParameterError(f"terrain {name} must be a finite number > 0, got {value!r}")
-    return v
-
-
-def _finite(name: str, value: float) -> float:
+def _number(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParameterError(f"{name} must be a number, got {value!r}")
     v = float(value)
     if not math.isfinite(v):
-        raise ParameterError(f"terrain {name} must be finite, got {value!r}")
+        raise ParameterError(f"{name} must be finite, got {value!r}")
     return v
+
+
+def _positive(name: str, value: object) -> float:
+    v = _number(name, value)
+    if not v > 0:
+        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _finite(name: str, value: object) -> float:
+    return _number(name, value)
 
 
 def _x_range(side: str, ext: Extent) -> tuple[float, float]:
     return {"right": (0.0, ext.half_width), "left": (-ext.half_width, 0.0),
             "both": (-ext.half_width, ext.half_width)}[side]
-
-
-def _other_x_range(side: str, ext: Extent) -> tuple[float, float] | None:
-    return {"right": (-ext.half_width, 0.0), "left": (0.0, ext.half_width), "both": None}[side]
 
 
 def _strip_with_holes(x0: float, x1: float, holes: Sequence[tuple[float, float]], ext: Extent,
@@ -145,22 +147,9 @@ def _strip_with_holes(x0: float, x1: float, holes: Sequence[tuple[float, float]]
     return boxes
 
 
-def _check_intervals(intervals: list[tuple[float, float]], what: str, ext: Extent) -> None:
-    s = sorted(intervals)
-    for (a0, a1), (b0, _) in zip(s, s[1:], strict=False):
-        if b0 < a1:
-            raise ParameterError(f"terrain {what}s overlap: [{a0}, {a1}] and [{b0}, ...]")
-    for a, b in s:
-        if a <= ext.y_min or b >= ext.y_max:
-            raise ParameterError(f"terrain {what} [{a}, {b}] is outside the ground "
-                                 f"({ext.y_min}, {ext.y_max})")
-
-
 def flat(friction: float = 1.0, extent: Extent | None = None) -> Terrain:
     """Flat ground, top face at ``z = 0``."""
-    ext = extent or Extent()
-    box = GroundBox(-ext.half_width, ext.half_width, ext.y_min, ext.y_max, 0.0, ext.thickness)
-    return Terrain("flat", [box], _positive("friction", friction), {})
+    return compose([], friction, extent, name="flat")
 
 
 def step(height: float, position_y: float, side: str = "right", friction: float = 1.0,
@@ -169,15 +158,10 @@ def step(height: float, position_y: float, side: str = "right", friction: float 
 
     Yu 6.1.1: ``step(0.04, y, 'right')``; Yu 6.2.2 (prototype): ``height = 0.25``.
     """
-    ext = extent or Extent()
-    height, position_y = _positive("step height", height), _finite("step position_y", position_y)
-    x0, x1 = _x_range(_check_side(side), ext)
-    if not ext.y_min < position_y < ext.y_max:
-        raise ParameterError(f"terrain step position_y={position_y} is outside ({ext.y_min}, {ext.y_max})")
-    boxes = [GroundBox(-ext.half_width, ext.half_width, ext.y_min, ext.y_max, 0.0, ext.thickness),
-             GroundBox(x0, x1, position_y, ext.y_max, height, ext.thickness + height, obstacle=True)]
-    return Terrain("step", boxes, _positive("friction", friction),
-                   {"height": height, "position_y": position_y, "side": side})
+    t = compose([{"type": "step", "height": height, "position_y": position_y, "side": side}], friction, extent,
+                name="step")
+    t.params = {"height": float(height), "position_y": float(position_y), "side": side}
+    return t
 
 
 def ditches(specs: Iterable[tuple[float, float, float]], side: str = "right", friction: float = 1.0,
@@ -187,20 +171,11 @@ def ditches(specs: Iterable[tuple[float, float, float]], side: str = "right", fr
     Each ditch spans ``position_y <= y <= position_y + width`` and has a flat bottom at
     ``z = -depth`` (Yu 6.1.2: depths 18, 40 and 80 mm).
     """
-    ext = extent or Extent()
-    side = _check_side(side)
-    specs = [(_positive("ditch depth", d), _positive("ditch width", w), _finite("ditch position_y", p))
-             for d, w, p in specs]
-    holes = [(p, p + w) for _, w, p in specs]
-    _check_intervals(holes, "ditch", ext)
-    x0, x1 = _x_range(side, ext)
-    boxes = _strip_with_holes(x0, x1, holes, ext)
-    boxes += [GroundBox(x0, x1, p, p + w, -d, ext.thickness, obstacle=True) for d, w, p in specs]
-    other = _other_x_range(side, ext)
-    if other is not None:
-        boxes.append(GroundBox(other[0], other[1], ext.y_min, ext.y_max, 0.0, ext.thickness))
-    return Terrain("ditches", boxes, _positive("friction", friction),
-                   {"ditches": [tuple(s) for s in specs], "side": side})
+    specs = [tuple(d) for d in specs]
+    t = compose([{"type": "ditch", "depth": d, "width": w, "position_y": p, "side": side} for d, w, p in specs],
+                friction, extent, name="ditches")
+    t.params = {"ditches": [tuple(float(v) for v in d) for d in specs], "side": side}
+    return t
 
 
 def gaps(specs: Iterable[tuple[float, float]], side: str = "both", friction: float = 1.0,
@@ -210,15 +185,154 @@ def gaps(specs: Iterable[tuple[float, float]], side: str = "both", friction: flo
     The gap is simply a missing section of the ground, so a foot (or the robot) falls through;
     :meth:`Terrain.height_at` reports ``-inf`` there.
     """
+    specs = [tuple(g) for g in specs]
+    t = compose([{"type": "gap", "width": w, "position_y": p, "side": side} for w, p in specs], friction, extent,
+                name="gaps")
+    t.params = {"gaps": [tuple(float(v) for v in g) for g in specs], "side": side}
+    return t
+
+
+# -- composition of named features -----------------------------------------------------------------
+
+FEATURES: dict[str, dict[str, str]] = {
+    "step": {"height": "m, > 0", "position_y": "m, near edge", "side": "right | left | both"},
+    "ditch": {"depth": "m, > 0", "width": "m, > 0", "position_y": "m, near edge", "side": "right | left | both"},
+    "gap": {"width": "m, > 0 (bottomless)", "position_y": "m, near edge", "side": "right | left | both"},
+    "stairs": {"rise": "m per stair, > 0", "run": "m per stair, > 0", "count": "stairs, >= 1",
+               "position_y": "m, first stair", "side": "right | left | both"},
+    "blocks": {"position_y": "m, near edge", "length": "m, > 0", "half_width": "m, > 0 (lateral extent)",
+               "size": "m, block edge, > 0", "height_min": "m, >= 0", "height_max": "m, >= height_min",
+               "seed": "integer", "side": "right | left | both"},
+}
+"""Terrain features :func:`compose` builds, with their fields (every field is required)."""
+
+
+def _y_range(f: dict, ext: Extent) -> tuple[float, float]:
+    t = f["type"]
+    y = f["position_y"]
+    if t in ("ditch", "gap"):
+        return y, y + f["width"]
+    if t == "blocks":
+        return y, y + f["length"]
+    return y, ext.y_max  # step, stairs: from their edge forward
+
+
+def _checked(f: dict, where: str) -> dict:
+    """A feature mapping with its fields validated (errors name ``where``, e.g. ``terrain.step``)."""
+    kind = f.get("type")
+    if kind not in FEATURES:
+        raise ParameterError(f"{where}.type must be one of {', '.join(FEATURES)}, got {kind!r}")
+    fields = FEATURES[kind]
+    unknown = sorted(set(f) - set(fields) - {"type"})
+    if unknown:
+        raise ParameterError(f"{where}: unknown field {unknown[0]!r} for a {kind} (fields: {', '.join(fields)})")
+    missing = [k for k in fields if k not in f]
+    if missing:
+        raise ParameterError(f"{where}: a {kind} needs {', '.join(missing)}")
+    out: dict = {"type": kind}
+    for key in fields:
+        name = f"{where}.{key}"
+        if key == "side":
+            if f[key] not in SIDES:
+                raise ParameterError(f"{name} must be one of {', '.join(SIDES)}, got {f[key]!r}")
+            out[key] = f[key]
+        elif key in ("count", "seed"):
+            if isinstance(f[key], bool) or not isinstance(f[key], int) or (key == "count" and f[key] < 1):
+                raise ParameterError(f"{name} must be an integer{' >= 1' if key == 'count' else ''}, got {f[key]!r}")
+            out[key] = int(f[key])
+        elif key == "position_y":
+            out[key] = _finite(name, f[key])
+        elif key == "height_min":
+            v = _finite(name, f[key])
+            if v < 0:
+                raise ParameterError(f"{name} must be >= 0, got {v}")
+            out[key] = v
+        else:
+            out[key] = _positive(name, f[key])
+    if kind == "blocks" and out["height_max"] < out["height_min"]:
+        raise ParameterError(f"{where}.height_max ({out['height_max']}) is below height_min ({out['height_min']})")
+    return out
+
+
+def compose(features: Sequence[dict] | dict[str, dict], friction: float = 1.0, extent: Extent | None = None,
+            name: str = "terrain") -> Terrain:
+    """Flat ground with named features: holes (``ditch``: flat bottom at ``-depth``; ``gap``: bottomless)
+    cut out of the ground, and raised ones (``step``, ``stairs``, a ``blocks`` patch of random heights)
+    standing on it. ``features`` is a list of mappings with ``type`` and the fields of :data:`FEATURES`,
+    or a mapping ``{name: feature}`` (the names appear in errors).
+
+    Holes on one side are cut from that side's half of the ground (both halves for ``side = both``);
+    a raised feature may not cover a hole on the same side (it would fill it), holes may not overlap.
+    """
     ext = extent or Extent()
-    side = _check_side(side)
-    specs = [(_positive("gap width", w), _finite("gap position_y", p)) for w, p in specs]
-    holes = [(p, p + w) for w, p in specs]
-    _check_intervals(holes, "gap", ext)
-    x0, x1 = _x_range(side, ext)
-    boxes = _strip_with_holes(x0, x1, holes, ext)
-    other = _other_x_range(side, ext)
-    if other is not None:
-        boxes.append(GroundBox(other[0], other[1], ext.y_min, ext.y_max, 0.0, ext.thickness))
-    return Terrain("gaps", boxes, _positive("friction", friction),
-                   {"gaps": [tuple(s) for s in specs], "side": side})
+    friction = _positive("terrain friction", friction)
+    named = features.items() if isinstance(features, dict) else ((f"feature {i}", f) for i, f in enumerate(features))
+    feats = [(where, _checked(dict(f), where)) for where, f in named]
+    holes = [(w, f) for w, f in feats if f["type"] in ("ditch", "gap")]
+    raised = [(w, f) for w, f in feats if f["type"] not in ("ditch", "gap")]
+    for k, (wa, a) in enumerate(holes):
+        for wb, b in holes[k + 1:]:
+            if _sides_meet(a["side"], b["side"]) and _overlap(_y_range(a, ext), _y_range(b, ext)):
+                raise ParameterError(f"terrain: {wa} and {wb} overlap")
+    for wa, a in raised:
+        for wb, b in holes:
+            if _sides_meet(a["side"], b["side"]) and _overlap(_y_range(a, ext), _y_range(b, ext)):
+                raise ParameterError(f"terrain: {wa} covers {wb} (a raised feature would fill the hole)")
+    for w, f in feats:
+        y0, y1 = _y_range(f, ext)
+        if y0 <= ext.y_min or y0 >= ext.y_max or y1 > ext.y_max:
+            raise ParameterError(f"terrain: {w} [{y0}, {y1}] is outside the ground ({ext.y_min}, {ext.y_max})")
+    if not holes:
+        bands = [("both", [])]
+    elif len({f["side"] for _, f in holes}) == 1:
+        side = holes[0][1]["side"]
+        bands = [(side, holes)] + ([] if side == "both" else [("left" if side == "right" else "right", [])])
+    else:
+        bands = [(s, [(w, f) for w, f in holes if f["side"] in (s, "both")]) for s in ("right", "left")]
+    boxes: list[GroundBox] = []
+    for side, band_holes in bands:  # ground of the bands with holes first, their bottoms, then the others
+        if band_holes:
+            x0, x1 = _x_range(side, ext)
+            boxes += _strip_with_holes(x0, x1, [_y_range(f, ext) for _, f in band_holes], ext)
+            boxes += [GroundBox(x0, x1, *_y_range(f, ext), -f["depth"], ext.thickness, obstacle=True)
+                      for _, f in band_holes if f["type"] == "ditch" and f["side"] == side]
+    for side, band_holes in bands:
+        if not band_holes:
+            x0, x1 = _x_range(side, ext)
+            boxes.append(GroundBox(x0, x1, ext.y_min, ext.y_max, 0.0, ext.thickness))
+    for _, f in raised:
+        boxes += _raised_boxes(f, ext)
+    params = {w: {k: v for k, v in f.items()} for w, f in feats}
+    return Terrain(name, boxes, friction, params)
+
+
+def _sides_meet(a: str, b: str) -> bool:
+    return a == b or "both" in (a, b)
+
+
+def _overlap(a: tuple[float, float], b: tuple[float, float]) -> bool:
+    return a[0] < b[1] and b[0] < a[1]
+
+
+def _raised_boxes(f: dict, ext: Extent) -> list[GroundBox]:
+    x0, x1 = _x_range(f["side"], ext)
+    y = f["position_y"]
+    if f["type"] == "step":
+        h = f["height"]
+        return [GroundBox(x0, x1, y, ext.y_max, h, ext.thickness + h, obstacle=True)]
+    if f["type"] == "stairs":
+        out = []
+        for k in range(f["count"]):
+            h = (k + 1) * f["rise"]
+            out.append(GroundBox(x0, x1, y + k * f["run"], ext.y_max, h, ext.thickness + h, obstacle=True))
+        return out
+    # blocks: a grid of square blocks, heights uniform in [height_min, height_max] from the seed
+    hw, size = f["half_width"], f["size"]
+    lo, hi = {"right": (0.0, hw), "left": (-hw, 0.0), "both": (-hw, hw)}[f["side"]]
+    nx, ny = max(1, round((hi - lo) / size)), max(1, round(f["length"] / size))
+    rng = np.random.default_rng(f["seed"])
+    heights = rng.uniform(f["height_min"], f["height_max"], (ny, nx))
+    dx, dy = (hi - lo) / nx, f["length"] / ny
+    return [GroundBox(lo + i * dx, lo + (i + 1) * dx, y + j * dy, y + (j + 1) * dy, float(heights[j, i]),
+                      ext.thickness + float(heights[j, i]), obstacle=True)
+            for j in range(ny) for i in range(nx) if heights[j, i] > 0]

@@ -56,6 +56,11 @@ def _feet(res: Results) -> np.ndarray:
     return res[f"{ROBOT}.foot_position"].reshape(len(res.time), 6, 3)
 
 
+def _idx(event: dict) -> int:
+    """Array index (0-5) of an event's leg (events carry the label ``leg`` and Yu's ``leg_number`` 1-6)."""
+    return event["leg_number"] - 1
+
+
 def _at(res: Results, t: float) -> int:
     return int(np.argmin(np.abs(res.time - t)))
 
@@ -98,7 +103,9 @@ def test_step_elevator_on_right_legs_in_order(step_run):
     """Must show: elevator reflexes on legs 4, 5, 6 (R1, R2, R3) in that order, none on a left leg."""
     summary, _ = step_run
     elevators = _elevators(summary)
-    legs = [e["leg"] for e in elevators]
+    assert all(e["leg"] == LEGS[e["leg_number"] - 1] for e in summary["reflexes"])  # one naming everywhere
+    assert [e["leg"] for e in elevators][:3] == ["R1", "R2", "R3"]
+    legs = [_idx(e) for e in elevators]
     assert not any(leg in LEFT for leg in legs), legs
     firsts = [legs.index(leg) for leg in RIGHT if leg in legs]
     assert len(firsts) == 3, f"elevator reflexes on right legs: {legs}"
@@ -115,7 +122,7 @@ def test_prototype_step_elevators_on_right_legs_in_order(prototype_run):
     6 in order and none on a left leg (the lift-off drag of the heavy feet fired L3 before ob_clear_time,
     a hard L1 touchdown before support_ratio = 1); the robot climbs without falling."""
     summary, _ = prototype_run
-    legs = [e["leg"] for e in _elevators(summary)]
+    legs = [_idx(e) for e in _elevators(summary)]
     assert not any(leg in LEFT for leg in legs), legs
     assert [legs.index(leg) for leg in RIGHT] == sorted(legs.index(leg) for leg in RIGHT), legs
     assert all(e["force_N"] > 30.0 for e in _elevators(summary))
@@ -131,7 +138,7 @@ def test_step_each_right_leg_crosses_and_lands_on_the_step(step_run):
     feet, mode = _feet(res), res["controller.mode"]
     first = {}
     for e in _elevators(summary):
-        first.setdefault(e["leg"], e)
+        first.setdefault(_idx(e), e)
     for leg in RIGHT:
         k0 = _at(res, first[leg]["t"]) + 2
         k1 = k0 + int(np.argmax(mode[k0:, leg] < 0.5))  # the reflex swing ends
@@ -176,9 +183,9 @@ def _searches(summary, res):
     for i, e in enumerate(evs):
         if e["kind"] != "searching":
             continue
-        end = next(x for x in evs[i + 1:] if x["leg"] == e["leg"] and x["kind"] in ("found", "giveup"))
+        end = next(x for x in evs[i + 1:] if x["leg_number"] == e["leg_number"] and x["kind"] in ("found", "giveup"))
         k = _at(res, e["t"])
-        out.append({"leg": e["leg"], "t": e["t"], "ditch": _ditch_of(feet[k, e["leg"], 1], ditches),
+        out.append({"leg": _idx(e), "t": e["t"], "ditch": _ditch_of(feet[k, _idx(e), 1], ditches),
                     "end": end, "k_end": _at(res, end["t"])})
     return out
 
@@ -237,7 +244,7 @@ def test_80mm_ditch_ends_with_the_foot_back_at_its_aep(ditches_run):
     world = _feet(res)[k, leg]
     depth, width, y0 = summary["ditches_depth_width_y_m"][2]
     assert y0 + R_FOOT < world[1] < y0 + width - R_FOOT and world[2] - R_FOOT > -0.01  # hanging over it
-    found = next(e for e in summary["reflexes"] if e["kind"] == "found" and e["leg"] == leg and e["t"] > withdraw["t"])
+    found = next(e for e in summary["reflexes"] if e["kind"] == "found" and _idx(e) == leg and e["t"] > withdraw["t"])
     kf = _at(res, found["t"])
     assert _ditch_of(_feet(res)[kf, leg, 1], summary["ditches_depth_width_y_m"]) is None
     assert abs(_feet(res)[kf, leg, 2] - R_FOOT) < 3 * MM  # on the ground behind the ditch

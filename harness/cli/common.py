@@ -19,6 +19,24 @@ def add_set_argument(parser: argparse.ArgumentParser) -> None:
                         help="set a parameter by path (globs allowed, e.g. '*.eps=0.2'); repeatable")
 
 
+def add_scenario_set_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a scenario key, e.g. terrain.step.height=0.06, robot.body_mass=4, "
+                             "controller.Fcx=20 (VALUE: a TOML value; a bare word is a string); repeatable")
+
+
+def parse_scenario_sets(items: list[str]) -> dict[str, str]:
+    """``["terrain.step.height=0.06", ...]`` -> ``{"terrain.step.height": "0.06"}`` (values parsed by the
+    scenario loader as TOML); malformed items raise :class:`CliError`."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise CliError(f"--set expects KEY=VALUE, got {item!r}")
+        out[key.strip()] = value.strip()
+    return out
+
+
 def parse_sets(items: list[str]) -> dict[str, Any]:
     """``["a.b=1.5", ...]`` -> ``{"a.b": 1.5}``; malformed items raise :class:`CliError`."""
     return parse_assignments(items, "--set", "BLOCK.PARAM=VALUE")

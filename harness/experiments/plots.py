@@ -46,7 +46,7 @@ def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: 
         for a, b in _runs(stance[:, leg]):
             ax.add_patch(plt.Rectangle((t[a], row - 0.35), t[min(b, len(t) - 1)] - t[a], 0.7, color="black"))
     for ev in reflexes:
-        ax.plot(ev["t"], 5 - ev["leg"], marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"), ms=8)
+        ax.plot(ev["t"], 6 - ev["leg_number"], marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"), ms=8)
     for kind in sorted({ev["kind"] for ev in reflexes} | {"elevator", "searching"}, key=list(REFLEX_COLORS).index):
         ax.plot([], [], "v", color=REFLEX_COLORS.get(kind, "tab:green"),
                 label=f"{kind} reflex" if kind in ("elevator", "searching") else kind)
@@ -103,7 +103,7 @@ def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], refl
         top = np.percentile(np.abs(f[:, leg, :]), 99.5) * 1.3 + 1
         ax.set_ylim(-top, top)
         for ev in reflexes:
-            if ev["leg"] == leg:
+            if ev["leg_number"] == leg + 1:
                 color = REFLEX_COLORS.get(ev["kind"], "tab:green")
                 ax.axvline(ev["t"], color=color, lw=1.0)
                 if ev["kind"] == "elevator":

@@ -1,19 +1,20 @@
 """Robot scenarios: build controller + DART plant, co-simulate at 1 kHz, write results, summary, plots.
 
-A scenario is registered in :data:`SCENARIOS` as ``"module:function"``; the function takes the
-``--set`` overrides and returns a :class:`RunSetup`. :func:`run_scenario` runs it and writes into
-its directory ``results.csv``/``results.npz``, ``summary.json`` and the PNGs of
-:mod:`harness.experiments.plots`. A run that fails midway still writes what it recorded, marks
-``summary.json`` ``"complete": false`` with the error, and re-raises.
+A scenario is a TOML document (:mod:`harness.experiments.scenario`; the built-ins are files in
+``harness/experiments/scenarios/``); its ``controller.kind`` picks the builder (Yu:
+:func:`harness.experiments.yu.scenarios.build`, Fukuhara: :func:`harness.experiments.fukuhara.scenarios.build`),
+which returns a :class:`RunSetup`. :func:`run_scenario` runs it and writes into its directory
+``results.csv``/``results.npz``, ``summary.json`` (with the outcomes of :mod:`harness.experiments.outcomes`)
+and the PNGs of :mod:`harness.experiments.plots`. A run that fails midway still writes what it recorded,
+marks ``summary.json`` ``"complete": false`` with the error, and re-raises.
 """
 
 from __future__ import annotations
 
-import importlib
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,21 +22,17 @@ from typing import Any
 import numpy as np
 
 from components.core import ModelError
-from components.geometry import RobotGeometry
+from components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM, RobotGeometry
 from components.graph import Graph
+from harness.experiments import outcomes
 from harness.experiments import plots as plots_run
+from harness.experiments.scenario import GEOMETRY_KEYS, Scenario, ScenarioError, builtin_names, load
 from harness.results import Results, atomic_write
 from harness.simulate import SimulationError, Simulator
 
-SCENARIOS: dict[str, tuple[str, str]] = {
-    "flat": ("harness.experiments.yu.scenarios:flat", "Yu tripod walking on flat ground"),
-    "step": ("harness.experiments.yu.scenarios:step", "Yu 6.1.1: 40 mm step on the right side, elevator reflexes"),
-    "ditches": ("harness.experiments.yu.scenarios:ditches", "Yu 6.1.2: ditches 18/40/80 mm deep, searching reflexes"),
-    "prototype-step": ("harness.experiments.yu.scenarios:prototype_step", "Yu 6.2.2: Table 4 robot over a 250 mm step"),
-    "fukuhara-gaits": ("harness.experiments.fukuhara.scenarios:gaits", "Fukuhara: gaits at three speed settings"),
-    "fukuhara-amputation": ("harness.experiments.fukuhara.scenarios:amputation", "Fukuhara: L2+R2 and L1+R1 amputated"),
-    "fukuhara-gap": ("harness.experiments.fukuhara.scenarios:gap", "Fukuhara: gap crossing, random initial alpha"),
-}
+PRESETS: dict[str, RobotGeometry] = {"yu-sim": YU_SIM, "yu-prototype": YU_PROTOTYPE}
+PLANT_KEYS = ("kp", "kd", "friction", "velocity_ff")
+"""Keys of a scenario's ``[robot]`` table that are parameters of the DART plant block."""
 
 
 @dataclass
@@ -49,51 +46,102 @@ class RunSetup:
     robot: str = "robot"
     thresholds: dict[str, float] = field(default_factory=dict)
     stance: Callable[[Results], np.ndarray] | None = None  # time x 6 bool; default: Fz > Fcz
-    reflexes: Callable[[Results], list[dict]] | None = None  # [{leg, kind, t, force_N}]
+    reflexes: Callable[[Results], list[dict]] | None = None  # [{leg, leg_number, kind, t, force_N}]
     record: list[str] | None = None
     info: dict[str, Any] = field(default_factory=dict)
-    extra: Callable[[Results, Path], dict[str, Any]] | None = None  # more summary keys / plots
+    extra: Callable[[Results, Path], dict[str, Any]] | None = None  # more summary keys / plots; "checks"
+    waiting: Callable[[Results], np.ndarray] | None = None  # time steps spent waiting on a reflex
+    scenario: Scenario | None = None
+
+
+def leg_fields(index: int) -> dict[str, Any]:
+    """How every output names leg ``index`` (0-5): the papers' label and Yu's number (1-6)."""
+    return {"leg": LEG_NAMES[index], "leg_number": index + 1}
 
 
 def scenario_names() -> list[str]:
-    return list(SCENARIOS)
+    return builtin_names()
 
 
-def build_scenario(name: str, sets: dict[str, float] | None = None, **kw: Any) -> RunSetup:
-    if name not in SCENARIOS:
-        raise ModelError(f"unknown scenario {name!r} (known: {', '.join(SCENARIOS)})")
-    module, _, func = SCENARIOS[name][0].partition(":")
+def robot_geometry(scenario: Scenario) -> RobotGeometry:
+    """The scenario's geometry preset with its ``[robot]`` overrides (errors name the key)."""
+    robot = scenario.doc["robot"]
+    changes = {k: float(robot[k]) for k in GEOMETRY_KEYS if k in robot}
     try:
-        builder = getattr(importlib.import_module(module), func)
-    except (ImportError, AttributeError) as exc:
-        raise ModelError(f"scenario {name!r} is not available: {exc}") from exc
-    return builder(sets or {}, **kw)
+        return PRESETS[robot["preset"]].with_(**changes) if changes else PRESETS[robot["preset"]]
+    except ModelError as exc:
+        raise ScenarioError(f"robot ({', '.join(f'robot.{k}' for k in changes)}): {exc} ({scenario.source})") from None
+
+
+def terrain_of(scenario: Scenario, geometry: RobotGeometry):
+    """The terrain of the scenario's features, jittered from its seed, checked against the robot's size:
+    a feature may not start under the robot's feet at ``t = 0`` nor stand taller than its body height."""
+    from robots import terrain as tr
+
+    doc = scenario.doc
+    feats = {name: dict(f) for name, f in scenario.features().items()}
+    jitter = float(doc["terrain"]["jitter_m"])
+    if jitter > 0:
+        rng = np.random.default_rng(int(doc["seed"]))
+        for f in feats.values():
+            f["position_y"] = float(f["position_y"] + rng.uniform(-jitter, jitter))
+    front = max(y for _, y in geometry.mounts) + geometry.step_half_length + geometry.leg.foot_radius
+    for name, f in feats.items():
+        key = f"terrain.{name}"
+        if f["position_y"] < front + 0.01:
+            raise ScenarioError(f"{key}.position_y = {f['position_y']:.3f} m is under the robot at the start (its "
+                                f"front feet reach y = {front:.3f} m; a feature must start beyond {front + 0.01:.3f} m)"
+                                f" ({scenario.source})")
+        tall = {"step": f.get("height"), "stairs": f.get("rise", 0) * f.get("count", 0),
+                "blocks": f.get("height_max")}.get(f["type"])
+        if tall is not None and tall >= geometry.height:
+            raise ScenarioError(f"{key}: {tall:.3f} m high does not fit the {geometry.name} robot (body height "
+                                f"{geometry.height:.3f} m) ({scenario.source})")
+    try:
+        terrain = tr.compose({f"terrain.{k}": v for k, v in feats.items()}, doc["terrain"]["friction"],
+                             name=scenario.name)
+    except ModelError as exc:
+        raise ScenarioError(f"{exc} ({scenario.source})") from None
+    terrain.params = {"features": feats, "jitter_m": jitter} if feats else {}
+    return terrain
+
+
+def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None = None, seed: int | None = None,
+                   **_: Any) -> RunSetup:
+    """The :class:`RunSetup` of a built-in scenario name or a ``.toml`` file, with ``sets`` overrides
+    (``--set`` keys, :mod:`harness.experiments.scenario`) and ``seed`` (overrides the file's)."""
+    scenario = name if isinstance(name, Scenario) else load(name, sets)
+    if seed is not None:
+        scenario.doc["seed"] = int(seed)
+    kind = scenario.doc["controller"]["kind"]
+    if kind == "fukuhara":
+        from harness.experiments.fukuhara.scenarios import build
+    else:
+        from harness.experiments.yu.scenarios import build
+    setup = build(scenario)
+    setup.info.setdefault("seed", int(scenario.doc["seed"]))
+    return setup
 
 
 def fell_from(res: Results, robot: str, max_tilt: float = math.pi / 4) -> tuple[bool, float | None, str]:
-    """(fell, time, reason): body touched the ground or tilted over ``max_tilt``."""
-    rpy = res[f"{robot}.body_rpy"]
-    tilt = np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1, 1))
-    contact = res[f"{robot}.body_contact"] > 0.5 if f"{robot}.body_contact" in res else np.zeros(len(tilt), bool)
-    bad = (tilt > max_tilt) | contact | ~np.isfinite(tilt)
-    if not bad.any():
-        return False, None, ""
-    k = int(np.argmax(bad))
-    reason = "body touched the ground" if contact[k] else f"tilted {math.degrees(tilt[k]):.0f} deg"
-    return True, float(res.time[k]), reason
+    """(fell, time, reason): body touched the ground or tilted over ``max_tilt`` (rad)."""
+    return outcomes.fall(res, robot, math.degrees(max_tilt))
 
 
-def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, sets: dict[str, float] | None = None,
-                 progress: bool = True, plots: bool = True, step_thread: bool | None = None,
-                 **kw: Any) -> dict[str, Any]:
-    """Run scenario ``name``; returns the summary (also written to ``out_dir/summary.json``).
+def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
+                 sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
+                 step_thread: bool | None = None, **kw: Any) -> dict[str, Any]:
+    """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
+    written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
-    ``step_thread``: see :class:`~harness.simulate.Simulator` (sweeps turn it off: their trials already
-    fill the CPUs)."""
+    ``step_thread``: see :class:`~harness.simulate.Simulator`."""
     setup = build_scenario(name, sets, **kw)
     t_end = float(t_end if t_end is not None else setup.t_end)
+    label = setup.scenario.name if setup.scenario is not None else str(name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if setup.scenario is not None:
+        atomic_write(out / "scenario.toml", lambda f: f.write(setup.scenario.to_toml()), text=True)
     setup_wall0 = time.perf_counter()
     sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread).prepare()
     setup_wall = time.perf_counter() - setup_wall0
@@ -107,27 +155,45 @@ def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, set
             raise
         res = exc.results
     wall = time.perf_counter() - wall0
-    res.meta.update({"scenario": name, **setup.info})
+    res.meta.update({"scenario": label, **setup.info})
     res.save(out / "results.csv")
     res.save(out / "results.npz")
-    summary = summarize(name, setup, res, wall)
+    summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
     if error is not None:
         summary.update({"complete": False, "error": str(error)})
     if plots:
         summary["pictures"] = [str(p.name) for p in make_plots(setup, res, summary, out)]
+    checks: dict[str, bool] = {}
     if setup.extra is not None:
-        summary.update(setup.extra(res, out))
+        more = setup.extra(res, out)
+        checks = more.pop("checks", {})
+        summary.update(more)
+    summary.update(judge(setup, res, checks, keep=summary))
     atomic_write(out / "summary.json", lambda f: json.dump(summary, f, indent=2, default=_json_default), text=True)
     if error is not None:
         raise error
     return summary
 
 
+def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = None,
+          keep: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The honest outcome keys (:func:`harness.experiments.outcomes.evaluate`) under the scenario's criteria;
+    a ``speed_m_s`` already in ``keep`` (a scenario's own, e.g. after a gait transient) is kept."""
+    criteria = setup.scenario.doc["criteria"] if setup.scenario is not None else {}
+    waiting = setup.waiting(res) if setup.waiting is not None else None
+    result = outcomes.evaluate(res, setup.robot, criteria, waiting, checks)
+    if keep and "speed_m_s" in keep:
+        result.pop("speed_m_s")
+    if not res.complete:
+        result["success"] = False
+        result["criteria_failed"] = [*result["criteria_failed"], "incomplete"]
+    return result
+
+
 def summarize(name: str, setup: RunSetup, res: Results, wall: float) -> dict[str, Any]:
     robot = setup.robot
     pos = res[f"{robot}.body_position"]
-    fell, fell_t, reason = fell_from(res, robot)
     reflexes = setup.reflexes(res) if setup.reflexes else []
     sim_time = float(res.time[-1] - res.time[0])
     return {
@@ -136,9 +202,6 @@ def summarize(name: str, setup: RunSetup, res: Results, wall: float) -> dict[str
         "complete": bool(res.complete),
         "distance_m": float(pos[-1, 1] - pos[0, 1]),
         "lateral_drift_m": float(pos[-1, 0] - pos[0, 0]),
-        "fell": fell,
-        "fell_time_s": fell_t,
-        "fell_reason": reason,
         "reflexes": reflexes,
         "wall_time_s": wall,
         "real_time_factor": sim_time / wall if wall > 0 else None,

@@ -54,7 +54,7 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     return lo, hi
 
 
-def run_trial(scenario: str, seed: int, sets: dict[str, float] | None, out_dir: str,
+def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: str,
               t_end: float | None = None, plots: bool = False) -> dict[str, Any]:
     """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``."""
     from harness.experiments.runner import run_scenario
@@ -85,7 +85,7 @@ class Group:
     """Trials run with the same sets (one value of the varied parameter)."""
 
     label: str
-    sets: dict[str, float]
+    sets: dict[str, Any]
     trials: list[dict[str, Any]] = field(default_factory=list)
 
     def stats(self) -> dict[str, Any]:
@@ -98,27 +98,42 @@ class Group:
                 "ci_method": "Wilson score interval, 95 %, failed trials count as unsuccessful"}
 
 
-def parse_vary(text: str | None) -> tuple[str, list[float]] | None:
-    """``"rule2=1,0"`` -> ``("rule2", [1.0, 0.0])``."""
+def parse_vary(text: str | None) -> tuple[str, list[Any]] | None:
+    """``"rule2=1,0"`` -> ``("rule2", [1, 0])``; each value is a TOML value (a bare word is a string)."""
+    from harness.experiments.scenario import ScenarioError, parse_value
+
     if not text:
         return None
     key, sep, values = text.partition("=")
     if not sep or not key.strip():
         raise ModelError(f"--vary expects KEY=V1,V2,..., got {text!r}")
     try:
-        vals = [float(v) for v in values.split(",") if v.strip()]
-    except ValueError:
-        raise ModelError(f"--vary {key}: values must be numbers, got {values!r}") from None
+        vals = [parse_value(v) for v in values.split(",") if v.strip()]
+    except ScenarioError as exc:
+        raise ModelError(f"--vary {key.strip()}: {exc}") from None
     if not vals:
         raise ModelError(f"--vary {key}: no values")
     return key.strip(), vals
 
 
-def _groups(sets: dict[str, float], vary: tuple[str, list[float]] | None) -> list[Group]:
+def _label(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _groups(sets: dict[str, Any], vary: tuple[str, list[Any]] | None) -> list[Group]:
     if vary is None:
         return [Group("all", dict(sets))]
     key, values = vary
-    return [Group(f"{key}={v:g}", {**sets, key: v}) for v in values]
+    return [Group(f"{key}={_label(v)}", {**sets, key: v}) for v in values]
+
+
+def check_groups(scenario: str, groups: Sequence[Group], seed: int) -> None:
+    """Build every group's closed loop once before any trial runs: an unknown key, a wrong type or a value
+    out of range is an error naming the key here, not a failure of every trial."""
+    from harness.experiments.runner import build_scenario
+
+    for g in groups:
+        build_scenario(scenario, g.sets, seed=seed)
 
 
 def _trial_dir(out: Path, group: Group, n_groups: int, i: int, seed: int) -> Path:
@@ -138,15 +153,12 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
     to use (not closed). The trial directories are absolute paths: workers on other machines need the
     same filesystem.
     """
-    from harness.experiments.runner import SCENARIOS
-
-    if scenario not in SCENARIOS:
-        raise ModelError(f"unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})")
     if int(trials) < 1:
         raise ModelError(f"--trials must be >= 1, got {trials}")
+    groups = _groups(dict(sets or {}), vary)
+    check_groups(scenario, groups, int(seed))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    groups = _groups(dict(sets or {}), vary)
     tasks = [(g, i, int(seed) + i) for g in groups for i in range(int(trials))]
     t0 = time.perf_counter()
     records: dict[tuple[str, int], dict[str, Any]] = {}

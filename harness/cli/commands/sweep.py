@@ -19,8 +19,7 @@ import argparse
 from pathlib import Path
 
 from components.core import ModelError
-from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
-from harness.experiments.runner import SCENARIOS
+from harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
 
 NAME = "sweep"
 HELP = "run many seeded trials of a scenario on dask (local cluster or --scheduler)"
@@ -37,7 +36,7 @@ def _integer(text: str, what: str, minimum: int | None = None) -> int:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scenario", help="scenario name (see cpgsim run --list)")
+    p.add_argument("scenario", help="scenario name (see cpgsim run --list) or FILE.toml")
     p.add_argument("--trials", required=True, help="number of trials (per --vary value)")
     p.add_argument("--seed", default="0", help="base seed: trial i uses seed + i (default 0)")
     p.add_argument("--vary", default=None, metavar="KEY=V1,V2",
@@ -50,14 +49,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", default=None, help="output directory (default runs/sweep-<scenario>)")
     p.add_argument("--plots", action="store_true", help="also make each trial's run pictures (slower)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_set_argument(p)
+    add_scenario_set_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from harness.experiments.sweep import parse_vary, run_sweep
 
-    if args.scenario not in SCENARIOS:
-        raise CliError(f"unknown scenario {args.scenario!r} (known: {', '.join(SCENARIOS)})")
     if args.serial and args.scheduler:
         raise CliError("--serial and --scheduler exclude each other")
     trials = _integer(args.trials, "--trials", 1)
@@ -69,16 +66,20 @@ def run(args: argparse.Namespace) -> int:
             t_end = positive_float(args.t_end)
         except argparse.ArgumentTypeError as exc:
             raise CliError(f"--t-end: {exc}") from None
-    sets = parse_sets(args.sets)
+    sets = parse_scenario_sets(args.sets)
     try:
         vary = parse_vary(args.vary)
     except ModelError as exc:
         raise CliError(str(exc)) from None
-    out = Path(args.output or Path("runs") / f"sweep-{args.scenario}")
+    out = Path(args.output or Path("runs") / f"sweep-{Path(args.scenario).stem}")
     doc = run_sweep(args.scenario, trials, seed, out, sets=sets, vary=vary, scheduler=args.scheduler,
                     workers=workers, serial=args.serial, t_end=t_end, plots=args.plots, progress=not args.no_progress)
     for line in doc["report"]:
         print(line)
     print(f"  {doc.get('executor', '')}; wall time {doc['wall_time_s']:.1f} s")
     print(f"  sweep: {out}/sweep.json, {doc['picture']}")
+    crashed = sum(g["failed"] for g in doc["groups"])
+    if crashed:
+        raise CliError(f"{crashed} of {sum(g['n'] for g in doc['groups'])} trials crashed (errors in sweep.json)",
+                       code=1)
     return 0

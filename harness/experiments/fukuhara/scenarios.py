@@ -25,7 +25,6 @@ Success: ``fukuhara-gaits`` -- no fall and the expected gait label of the speed 
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -46,10 +45,11 @@ from components.fukuhara.controller import (
 from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from components.graph import Graph
 from harness.experiments.gait_classifier import classify, stance_from_fz
-from harness.experiments.runner import RunSetup, fell_from
+from harness.experiments.runner import PLANT_KEYS, RunSetup, fell_from, leg_fields, robot_geometry, terrain_of
+from harness.experiments.scenario import Scenario, ScenarioError
 from harness.results import Results
-from robots import terrain as tr
 from robots.plant import DartHexapod
+from robots.terrain import Terrain
 
 EXPECTED_GAIT = {1: "tripod", 2: "tetrapod", 3: "wave"}
 AMPUTATION_CASES = {1: ("L2", "R2"), 2: ("L1", "R1")}
@@ -122,7 +122,7 @@ def initial_alpha(seed: int | None, geometry: RobotGeometry = YU_SIM) -> np.ndar
 
 
 def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: dict[str, float],
-                amputated: tuple[str, ...] = (), terrain: tr.Terrain | None = None,
+                amputated: tuple[str, ...] = (), terrain: Terrain | None = None,
                 geometry: RobotGeometry = YU_SIM) -> tuple[Graph, dict, dict, np.ndarray]:
     """Controller + plant graph; returns (graph, scenario options, controller overrides, initial alpha)."""
     opts, ctrl_params, paths = _split_sets(sets, options)
@@ -202,7 +202,7 @@ def searching_events(res: Results) -> list[dict]:
         col = f"ctrl.{leg}.rule"
         if col in res:
             for k in np.flatnonzero(res[col] == RULE_SEARCH):
-                out.append({"leg": i, "kind": "searching", "t": float(res.time[k]), "force_N": float(f[k, i, 1])})
+                out.append(leg_fields(i) | {"kind": "searching", "t": float(res.time[k]), "force_N": float(f[k, i, 1])})
     return sorted(out, key=lambda e: e["t"])[:MAX_LISTED_EVENTS]
 
 
@@ -273,66 +273,89 @@ def _thresholds(ctrl_params: dict) -> dict[str, float]:
             "N_SRH": float(ctrl_params.get("N_SRH", DEFAULTS["N_SRH"]))}
 
 
-# -- scenarios -----------------------------------------------------------------------------------
+# -- the scenario builder ---------------------------------------------------------------------------
 
-def gaits(sets: dict[str, float], seed: int | None = None) -> RunSetup:
-    """Fukuhara 3.1 on flat ground; ``--set setting=1|2|3`` picks the speed (tripod, tetrapod, wave).
+def _sets_of(scenario: Scenario) -> dict[str, Any]:
+    """The ``closed_loop`` overrides of a scenario: controller table keys, graph paths, plant keys."""
+    ctrl = scenario.doc["controller"]
+    sets: dict[str, Any] = {k: float(ctrl[k]) for k in ("setting", "transient") if k in ctrl}
+    for key, value in ctrl["params"].items():
+        if "." in key or "*" in key:
+            sets[f"ctrl.{key}"] = float(value)
+        elif key in CONTROLLER_PARAMS or key in TRAJECTORY_PARAMS:
+            sets[key] = float(value)
+        else:
+            raise ScenarioError(f"unknown key controller.{key} for a fukuhara controller: use setting, case, "
+                                f"transient, a controller parameter ({', '.join(CONTROLLER_PARAMS)}; "
+                                f"{', '.join(TRAJECTORY_PARAMS)}) or a graph path like controller.L1.theta_AEP "
+                                f"({scenario.source})")
+    robot = scenario.doc["robot"]
+    sets.update({f"robot.{k}": float(robot[k]) for k in PLANT_KEYS if k in robot})
+    return sets
 
-    Default ``t_end`` 30/40/45 s for settings 1/2/3; the gait classifier ignores the first 15 s
-    (the stated transient; ``--set transient=...``).
-    """
-    opts0 = {"setting": 1.0, "transient": float("nan")}
-    graph, opts, ctrl_params, alpha0 = closed_loop("fukuhara-gaits", sets, seed, opts0)
-    setting = opts["setting"]
-    transient = DEFAULT_TRANSIENT[setting] if math.isnan(opts["transient"]) else float(opts["transient"])
-    opts["transient"] = transient
+
+def build(scenario: Scenario) -> RunSetup:
+    """The closed loop of a ``kind = "fukuhara"`` scenario: gaits by speed setting (Fukuhara 3.1),
+    amputation (``controller.case``, 3.2), gap crossing (``criteria.cross`` names the gap, 3.3)."""
+    doc = scenario.doc
+    ctrl_table, crit = doc["controller"], doc["criteria"]
+    geometry = robot_geometry(scenario)
+    terrain = terrain_of(scenario, geometry)
+    case = int(ctrl_table.get("case", 0))
+    amputated = AMPUTATION_CASES.get(case, ())
+    seed = int(doc["seed"])
+    opts0 = {"setting": 1.0, "transient": 15.0}
+    try:
+        graph, opts, ctrl_params, alpha0 = closed_loop(scenario.name, _sets_of(scenario), seed, opts0,
+                                                       amputated=amputated, terrain=terrain, geometry=geometry)
+    except ScenarioError:
+        raise
+    except ModelError as exc:
+        raise ScenarioError(f"{scenario.name}: {exc} ({scenario.source})") from None
+    setting, transient = opts["setting"], float(opts["transient"])
     custom_speed = any(k in ctrl_params and ctrl_params[k] != v
                        for k, v in zip(("omega_sw", "omega_st"), SPEED_SETTINGS[setting], strict=True))
-    expected = None if custom_speed else EXPECTED_GAIT[setting]
-    legs = list(range(6))
-    terrain = graph.find("robot").terrain
-    info = _info(graph, seed, opts, alpha0, ())
-    info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"], "expected_gait": expected})
+    expected = crit["expected_gait"] or None
+    if expected == "auto":
+        expected = None if custom_speed else EXPECTED_GAIT[setting]
+    legs = [i for i in range(6) if LEG_NAMES[i] not in amputated]
+    info = _info(graph, seed, opts, alpha0, amputated)
+    info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"],
+                 "rule2": float(ctrl_params.get("rule2", 1.0)), "expected_gait": expected})
+    cross = scenario.features().get(crit["cross"]) if crit["cross"] else None
+    far_edge = None
+    if cross is not None:
+        feat = terrain.params["features"][crit["cross"]]
+        width = feat.get("width", feat.get("length", 0.0))
+        far_edge = feat["position_y"] + width
+        info["gap"] = {"y": feat["position_y"], "width": width}
+        info["success_rule"] = (f"body centre reaches y >= {crit['cross']} far edge + {crit['cross_margin_m']} m "
+                                "before any fall")
 
     def extra(res: Results, out: Path) -> dict[str, Any]:
         s = gait_summary(res, legs, transient)
-        fell = fell_from(res, "robot")[0]
-        s["success"] = bool(not fell and (expected is None or s["gait"] == expected))
-        s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"fukuhara-gaits setting {setting}: gait "
-                                         f"{s['gait']} (contacts: {s['gait_from_contacts']})").name]
+        checks: dict[str, bool] = {}
+        if expected is not None:
+            checks["expected_gait"] = s["gait"] == expected
+        if amputated:
+            pos = res["robot.body_position"]
+            s["walks"] = bool(not fell_from(res, "robot")[0] and pos[-1, 1] - pos[0, 1] >= MIN_WALK)
+        if far_edge is not None:
+            crossing = gap_outcome(res, far_edge, crit["cross_margin_m"])
+            checks["cross"] = crossing.pop("success")
+            s.update({k: v for k, v in crossing.items() if not k.startswith("fell")})
+        verdict = "ok" if all(checks.values()) else "failed"
+        s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"{scenario.name} (setting {setting}, rule 2 "
+                                         f"{'on' if info['rule2'] else 'off'}"
+                                         f"{', amputated ' + '+'.join(amputated) if amputated else ''}): gait "
+                                         f"{s['gait']} (contacts: {s['gait_from_contacts']}), {verdict}").name]
+        s["checks"] = checks
         return s
 
-    return RunSetup(graph=graph, geometry=YU_SIM, terrain=terrain, t_end=DEFAULT_T_END[setting],
+    t_end = float(doc["t_end"]) if doc.get("t_end") is not None else DEFAULT_T_END[setting]
+    return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=t_end,
                     thresholds=_thresholds(ctrl_params), stance=_stance_fn(legs), reflexes=searching_events,
-                    record=_record(()), info=info, extra=extra)
-
-
-def amputation(sets: dict[str, float], seed: int | None = None) -> RunSetup:
-    """Fukuhara 3.2: ``--set case=1`` L2+R2 (default), ``case=2`` L1+R1 amputated; setting 3 (wave speed)."""
-    opts0 = {"setting": 3.0, "case": 1.0, "transient": 30.0}
-    case = int(sets.get("case", 1))
-    if case not in AMPUTATION_CASES:
-        raise ModelError(f"case must be 1 (L2+R2) or 2 (L1+R1), got {sets.get('case')}")
-    amputated = AMPUTATION_CASES[case]
-    graph, opts, ctrl_params, alpha0 = closed_loop("fukuhara-amputation", sets, seed, opts0, amputated=amputated)
-    legs = [i for i in range(6) if LEG_NAMES[i] not in amputated]
-    terrain = graph.find("robot").terrain
-    info = _info(graph, seed, opts, alpha0, amputated)
-    info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"]})
-
-    def extra(res: Results, out: Path) -> dict[str, Any]:
-        s = gait_summary(res, legs, float(opts["transient"]))
-        fell = fell_from(res, "robot")[0]
-        pos = res["robot.body_position"]
-        s["walks"] = bool(not fell and pos[-1, 1] - pos[0, 1] >= MIN_WALK)
-        s["success"] = s["walks"]
-        s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"fukuhara-amputation {'+'.join(amputated)}: "
-                                         f"{'walks' if s['walks'] else 'does not walk'}").name]
-        return s
-
-    return RunSetup(graph=graph, geometry=YU_SIM, terrain=terrain, t_end=40.0,
-                    thresholds=_thresholds(ctrl_params), stance=_stance_fn(legs), reflexes=searching_events,
-                    record=_record(amputated), info=info, extra=extra)
+                    record=_record(amputated), info=info, extra=extra, scenario=scenario)
 
 
 def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> dict[str, Any]:
@@ -347,37 +370,6 @@ def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> di
             "max_y_m": float(np.max(y)), "fell": fell, "fell_time_s": fell_t, "fell_reason": reason}
 
 
-def gap(sets: dict[str, float], seed: int | None = None) -> RunSetup:
-    """Fukuhara 3.3: a bottomless gap across the path, random initial alpha from ``--seed``.
 
-    Options: ``gap_width`` (m, default 0.05), ``gap_y`` (near edge, m, default 0.25; the front feet start
-    at most 0.18 m ahead of the body centre), ``setting`` (default 2, tetrapod speed), ``rule2``.
-    Success: the body centre passes ``gap_y + gap_width + 0.25 m`` (all six feet beyond the gap) within
-    ``t_end`` (default 25 s) without a fall (body touching anything or tilting over 45 degrees).
-    """
-    opts0 = {"setting": 2.0, "gap_width": 0.05, "gap_y": 0.25, "transient": 10.0}
-    opts, _, _ = _split_sets(sets, opts0)
-    width, y0 = float(opts["gap_width"]), float(opts["gap_y"])
-    terrain = tr.gaps([(width, y0)], side="both")
-    graph, opts, ctrl_params, alpha0 = closed_loop("fukuhara-gap", sets, seed, opts0, terrain=terrain)
-    legs = list(range(6))
-    info = _info(graph, seed, opts, alpha0, ())
-    info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"],
-                 "rule2": float(ctrl_params.get("rule2", 1.0)), "gap": {"y": y0, "width": width},
-                 "success_rule": f"body centre reaches y >= gap far edge + {GAP_MARGIN} m before any fall"})
-
-    def extra(res: Results, out: Path) -> dict[str, Any]:
-        s = gait_summary(res, legs, float(opts["transient"]))
-        s.update(gap_outcome(res, y0 + width))
-        s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"fukuhara-gap (rule 2 "
-                                         f"{'on' if info['rule2'] else 'off'}): "
-                                         f"{'crossed' if s['success'] else 'failed'}").name]
-        return s
-
-    return RunSetup(graph=graph, geometry=YU_SIM, terrain=terrain, t_end=25.0,
-                    thresholds=_thresholds(ctrl_params), stance=_stance_fn(legs), reflexes=searching_events,
-                    record=_record(()), info=info, extra=extra)
-
-
-__all__ = ["AmputatedHexapod", "EXPECTED_GAIT", "MODE_NAMES", "amputation", "closed_loop", "gait_summary",
-           "gap", "gap_outcome", "gaits", "initial_alpha", "mode_stance"]
+__all__ = ["AmputatedHexapod", "EXPECTED_GAIT", "MODE_NAMES", "build", "closed_loop", "gait_summary",
+           "gap_outcome", "initial_alpha", "mode_stance"]

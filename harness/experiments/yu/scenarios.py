@@ -76,12 +76,13 @@ from typing import Any
 
 import numpy as np
 
-from components.geometry import YU_PROTOTYPE, YU_SIM, RobotGeometry
+from components.core import ModelError
+from components.geometry import YU_SIM, RobotGeometry
 from components.graph import Graph
 from components.yu.leg import hexapod_controller
-from components.yu.reflexes import elevator_descent_rate
 from harness.compile import compile_graph
-from harness.experiments.runner import RunSetup
+from harness.experiments.runner import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
+from harness.experiments.scenario import Scenario, ScenarioError
 from harness.results import Results
 from robots import terrain as tr
 from robots.plant import DartHexapod
@@ -93,6 +94,8 @@ RECORD = [f"{ROBOT}.*", f"{CONTROLLER}.q_target", f"{CONTROLLER}.swing", f"{CONT
           f"{CONTROLLER}.state", f"{CONTROLLER}.rate", f"{CONTROLLER}.*.reflex.n_*", f"{CONTROLLER}.*.network.x?",
           f"{CONTROLLER}.*.converter.q"]
 LEGS = ("L1", "L2", "L3", "R1", "R2", "R3")
+THRESHOLDS = {"Fcx": 10.0, "Fcy": 10.0, "Fcz": 2.0}
+"""Sensory thresholds (N) of Yu's simulation (Y8, Y9), used where a scenario sets none."""
 
 
 def initial_targets(controller: Graph) -> np.ndarray:
@@ -105,9 +108,10 @@ def initial_targets(controller: Graph) -> np.ndarray:
 
 
 def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[str, float],
-                sets: dict[str, float], clearance_elevator: float | None = None) -> tuple[Graph, DartHexapod]:
+                sets: dict[str, float], clearance_elevator: float | None = None,
+                gait: int = 1) -> tuple[Graph, DartHexapod]:
     """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``)."""
-    ctrl = hexapod_controller(CONTROLLER, geometry=geometry, clearance_elevator=clearance_elevator)
+    ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator)
     for key, value in thresholds.items():
         ctrl.set_param(f"*.sensors.{key}", value)
     robot = DartHexapod(ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2)
@@ -136,7 +140,8 @@ foothold; ``giveup``: a search ended without one, the foot returns to its AEP)."
 
 
 def reflex_events(res: Results) -> list[dict[str, Any]]:
-    """Reflex events from the legs' event counters: ``{leg, kind, t, force_N}`` (+ ``peak_force_N``).
+    """Reflex events from the legs' event counters: ``{leg, leg_number, kind, t, force_N}`` (+ ``peak_force_N``);
+    ``leg`` is the label (``"R1"``), ``leg_number`` Yu's number (1-6: L1-L3, R1-R3).
 
     ``force_N`` is the horizontal toe force ``max(|Fx|, |Fy|)`` at an elevator trigger (the largest
     in the 20 ms before it, as the controller saw it) and the vertical one otherwise;
@@ -153,73 +158,59 @@ def reflex_events(res: Results) -> list[dict[str, Any]]:
                 continue
             steps = np.where(np.diff(res[col]) > 0.5)[0] + 1
             for k in steps:
-                ev = {"leg": leg, "kind": kind, "t": float(res.time[k])}
+                ev = leg_fields(leg) | {"kind": kind, "t": float(res.time[k])}
                 if kind == "elevator":
                     ev["force_N"] = float(np.abs(force[max(0, k - 20):k + 1, leg, :2]).max())
                     ev["peak_force_N"] = float(np.abs(force[max(0, k - 20):k + 101, leg, :2]).max())
                 else:
                     ev["force_N"] = float(force[k, leg, 2])
                 events.append(ev)
-    return sorted(events, key=lambda e: (e["t"], e["leg"]))
-
-
-def _setup(geometry: RobotGeometry, terrain: tr.Terrain, t_end: float, thresholds: dict[str, float],
-           sets: dict[str, float], info: dict[str, Any], clearance_elevator: float | None = None,
-           params: dict[str, float] | None = None) -> RunSetup:
-    chosen = {**(params or {}), **sets}  # the user's --set wins
-    graph, _ = closed_loop(geometry, terrain, thresholds, chosen, clearance_elevator)
-    return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=t_end, robot=ROBOT,
-                    thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD,
-                    info={"terrain": terrain.describe(), "stance_width_m": geometry.stance_width,
-                          "parameters": chosen, **info})
+    return sorted(events, key=lambda e: (e["t"], e["leg_number"]))
 
 
 YU_RUN = YU_SIM.with_(stance_width=0.075)
 """The robot of the Yu scenarios: Table 3 with a 75 mm stance line (module docstring)."""
-X1_APEX = 0.6
-SEARCH_AMPLITUDES = {"controller.*.converter.d_alpha": float(np.radians(12.0)),
-                     "controller.*.converter.d_beta": float(np.radians(6.0)),
-                     "controller.*.converter.d_gamma": float(np.radians(6.0))}
-PARAMS = {"controller.*.converter.height_memory": 1.0,
-          **SEARCH_AMPLITUDES,
-          "controller.*.reflex.x1_apex": X1_APEX,
-          "controller.*.reflex.rate_descent": round(elevator_descent_rate(X1_APEX), 4),
-          "controller.*.reflex.found_support": 1.0,
-          "controller.*.reflex.ob_support_veto": 1.0,
-          "controller.*.reflex.ob_after_liftoff": 1.0,
-          "controller.*.reflex.withdraw": 1.0,
-          "controller.*.converter.withdraw_alpha": 0.0}
-"""Controller parameters of the Yu scenarios (module docstring: why each)."""
-THRESHOLDS = {"Fcx": 10.0, "Fcy": 10.0, "Fcz": 2.0}
-PROTOTYPE_CLEAR_TIME = 0.03
-"""s the prototype's touchdown flag must be off before an elevator may fire (module docstring)."""
-STEP_Y = 0.355
-DITCHES = ((0.018, 0.089, 0.316), (0.040, 0.083, 0.487), (0.080, 0.086, 0.664))
-"""(depth, width, position_y) of the ditches under the right legs (m)."""
+OPEN_LOOP = {"*.reflex.elevator": 0.0, "*.reflex.searching": 0.0}
+"""Controller parameters of ``kind = "yu-open-loop"``: the same CPG, FSM and converter, no reflex."""
 
 
-def flat(sets: dict[str, float], **_: Any) -> RunSetup:
-    return _setup(YU_RUN, tr.flat(), 20.0, THRESHOLDS, sets, {}, params=PARAMS)
+def waiting_of(res: Results) -> np.ndarray:
+    """Time steps at which the robot waits on a reflex: some leg runs one, the FSM holds the others."""
+    return (res[f"{CONTROLLER}.reflex"] > 0.5).any(axis=1)
 
 
-def step(sets: dict[str, float], position_y: float | None = None, **_: Any) -> RunSetup:
-    y = STEP_Y if position_y is None else float(position_y)
-    terrain = tr.step(0.04, y, side="right")
-    return _setup(YU_RUN, terrain, 30.0, THRESHOLDS, sets, {"step_height_m": 0.04, "step_y_m": y},
-                  clearance_elevator=0.08, params=PARAMS)
+def feature_summary(terrain: tr.Terrain) -> dict[str, Any]:
+    """Where the steps and ditches are (after jitter): ``step_height_m``, ``step_y_m`` of the first step,
+    ``ditches_depth_width_y_m`` of every ditch, in file order."""
+    feats = terrain.params.get("features", {}).values()
+    out: dict[str, Any] = {}
+    step = next((f for f in feats if f["type"] == "step"), None)
+    if step is not None:
+        out.update({"step_height_m": step["height"], "step_y_m": step["position_y"]})
+    ditch = [[f["depth"], f["width"], f["position_y"]] for f in feats if f["type"] == "ditch"]
+    if ditch:
+        out["ditches_depth_width_y_m"] = ditch
+    return out
 
 
-def ditches(sets: dict[str, float], specs: Any = None, **_: Any) -> RunSetup:
-    spec = tuple(tuple(float(x) for x in d) for d in (specs or DITCHES))
-    terrain = tr.ditches(spec, side="right")
-    return _setup(YU_RUN, terrain, 48.0, THRESHOLDS, sets,
-                  {"ditches_depth_width_y_m": [list(d) for d in spec]}, params=PARAMS)
-
-
-def prototype_step(sets: dict[str, float], **_: Any) -> RunSetup:
-    terrain = tr.step(0.25, 0.9, side="right")
-    params = {**{k: v for k, v in PARAMS.items() if k not in SEARCH_AMPLITUDES},
-              "controller.*.reflex.ob_clear_time": PROTOTYPE_CLEAR_TIME,
-              "controller.*.sensors.support_ratio": 1.0}
-    return _setup(YU_PROTOTYPE, terrain, 45.0, {"Fcx": 30.0, "Fcy": 30.0, "Fcz": 30.0}, sets,
-                  {"step_height_m": 0.25, "step_y_m": 0.9}, clearance_elevator=0.5, params=params)
+def build(scenario: Scenario) -> RunSetup:
+    """The closed loop a ``kind = "yu"`` / ``"yu-open-loop"`` scenario document describes."""
+    doc = scenario.doc
+    ctrl = doc["controller"]
+    geometry = robot_geometry(scenario)
+    terrain = terrain_of(scenario, geometry)
+    thresholds = {k: float(ctrl.get(k, d)) for k, d in THRESHOLDS.items()}
+    params = {f"{CONTROLLER}.{k}": float(v) for k, v in ctrl["params"].items()}
+    if ctrl["kind"] == "yu-open-loop":
+        params.update({f"{CONTROLLER}.{k}": v for k, v in OPEN_LOOP.items()})
+    plant = {f"{ROBOT}.{k}": float(doc["robot"][k]) for k in PLANT_KEYS if k in doc["robot"]}
+    try:
+        graph, _ = closed_loop(geometry, terrain, thresholds, {**params, **plant}, ctrl.get("clearance_elevator"),
+                               gait=int(ctrl.get("gait", 1)))
+    except ModelError as exc:
+        raise ScenarioError(f"{scenario.name}: {exc}") from None
+    info = {"terrain": terrain.describe(), "stance_width_m": geometry.stance_width, "parameters": params,
+            "controller_kind": ctrl["kind"], **feature_summary(terrain)}
+    return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
+                    thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
+                    waiting=waiting_of, scenario=scenario)

@@ -1,0 +1,100 @@
+"""Outcomes of a robot run, computed from the recorded data only (never assumed from the setup).
+
+- ``fell``: the body touched anything, or its tilt (angle between the body's up axis and the world's)
+  passed ``fall_tilt_deg`` (default 45 degrees); ``fell_time_s`` and ``fell_reason`` say when and why.
+- ``max_tilt_deg``: the largest tilt over the run; ``height_drop_m``: how far the body sank below its
+  height at ``t = 0`` at worst (a robot lying on a step face shows here even when it did not "fall").
+- ``waiting_share``: the share of the run during which the whole robot waited on a reflex (Yu: some leg
+  searched or retracted and the gait FSM held the others); those times are not walking time.
+- ``stalled``: within some window of ``stall_window_s`` of walking time (reflex waits left out) the body
+  advanced less than ``stall_progress_m``; ``stalled_from_s`` is where the first such window starts.
+- ``distance_m`` (forward, body origin), ``speed_m_s`` (over the whole run).
+- ``success``: every criterion of the scenario's ``[criteria]`` table holds; ``criteria_failed`` lists the
+  ones that did not (``"fell"``, ``"stalled"``, ``"max_tilt_deg"``, ``"min_distance_m"``, plus the
+  scenario's own, e.g. ``"expected_gait"`` or ``"cross"``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from harness.results import Results
+
+
+def tilt_deg(res: Results, robot: str) -> np.ndarray:
+    """Body tilt per sample: the angle between the body's z axis and the world's (degrees)."""
+    rpy = res[f"{robot}.body_rpy"]
+    return np.degrees(np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1.0, 1.0)))
+
+
+def fall(res: Results, robot: str, fall_tilt_deg: float = 45.0) -> tuple[bool, float | None, str]:
+    """(fell, time, reason): the body touched anything or tilted past ``fall_tilt_deg``."""
+    tilt = tilt_deg(res, robot)
+    key = f"{robot}.body_contact"
+    contact = res[key].ravel() > 0.5 if key in res else np.zeros(len(tilt), bool)
+    bad = (tilt > fall_tilt_deg) | contact | ~np.isfinite(tilt)
+    if not bad.any():
+        return False, None, ""
+    k = int(np.argmax(bad))
+    reason = "body touched the ground" if contact[k] else f"tilted {tilt[k]:.0f} deg"
+    return True, float(res.time[k]), reason
+
+
+def stall(time: np.ndarray, y: np.ndarray, waiting: np.ndarray, window: float,
+          progress: float) -> tuple[bool, float | None]:
+    """(stalled, start): a window of ``window`` s of walking time (``waiting`` samples removed) in which
+    ``y`` grew by less than ``progress``. Runs shorter than one window cannot stall."""
+    walk = ~waiting
+    if walk.sum() < 2:
+        return False, None
+    t_walk = np.cumsum(np.r_[0.0, np.diff(time)] * walk)  # walking time elapsed at each sample
+    yw, tw, tt = y[walk], t_walk[walk], time[walk]
+    if tw[-1] - tw[0] < window:
+        return False, None
+    end = np.searchsorted(tw, tw + window)  # first sample at least one window later
+    ok = end < len(tw)
+    gain = np.full(len(tw), np.inf)
+    gain[ok] = yw[end[ok]] - yw[ok]
+    bad = np.flatnonzero(gain < progress)
+    return (True, float(tt[bad[0]])) if len(bad) else (False, None)
+
+
+def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.ndarray | None = None,
+             scenario_checks: Mapping[str, bool] | None = None) -> dict[str, Any]:
+    """The honest outcome keys of a run's summary (module docstring); ``scenario_checks`` are the
+    scenario's own criteria (name -> met)."""
+    t = res.time
+    pos = res[f"{robot}.body_position"]
+    waiting = np.zeros(len(t), bool) if waiting is None else np.asarray(waiting, bool).reshape(len(t))
+    fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", 45.0)))
+    tilt = tilt_deg(res, robot)
+    stalled, stall_t = stall(t, pos[:, 1], waiting, float(criteria.get("stall_window_s", 5.0)),
+                             float(criteria.get("stall_progress_m", 0.01)))
+    duration = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+    distance = float(pos[-1, 1] - pos[0, 1])
+    max_tilt = float(np.nanmax(tilt)) if len(tilt) else math.nan
+    failed = []
+    if criteria.get("no_fall", True) and fell:
+        failed.append("fell")
+    if criteria.get("no_stall", True) and stalled:
+        failed.append("stalled")
+    if not max_tilt < float(criteria.get("max_tilt_deg", 30.0)):
+        failed.append("max_tilt_deg")
+    if distance < float(criteria.get("min_distance_m", 0.0)):
+        failed.append("min_distance_m")
+    failed += [name for name, met in (scenario_checks or {}).items() if not met]
+    return {
+        "fell": fell, "fell_time_s": fell_t, "fell_reason": reason,
+        "max_tilt_deg": max_tilt,
+        "height_drop_m": float(pos[0, 2] - np.nanmin(pos[:, 2])),
+        "waiting_share": float(waiting[1:].mean()) if len(t) > 1 else 0.0,
+        "stalled": stalled, "stalled_from_s": stall_t,
+        "distance_m": distance,
+        "speed_m_s": distance / duration if duration > 0 else math.nan,
+        "success": not failed, "criteria_failed": failed,
+        "criteria": dict(criteria),
+    }

@@ -25,15 +25,21 @@ def add_scenario_set_argument(parser: argparse.ArgumentParser) -> None:
                              "controller.Fcx=20 (VALUE: a TOML value; a bare word is a string); repeatable")
 
 
-def parse_scenario_sets(items: list[str]) -> dict[str, str]:
-    """``["terrain.step.height=0.06", ...]`` -> ``{"terrain.step.height": "0.06"}`` (values parsed by the
-    scenario loader as TOML); malformed items raise :class:`CliError`."""
-    out: dict[str, str] = {}
+def parse_scenario_sets(items: list[str]) -> dict[str, Any]:
+    """``["terrain.step.height=0.06", "terrain.step.side=left"]`` -> ``{"terrain.step.height": 0.06,
+    "terrain.step.side": "left"}`` (each VALUE a TOML value, a bare word a string); malformed items raise
+    :class:`CliError` naming the item."""
+    from harness.experiments.scenario import ScenarioError, parse_value
+
+    out: dict[str, Any] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise CliError(f"--set expects KEY=VALUE, got {item!r}")
-        out[key.strip()] = value.strip()
+        try:
+            out[key.strip()] = parse_value(value)
+        except ScenarioError as exc:
+            raise CliError(f"--set {key.strip()}: {exc}") from None
     return out
 
 

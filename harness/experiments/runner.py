@@ -14,96 +14,24 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
-from components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM, RobotGeometry
-from components.graph import Graph
 from harness.experiments import outcomes
 from harness.experiments import plots as plots_run
-from harness.experiments.scenario import GEOMETRY_KEYS, Scenario, ScenarioError, builtin_names, load
+from harness.experiments.fukuhara import scenarios as fukuhara
+from harness.experiments.scenario import Scenario, builtin_names, load
+from harness.experiments.setup import RunSetup
+from harness.experiments.yu import scenarios as yu
 from harness.results import Results, atomic_write
 from harness.simulate import SimulationError, Simulator
-
-PRESETS: dict[str, RobotGeometry] = {"yu-sim": YU_SIM, "yu-prototype": YU_PROTOTYPE}
-PLANT_KEYS = ("kp", "kd", "friction", "velocity_ff")
-"""Keys of a scenario's ``[robot]`` table that are parameters of the DART plant block."""
-
-
-@dataclass
-class RunSetup:
-    """What a scenario builds: the closed-loop graph and how to read its results."""
-
-    graph: Graph
-    geometry: RobotGeometry
-    terrain: Any
-    t_end: float
-    robot: str = "robot"
-    thresholds: dict[str, float] = field(default_factory=dict)
-    stance: Callable[[Results], np.ndarray] | None = None  # time x 6 bool; default: Fz > Fcz
-    reflexes: Callable[[Results], list[dict]] | None = None  # [{leg, leg_number, kind, t, force_N}]
-    record: list[str] | None = None
-    info: dict[str, Any] = field(default_factory=dict)
-    extra: Callable[[Results, Path], dict[str, Any]] | None = None  # more summary keys / plots; "checks"
-    waiting: Callable[[Results], np.ndarray] | None = None  # time steps spent waiting on a reflex
-    scenario: Scenario | None = None
-
-
-def leg_fields(index: int) -> dict[str, Any]:
-    """How every output names leg ``index`` (0-5): the papers' label and Yu's number (1-6)."""
-    return {"leg": LEG_NAMES[index], "leg_number": index + 1}
 
 
 def scenario_names() -> list[str]:
     return builtin_names()
-
-
-def robot_geometry(scenario: Scenario) -> RobotGeometry:
-    """The scenario's geometry preset with its ``[robot]`` overrides (errors name the key)."""
-    robot = scenario.doc["robot"]
-    changes = {k: float(robot[k]) for k in GEOMETRY_KEYS if k in robot}
-    try:
-        return PRESETS[robot["preset"]].with_(**changes) if changes else PRESETS[robot["preset"]]
-    except ModelError as exc:
-        raise ScenarioError(f"robot ({', '.join(f'robot.{k}' for k in changes)}): {exc} ({scenario.source})") from None
-
-
-def terrain_of(scenario: Scenario, geometry: RobotGeometry):
-    """The terrain of the scenario's features, jittered from its seed, checked against the robot's size:
-    a feature may not start under the robot's feet at ``t = 0`` nor stand taller than its body height."""
-    from robots import terrain as tr
-
-    doc = scenario.doc
-    feats = {name: dict(f) for name, f in scenario.features().items()}
-    jitter = float(doc["terrain"]["jitter_m"])
-    if jitter > 0:
-        rng = np.random.default_rng(int(doc["seed"]))
-        for f in feats.values():
-            f["position_y"] = float(f["position_y"] + rng.uniform(-jitter, jitter))
-    front = max(y for _, y in geometry.mounts) + geometry.step_half_length + geometry.leg.foot_radius
-    for name, f in feats.items():
-        key = f"terrain.{name}"
-        if f["position_y"] < front + 0.01:
-            raise ScenarioError(f"{key}.position_y = {f['position_y']:.3f} m is under the robot at the start (its "
-                                f"front feet reach y = {front:.3f} m; a feature must start beyond {front + 0.01:.3f} m)"
-                                f" ({scenario.source})")
-        tall = {"step": f.get("height"), "stairs": f.get("rise", 0) * f.get("count", 0),
-                "blocks": f.get("height_max")}.get(f["type"])
-        if tall is not None and tall >= geometry.height:
-            raise ScenarioError(f"{key}: {tall:.3f} m high does not fit the {geometry.name} robot (body height "
-                                f"{geometry.height:.3f} m) ({scenario.source})")
-    try:
-        terrain = tr.compose({f"terrain.{k}": v for k, v in feats.items()}, doc["terrain"]["friction"],
-                             name=scenario.name)
-    except ModelError as exc:
-        raise ScenarioError(f"{exc} ({scenario.source})") from None
-    terrain.params = {"features": feats, "jitter_m": jitter} if feats else {}
-    return terrain
 
 
 def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None = None, seed: int | None = None,
@@ -114,11 +42,7 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
     if seed is not None:
         scenario.doc["seed"] = int(seed)
     kind = scenario.doc["controller"]["kind"]
-    if kind == "fukuhara":
-        from harness.experiments.fukuhara.scenarios import build
-    else:
-        from harness.experiments.yu.scenarios import build
-    setup = build(scenario)
+    setup = (fukuhara.build if kind == "fukuhara" else yu.build)(scenario)
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
     return setup
 
@@ -130,11 +54,12 @@ def fell_from(res: Results, robot: str, max_tilt: float = math.pi / 4) -> tuple[
 
 def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
                  sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
-                 step_thread: bool | None = None, **kw: Any) -> dict[str, Any]:
+                 step_thread: bool | None = None, save_results: bool = True, **kw: Any) -> dict[str, Any]:
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
-    ``step_thread``: see :class:`~harness.simulate.Simulator`."""
+    ``step_thread``: see :class:`~harness.simulate.Simulator`; ``save_results=False`` writes only the
+    summary and the scenario (a benchmark of hundreds of trials)."""
     setup = build_scenario(name, sets, **kw)
     t_end = float(t_end if t_end is not None else setup.t_end)
     label = setup.scenario.name if setup.scenario is not None else str(name)
@@ -156,8 +81,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         res = exc.results
     wall = time.perf_counter() - wall0
     res.meta.update({"scenario": label, **setup.info})
-    res.save(out / "results.csv")
-    res.save(out / "results.npz")
+    if save_results:
+        res.save(out / "results.csv")
+        res.save(out / "results.npz")
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
     if error is not None:

@@ -367,10 +367,9 @@ def resolve_key(scenario: Scenario, key: str) -> list[str]:
 
 
 def apply_override(scenario: Scenario, key: str, value: Any) -> None:
-    """Set ``key`` (a ``--set`` key) to ``value`` (already a Python value, or a string to parse)."""
+    """Set ``key`` (a ``--set`` key) to ``value`` (a Python value: the CLI parses its text with
+    :func:`parse_value` first)."""
     path = resolve_key(scenario, key)
-    if isinstance(value, str):
-        value = parse_value(value)
     node = scenario.doc
     for part in path[:-1]:
         if part not in node:

@@ -37,7 +37,8 @@ from components.core import ModelError
 from harness.results import atomic_write
 
 Z95 = 1.959963984540054
-OUTCOME_KEYS = ("success", "complete", "fell", "fell_time_s", "fell_reason", "distance_m", "speed_m_s", "gait",
+OUTCOME_KEYS = ("success", "criteria_failed", "complete", "fell", "fell_time_s", "fell_reason", "max_tilt_deg",
+                "height_drop_m", "stalled", "stalled_from_s", "waiting_share", "distance_m", "speed_m_s", "gait",
                 "gait_from_contacts", "walks", "crossed_time_s", "max_y_m", "goal_y_m", "t_end", "wall_time_s")
 
 
@@ -55,7 +56,7 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
 
 
 def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: str,
-              t_end: float | None = None, plots: bool = False) -> dict[str, Any]:
+              t_end: float | None = None, plots: bool = False, save_results: bool = True) -> dict[str, Any]:
     """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``."""
     from harness.experiments.runner import run_scenario
 
@@ -63,7 +64,7 @@ def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: st
     record: dict[str, Any] = {"seed": int(seed), "dir": str(out_dir), "status": "ok", "error": None, "outcome": {}}
     try:
         summary = run_scenario(scenario, out_dir, t_end=t_end, sets=dict(sets or {}), progress=False, plots=plots,
-                               step_thread=False, seed=int(seed))
+                               step_thread=False, save_results=save_results, seed=int(seed))
         record["outcome"] = {k: summary[k] for k in OUTCOME_KEYS if k in summary}
     except Exception as exc:  # noqa: BLE001 - a trial must never stop the sweep
         record["status"] = "failed"

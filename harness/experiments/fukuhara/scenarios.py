@@ -45,8 +45,9 @@ from components.fukuhara.controller import (
 from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from components.graph import Graph
 from harness.experiments.gait_classifier import classify, stance_from_fz
-from harness.experiments.runner import PLANT_KEYS, RunSetup, fell_from, leg_fields, robot_geometry, terrain_of
+from harness.experiments.outcomes import fall
 from harness.experiments.scenario import Scenario, ScenarioError
+from harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from harness.results import Results
 from robots.plant import DartHexapod
 from robots.terrain import Terrain
@@ -339,7 +340,7 @@ def build(scenario: Scenario) -> RunSetup:
             checks["expected_gait"] = s["gait"] == expected
         if amputated:
             pos = res["robot.body_position"]
-            s["walks"] = bool(not fell_from(res, "robot")[0] and pos[-1, 1] - pos[0, 1] >= MIN_WALK)
+            s["walks"] = bool(not fall(res, "robot")[0] and pos[-1, 1] - pos[0, 1] >= MIN_WALK)
         if far_edge is not None:
             crossing = gap_outcome(res, far_edge, crit["cross_margin_m"])
             checks["cross"] = crossing.pop("success")
@@ -360,7 +361,7 @@ def build(scenario: Scenario) -> RunSetup:
 
 def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> dict[str, Any]:
     """Gap crossing criterion: the body centre reaches ``far_edge + margin`` before any fall."""
-    fell, fell_t, reason = fell_from(res, "robot")
+    fell, fell_t, reason = fall(res, "robot")
     y = res["robot.body_position"][:, 1]
     goal = far_edge + margin
     reached = np.flatnonzero(y >= goal)

@@ -81,8 +81,8 @@ from components.geometry import YU_SIM, RobotGeometry
 from components.graph import Graph
 from components.yu.leg import hexapod_controller
 from harness.compile import compile_graph
-from harness.experiments.runner import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from harness.experiments.scenario import Scenario, ScenarioError
+from harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from harness.results import Results
 from robots import terrain as tr
 from robots.plant import DartHexapod

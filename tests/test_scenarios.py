@@ -1,0 +1,201 @@
+"""Scenarios as data: the built-in TOML files, overrides by key, errors that name the key, composed
+terrains, and outcomes computed from recorded data (stall, tilt without a fall, fall)."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import numpy as np
+import pytest
+
+from harness.cli.main import main
+from harness.experiments.outcomes import evaluate, stall
+from harness.experiments.runner import build_scenario
+from harness.experiments.scenario import ScenarioError, builtin_names, line_of, load, parse_value
+from harness.results import Results
+from robots import terrain as tr
+
+BUILTIN = ["ditches", "flat", "fukuhara-amputation", "fukuhara-gaits", "fukuhara-gap", "prototype-step", "step"]
+
+
+def test_every_builtin_scenario_is_a_file_that_builds_and_round_trips():
+    assert builtin_names() == BUILTIN
+    for name in BUILTIN:
+        scenario = load(name)
+        setup = build_scenario(scenario)
+        assert setup.scenario is scenario and setup.graph.find("robot") is not None
+        again = load_text(scenario.to_toml())
+        assert again.doc == scenario.doc, name  # --show prints what runs
+
+
+def load_text(text: str, tmp=None):
+    import tempfile
+    from pathlib import Path
+
+    d = Path(tempfile.mkdtemp())
+    path = d / "s.toml"
+    path.write_text(text)
+    return load(path)
+
+
+def test_overrides_reach_the_document_and_the_terrain():
+    s = load("step", {"terrain.step.height": 0.06, "terrain.step.side": "left", "robot.body_mass": 4,
+                      "controller.Fcx": 20, "controller.R1.reflex.x1_apex": 0.5})
+    assert s.features()["step"] == {"type": "step", "height": 0.06, "position_y": 0.355, "side": "left"}
+    assert s.doc["robot"]["body_mass"] == 4.0 and s.doc["controller"]["Fcx"] == 20.0
+    assert s.doc["controller"]["params"]["R1.reflex.x1_apex"] == 0.5
+    setup = build_scenario(s)
+    assert setup.geometry.body_mass == 4.0
+    assert setup.terrain.height_at(-0.1, 1.0) == pytest.approx(0.06) and setup.terrain.height_at(0.1, 1.0) == 0.0
+    assert setup.graph.get_param("controller.R1.reflex.x1_apex") == 0.5
+    assert setup.graph.get_param("controller.L1.sensors.Fcx") == 20.0
+
+
+def test_a_feature_can_be_added_from_the_command_line_keys():
+    s = load("flat", {"terrain.pit.type": "ditch", "terrain.pit.depth": 0.03, "terrain.pit.width": 0.1,
+                      "terrain.pit.position_y": 0.4, "terrain.pit.side": "both"})
+    terrain = build_scenario(s).terrain
+    assert terrain.height_at(0.1, 0.45) == pytest.approx(-0.03) and terrain.height_at(0.1, 0.6) == 0.0
+
+
+def test_values_are_toml_and_bare_words_are_strings():
+    assert parse_value("0.06") == 0.06 and parse_value("3") == 3 and parse_value("true") is True
+    assert parse_value("left") == "left" and parse_value('"a b"') == "a b" and parse_value("[1, 2]") == [1, 2]
+    with pytest.raises(ScenarioError, match="not a TOML value"):
+        parse_value("1 2")
+
+
+@pytest.mark.parametrize("sets, fragment", [
+    ({"nosuch": 1}, "no parameter matching 'controller.nosuch'"),  # unknown key (Yu: not a graph parameter)
+    ({"criteria.nosuch": 1}, "unknown key 'criteria.nosuch'"),
+    ({"terrain.step.heigth": 0.05}, "terrain.step: unknown field 'heigth'"),
+    ({"t_end": "x"}, "t_end must be a number, got 'x'"),  # wrong type
+    ({"terrain.step.height": "abc"}, "terrain.step.height must be a number"),
+    ({"controller.gait": 1.5}, "controller.gait must be an integer"),
+    ({"terrain.step.side": "middle"}, "terrain.step.side must be one of right, left, both"),
+    ({"robot.body_mass": -3}, "robot.body_mass = -3.0 is out of range: must be > 0"),  # out of range
+    ({"criteria.max_tilt_deg": 400}, "criteria.max_tilt_deg = 400.0 is out of range"),
+    ({"terrain.step.position_y": 0.05}, "terrain.step.position_y = 0.050 m is under the robot"),  # does not fit
+    ({"terrain.step.height": 0.2}, "terrain.step: 0.200 m high does not fit the yu-sim robot"),
+    ({"robot.preset": "yu-giant"}, "robot.preset must be one of yu-sim, yu-prototype"),
+])
+def test_bad_keys_and_values_are_errors_naming_the_key(sets, fragment):
+    with pytest.raises(ScenarioError) as err:
+        build_scenario("step", sets)
+    assert fragment in str(err.value)
+    assert "--set" in str(err.value) or "step" in str(err.value)  # and where it was written
+
+
+def test_errors_in_a_file_name_the_file_and_line(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text(textwrap.dedent("""\
+        name = "mine"
+        t_end = 5.0
+
+        [robot]
+        preset = "yu-sim"
+        stance_width = 0.075
+
+        [terrain.bump]
+        type = "step"
+        height = -0.02
+        position_y = 0.5
+        side = "right"
+        """))
+    with pytest.raises(ScenarioError, match=rf"terrain.bump.height must be a finite number > 0.*{path}, line 10"):
+        load(path)
+    path.write_text('name = "mine"\nt_end = 5.0\nspeed = 3\n')
+    with pytest.raises(ScenarioError, match=rf"unknown key 'speed' \({path}, line 3\)"):
+        load(path)
+    path.write_text("name = \n")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load(path)
+    with pytest.raises(ScenarioError, match="does not exist"):
+        load(tmp_path / "missing.toml")
+    assert line_of('[terrain.step]\nheight = 1\n', "terrain.step.height") == 2
+
+
+def test_raised_feature_over_a_hole_does_not_fit():
+    with pytest.raises(ScenarioError, match="terrain.step covers terrain.pit"):
+        load("step", {"terrain.pit.type": "ditch", "terrain.pit.depth": 0.02, "terrain.pit.width": 0.05,
+                      "terrain.pit.position_y": 0.6, "terrain.pit.side": "right"})
+
+
+def test_cli_show_list_and_bad_key(capsys, tmp_path):
+    assert main(["run", "step", "--show", "--set", "terrain.step.height=0.06", "--set", "terrain.step.side=left"]) == 0
+    out = capsys.readouterr().out
+    assert "height = 0.06" in out and 'side = "left"' in out
+    shown = tmp_path / "shown.toml"
+    shown.write_text(out)
+    assert main(["run", str(shown), "--show"]) == 0 and "height = 0.06" in capsys.readouterr().out
+    assert main(["run", "--list"]) == 0 and "fukuhara-gap" in capsys.readouterr().out
+    assert main(["run", "step", "--set", "terrain.step.height=tall", "-o", str(tmp_path / "x")]) == 2  # a string
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "terrain.step.height must be a number" in err[0]
+    assert not (tmp_path / "x").exists()  # nothing written for a rejected scenario
+
+
+def test_composed_terrain_stairs_and_blocks():
+    t = tr.compose({"up": {"type": "stairs", "rise": 0.02, "run": 0.1, "count": 3, "position_y": 0.5,
+                           "side": "both"}})
+    assert [t.height_at(0.0, y) for y in (0.45, 0.55, 0.65, 0.75, 2.0)] == pytest.approx([0, 0.02, 0.04, 0.06, 0.06])
+    patch = {"type": "blocks", "position_y": 0.4, "length": 0.8, "half_width": 0.4, "size": 0.1,
+             "height_min": 0.0, "height_max": 0.03, "seed": 7, "side": "both"}
+    a, b = tr.compose({"rough": patch}), tr.compose({"rough": patch})
+    ys, xs = np.meshgrid(np.linspace(0.41, 1.19, 9), np.linspace(-0.39, 0.39, 9))
+    ha, hb = a.height_at(xs, ys), b.height_at(xs, ys)
+    assert np.array_equal(ha, hb) and 0 <= ha.min() and ha.max() <= 0.03 and np.ptp(ha) > 0.01  # seeded
+    other = tr.compose({"rough": {**patch, "seed": 8}})
+    assert not np.array_equal(other.height_at(xs, ys), ha)
+    assert a.height_at(0.0, 1.5) == 0.0 and a.height_at(0.6, 0.8) == 0.0  # outside the patch: flat
+
+
+# -- outcomes from scripted runs ------------------------------------------------------------------
+
+def _run(y, roll_deg=0.0, contact=None, dt=0.01):
+    n = len(y)
+    t = np.arange(n) * dt
+    pos = np.column_stack([np.zeros(n), y, np.full(n, 0.12)])
+    rpy = np.column_stack([np.radians(np.broadcast_to(roll_deg, n)), np.zeros(n), np.zeros(n)])
+    c = np.zeros(n) if contact is None else contact
+    cols = ([f"robot.body_position[{i}]" for i in range(3)] + [f"robot.body_rpy[{i}]" for i in range(3)]
+            + ["robot.body_contact"])
+    return Results(t, cols, ["m"] * 3 + ["rad"] * 3 + ["1"], np.column_stack([pos, rpy, c]))
+
+
+CRITERIA = {"no_fall": True, "fall_tilt_deg": 45.0, "max_tilt_deg": 30.0, "no_stall": True, "stall_window_s": 5.0,
+            "stall_progress_m": 0.01, "min_distance_m": 0.0}
+
+
+def test_a_robot_that_stops_is_stalled_and_a_walking_one_is_not():
+    t = np.arange(2000) * 0.01  # 20 s
+    walking = 0.02 * t
+    out = evaluate(_run(walking), "robot", CRITERIA)
+    assert not out["stalled"] and out["success"] and out["speed_m_s"] == pytest.approx(0.02, rel=1e-3)
+    stuck = np.minimum(0.02 * t, 0.1)  # stops at 5 s and stays
+    out = evaluate(_run(stuck), "robot", CRITERIA)
+    assert out["stalled"] and not out["fell"] and not out["success"] and out["criteria_failed"] == ["stalled"]
+    assert 4.5 <= out["stalled_from_s"] <= 5.0  # the first window without 1 cm of progress starts as it stops
+
+
+def test_waiting_on_a_reflex_is_not_a_stall():
+    t = np.arange(3000) * 0.01  # 30 s: walk 10 s, wait 10 s (a search), walk 10 s
+    y = np.where(t < 10, 0.02 * t, np.where(t < 20, 0.2, 0.2 + 0.02 * (t - 20)))
+    waiting = (t >= 10) & (t < 20)
+    out = evaluate(_run(y), "robot", CRITERIA, waiting=waiting)
+    assert not out["stalled"] and out["waiting_share"] == pytest.approx(1 / 3, abs=0.01)
+    assert evaluate(_run(y), "robot", CRITERIA)["stalled"]  # the same motion without the wait is a stall
+    assert stall(t, y, np.zeros_like(waiting), 5.0, 0.01) == (True, pytest.approx(10.0, abs=0.5))
+
+
+def test_large_tilt_without_a_fall_and_a_fall():
+    t = np.arange(1000) * 0.01
+    tilted = evaluate(_run(0.02 * t, roll_deg=np.where(t > 5, 36.0, 0.0)), "robot", CRITERIA)
+    assert not tilted["fell"] and tilted["max_tilt_deg"] == pytest.approx(36.0)
+    assert not tilted["success"] and tilted["criteria_failed"] == ["max_tilt_deg"]
+    fallen = evaluate(_run(0.02 * t, roll_deg=np.where(t > 6, 50.0, 0.0)), "robot", CRITERIA)
+    assert fallen["fell"] and fallen["fell_time_s"] == pytest.approx(6.01) and fallen["fell_reason"] == "tilted 50 deg"
+    contact = evaluate(_run(0.02 * t, contact=(t > 7).astype(float)), "robot", CRITERIA)
+    assert contact["fell"] and contact["fell_reason"] == "body touched the ground"
+    assert math.isclose(contact["max_tilt_deg"], 0.0, abs_tol=1e-9)

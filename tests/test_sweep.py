@@ -101,3 +101,63 @@ def test_cli_bad_input_exits_2(argv, text, capsys):
     err = capsys.readouterr().err
     assert text in err and err.strip().splitlines()[-1].startswith(("cpgsim sweep: error", "usage")) is not None
     assert len(err.strip().splitlines()) <= 2
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0
+                    or __import__("shutil").which("unshare") is None,
+                    reason="needs root and unshare(1) to give the worker a file system of its own")
+def test_sweep_on_a_cluster_whose_worker_does_not_share_the_client_disk(tmp_path):
+    """A dask scheduler and a worker started as separate processes; the worker runs in a mount namespace
+    of its own with an empty tmpfs over the client's output folder (what it writes there the client
+    never sees, as on a cluster node with its own disk). The trials' files still reach the client."""
+    import os
+    import subprocess
+    import time
+
+    from distributed import Client
+
+    out = tmp_path / "shared"
+    out.mkdir()
+    (out / "client-only.txt").write_text("the client wrote this")
+    port = _free_port()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                              "--port", str(port), "--no-dashboard"], env=env, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    worker_cmd = (f"mount -t tmpfs tmpfs {out} && exec {sys.executable} -m distributed.cli.dask_worker "
+                  f"tcp://127.0.0.1:{port} --nworkers 1 --nthreads 1 --no-dashboard")
+    worker = subprocess.Popen(["unshare", "--mount", "--propagation", "private", "sh", "-c", worker_cmd], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        client = Client(f"tcp://127.0.0.1:{port}", timeout="30s")
+        client.wait_for_workers(1, timeout=60)
+        assert client.submit(os.listdir, str(out), pure=False).result() == []  # its own, empty folder
+        doc = run_sweep("fukuhara-gaits", 2, 5, out / "sweep", sets=SETS, t_end=1.0, progress=False,
+                        client=client)
+        client.close()
+    finally:
+        for proc in (worker, sched):
+            proc.terminate()
+        for proc in (worker, sched):
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        time.sleep(0.1)
+    trials = doc["groups"][0]["trials"]
+    assert [t["status"] for t in trials] == ["ok", "ok"], [t.get("error") for t in trials]
+    for t in trials:
+        res = Results.load(f"{t['dir']}/results.npz")  # written by the client from what the worker sent
+        assert res.time[-1] == pytest.approx(1.0) and "robot.body_position[1]" in res.columns
+        assert json.loads((__import__("pathlib").Path(t["dir"]) / "summary.json").read_text())["seed"] == t["seed"]
+        assert "files" not in t
+    assert (out / "client-only.txt").read_text() == "the client wrote this"

@@ -8,7 +8,7 @@ A suite file (the shipped one: ``harness/experiments/suites/terrain.toml``)::
     t_end = 25.0                  # s per trial
 
     [criteria]                    # applied to every trial (the scenario's [criteria] keys)
-    min_distance_m = 0.5
+    min_distance_m = 0.35
 
     [controllers.yu]              # a base scenario (no terrain features of its own) and overrides
     scenario = "flat"

@@ -81,6 +81,44 @@ def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: st
     return record
 
 
+def shipped_trial(trial_fn: Callable[..., dict[str, Any]], scenario: str, seed: int, sets: dict[str, Any] | None,
+                  out_dir: str, t_end: float | None = None, plots: bool = False, **kw: Any) -> dict[str, Any]:
+    """Run ``trial_fn`` on a worker into a private scratch folder and return its record with every file it
+    wrote (``record["files"]``: name -> bytes), so the client gets the results whatever the worker's
+    file system (a cluster's workers need not share the client's disk). ``out_dir`` is the client's."""
+    import shutil
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="cpgsim-trial-"))
+    try:
+        record = trial_fn(scenario, seed, sets, str(scratch / "trial"), t_end, plots, **kw)
+        files = {}
+        root = scratch / "trial"
+        if root.is_dir():
+            for f in sorted(root.rglob("*")):
+                if f.is_file():
+                    files[str(f.relative_to(root))] = f.read_bytes()
+        record["files"] = files
+        record["dir"] = out_dir
+        return record
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def receive_files(record: dict[str, Any]) -> dict[str, Any]:
+    """Write a shipped trial's files into its client-side ``dir`` (atomically, each file) and drop them
+    from the record."""
+    files = record.pop("files", None) or {}
+    base = Path(record["dir"])
+    for name, blob in files.items():
+        dest = (base / name).resolve()
+        if base.resolve() not in dest.parents:
+            raise ModelError(f"trial file {name!r} would be written outside {base}")
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(dest, lambda f, blob=blob: f.write(blob), text=False)
+    return record
+
+
 @dataclass
 class Group:
     """Trials run with the same sets (one value of the varied parameter)."""
@@ -151,8 +189,8 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
     ``scheduler``: address of a running dask scheduler (``tcp://host:8786``); default: a LocalCluster
     of ``workers`` single-threaded worker processes for this sweep. ``serial``: run in this process
     (the reference for determinism and the benchmark). ``client``: an existing ``distributed.Client``
-    to use (not closed). The trial directories are absolute paths: workers on other machines need the
-    same filesystem.
+    to use (not closed). On Dask every trial runs in a scratch folder of its worker and sends its files
+    back with its record (:func:`shipped_trial`); the client writes them, so workers need no shared disk.
     """
     if int(trials) < 1:
         raise ModelError(f"--trials must be >= 1, got {trials}")
@@ -230,14 +268,14 @@ def _run_dask(client, scenario, tasks, groups, out, t_end, plots, trial_fn, bar)
     futures = {}
     for g, i, s in tasks:
         d = str(_trial_dir(out, g, len(groups), i, s))
-        fut = client.submit(trial_fn, scenario, s, g.sets, d, t_end, plots, pure=False,
+        fut = client.submit(shipped_trial, trial_fn, scenario, s, g.sets, d, t_end, plots, pure=False,
                             key=f"trial-{g.label}-{i}-{time.time_ns()}")
         futures[fut] = (g, i, s, d)
     records = {}
     for fut in as_completed(list(futures)):
         g, i, s, d = futures[fut]
         try:
-            rec = fut.result()
+            rec = receive_files(fut.result())
         except Exception as exc:  # noqa: BLE001 - worker died or the task could not run
             rec = {"seed": s, "dir": d, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
                    "outcome": {}}

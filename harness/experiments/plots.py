@@ -38,24 +38,47 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.where(d == 1)[0], np.where(d == -1)[0], strict=True))
 
 
-def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: Path, title: str = "") -> Path:
+REFLEX_LABELS = {"elevator": "elevator reflex", "searching": "searching reflex", "found": "foothold found",
+                 "giveup": "search given up", "withdraw": "withdraw"}
+
+
+def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: Path, title: str = "",
+              held: np.ndarray | None = None, labels: dict[str, str] | None = None) -> Path:
+    """Gait diagram: stance black, swing white; ``held`` (time x 6) marks where the gait FSM holds the leg
+    (its CPG rate 0: a Prolong state waiting for the other legs), grey in stance, hatched in swing.
+    Only the event kinds that occur are in the legend (``labels`` renames them)."""
     t = res.time
-    fig, ax = plt.subplots(figsize=(10, 3.2))
+    names = {**REFLEX_LABELS, **(labels or {})}
+    fig, ax = plt.subplots(figsize=(10, 3.4))
+    held = np.zeros_like(stance, dtype=bool) if held is None else held
     for leg in range(6):
         row = 5 - leg
-        for a, b in _runs(stance[:, leg]):
-            ax.add_patch(plt.Rectangle((t[a], row - 0.35), t[min(b, len(t) - 1)] - t[a], 0.7, color="black"))
+        for mask, style in ((stance[:, leg] & ~held[:, leg], {"color": "black"}),
+                            (stance[:, leg] & held[:, leg], {"color": "0.6"}),
+                            (~stance[:, leg] & held[:, leg], {"facecolor": "white", "edgecolor": "0.5",
+                                                              "hatch": "////", "lw": 0})):
+            for a, b in _runs(mask):
+                ax.add_patch(plt.Rectangle((t[a], row - 0.35), t[min(b, len(t) - 1)] - t[a], 0.7, **style))
     for ev in reflexes:
-        ax.plot(ev["t"], 6 - ev["leg_number"], marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"), ms=8)
-    for kind in sorted({ev["kind"] for ev in reflexes} | {"elevator", "searching"}, key=list(REFLEX_COLORS).index):
-        ax.plot([], [], "v", color=REFLEX_COLORS.get(kind, "tab:green"),
-                label=f"{kind} reflex" if kind in ("elevator", "searching") else kind)
+        ax.plot(ev["t"], 6 - ev["leg_number"] + 0.45, marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"),
+                ms=7, clip_on=False)
+    handles = [plt.Rectangle((0, 0), 1, 1, color="black", label="stance")]
+    if held.any():
+        handles += [plt.Rectangle((0, 0), 1, 1, color="0.6", label="stance, held by the FSM"),
+                    plt.Rectangle((0, 0), 1, 1, facecolor="white", edgecolor="0.5", hatch="////",
+                                  label="swing, held by the FSM")]
+    kinds = sorted({ev["kind"] for ev in reflexes}, key=lambda k: list(REFLEX_COLORS).index(k)
+                   if k in REFLEX_COLORS else 99)
+    handles += [plt.Line2D([], [], ls="none", marker="v", color=REFLEX_COLORS.get(k, "tab:green"),
+                           label=names.get(k, k)) for k in kinds]
     ax.set_yticks(range(6), LEG_LABELS[::-1])
     ax.set_xlim(t[0], t[-1])
-    ax.set_ylim(-0.7, 5.7)
+    ax.set_ylim(-0.7, 5.9)
     ax.set_xlabel("time [s]")
-    ax.set_title(title or "gait diagram (black: stance)", loc="left", fontsize=10)
-    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=5, frameon=False)
+    held_share = f"; FSM holds {held.mean():.0%} of leg-time" if held.any() else ""
+    ax.set_title((title or "gait diagram") + held_share + ("" if reflexes else "; no reflex events"),
+                 loc="left", fontsize=9)
+    ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.06), fontsize=7, ncol=6, frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -87,39 +110,46 @@ def plot_feet_sagittal(res: Results, robot: str, terrain, path: Path, geometry: 
     return path
 
 
+THRESHOLD_TEXT = {"Fcx": "lateral obstacle", "Fcy": "forward obstacle", "Fcz": "touchdown"}
+
+
 def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], reflexes: Sequence[dict],
-                    path: Path) -> Path:
+                    path: Path, labels: dict[str, str] | None = None) -> Path:
+    """Toe forces per leg with the threshold lines (legend) and the reflex triggers (vertical lines,
+    labelled in a band above the traces so no label covers a trace)."""
     t = res.time
     f = res[f"{robot}.toe_force"].reshape(len(t), 6, 3)
-    fig, axes = plt.subplots(6, 1, figsize=(11, 11), sharex=True)
+    names = {**REFLEX_LABELS, **(labels or {})}
+    fig, axes = plt.subplots(6, 1, figsize=(11, 11.5), sharex=True)
+    styles = {"Fcx": ":", "Fcy": "--", "Fcz": "-."}
+    span = float(t[-1] - t[0]) or 1.0
     for leg, ax in enumerate(axes):
         ax.plot(t, f[:, leg, 0], lw=0.6, label="Fx lateral")
         ax.plot(t, f[:, leg, 1], lw=0.6, label="Fy forward")
         ax.plot(t, f[:, leg, 2], lw=0.8, label="Fz vertical", color="k")
-        for key, style in (("Fcx", ":"), ("Fcy", "--"), ("Fcz", "-.")):
+        for key, style in styles.items():
             if key in thresholds:
-                ax.axhline(thresholds[key], color="tab:gray", ls=style, lw=0.8)
-        ax.set_ylabel(f"{LEG_NAMES[leg]} [N]")
-        top = np.percentile(np.abs(f[:, leg, :]), 99.5) * 1.3 + 1
-        ax.set_ylim(-top, top)
-        for ev in reflexes:
-            if ev["leg_number"] == leg + 1:
-                color = REFLEX_COLORS.get(ev["kind"], "tab:green")
-                ax.axvline(ev["t"], color=color, lw=1.0)
-                if ev["kind"] == "elevator":
-                    text = f"elevator {ev.get('force_N', 0):.0f} N"
-                    if "peak_force_N" in ev:
-                        text += f" (peak {ev['peak_force_N']:.0f} N)"
-                elif ev["kind"] in ("searching", "giveup"):
-                    text = ev["kind"]
-                else:
-                    continue
-                ax.annotate(text, (ev["t"], top * 0.75), fontsize=7, color=color, xytext=(2, 0),
-                            textcoords="offset points")
+                ax.axhline(thresholds[key], color="tab:gray", ls=style, lw=0.9,
+                           label=f"{key} = {thresholds[key]:g} N ({THRESHOLD_TEXT.get(key, key)})")
+        ax.set_ylabel(f"{LEG_LABELS[leg]}\n[N]", fontsize=8)
+        top = np.percentile(np.abs(f[:, leg, :]), 99.5) * 1.2 + 1
+        ax.set_ylim(-top, top * 1.9)  # the band above 1.2 x the traces holds the labels
+        last_t, level = -np.inf, 0
+        for ev in (e for e in reflexes if e["leg_number"] == leg + 1):
+            color = REFLEX_COLORS.get(ev["kind"], "tab:green")
+            ax.axvline(ev["t"], color=color, lw=1.0)
+            if ev["kind"] == "elevator":
+                text = f"elevator {ev.get('force_N', 0):.0f} N"
+                if "peak_force_N" in ev:
+                    text += f" (peak {ev['peak_force_N']:.0f} N)"
+            else:
+                text = names.get(ev["kind"], ev["kind"])
+            level = (level + 1) % 3 if ev["t"] - last_t < 0.12 * span else 0  # stagger labels close in time
+            last_t = ev["t"]
+            ax.text(ev["t"], top * (1.3 + 0.2 * level), " " + text, fontsize=7, color=color, va="bottom",
+                    bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 0.5})
     axes[0].legend(fontsize=7, ncol=3, loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False)
-    thr = ", ".join(f"{k} = {v:g} N" for k, v in thresholds.items())
-    axes[0].set_title(f"toe forces (body frame); thresholds {thr}; vertical lines: reflex triggers",
-                      loc="left", fontsize=9)
+    axes[0].set_title("toe forces (body frame); vertical lines: reflex events", loc="left", fontsize=9)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

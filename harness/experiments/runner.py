@@ -143,11 +143,13 @@ def make_plots(setup: RunSetup, res: Results, summary: dict[str, Any], out: Path
     stance = setup.stance(res) if setup.stance else plots_run.stance_from_forces(
         res, robot, setup.thresholds.get("Fcz", 2.0))
     reflexes = summary.get("reflexes", [])
-    title = f"{summary['scenario']}: gait diagram (black: stance), distance {summary['distance_m']:.3f} m"
+    title = f"{summary['scenario']}: gait diagram, distance {summary['distance_m']:.3f} m"
+    held = setup.held(res) if setup.held else None
     return [
-        plots_run.plot_gait(res, stance, reflexes, out / "gait.png", title),
+        plots_run.plot_gait(res, stance, reflexes, out / "gait.png", title, held=held, labels=setup.event_labels),
         plots_run.plot_feet_sagittal(res, robot, setup.terrain, out / "feet_sagittal.png", setup.geometry),
-        plots_run.plot_toe_forces(res, robot, setup.thresholds, reflexes, out / "toe_forces.png"),
+        plots_run.plot_toe_forces(res, robot, setup.thresholds, reflexes, out / "toe_forces.png",
+                                  labels=setup.event_labels),
         plots_run.plot_body(res, robot, out / "body.png"),
         plots_run.plot_snapshots(res, robot, setup.geometry, setup.terrain, out / "snapshots.png"),
     ]

@@ -38,6 +38,8 @@ class RunSetup:
     extra: Callable[[Results, Path], dict[str, Any]] | None = None  # more summary keys / plots; "checks"
     waiting: Callable[[Results], np.ndarray] | None = None  # time steps spent waiting on a reflex
     scenario: Scenario | None = None
+    held: Callable[[Results], np.ndarray] | None = None  # time x 6: the gait FSM holds the leg (CPG rate 0)
+    event_labels: dict[str, str] = field(default_factory=dict)  # legend text of the reflex event kinds
 
 
 def leg_fields(index: int) -> dict[str, Any]:

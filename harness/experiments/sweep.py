@@ -313,6 +313,7 @@ def plot_sweep(doc: dict[str, Any], path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     groups = doc["groups"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [1, 2.2]})
@@ -344,13 +345,17 @@ def plot_sweep(doc: dict[str, Any], path: Path) -> Path:
         ax2.axhline(goals.pop(), color="0.4", ls="--", lw=1, label="goal (success line)")
     ax2.plot([], [], "x", color="tab:red", label="crashed")
     ax2.set_xlabel("trial (seed = base seed + trial)")
-    ax2.set_ylabel(metric)
+    ax2.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax2.set_ylabel(METRIC_LABELS.get(metric, metric))
     ax2.legend(fontsize=8)
     ax2.set_title(f"{doc['scenario']}: per-trial outcome", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+METRIC_LABELS = {"max_y_m": "furthest forward position of the body [m]", "distance_m": "distance walked [m]"}
 
 
 def _metric(groups: Sequence[dict[str, Any]]) -> str:

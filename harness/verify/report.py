@@ -178,24 +178,29 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
         if cyc is not None:
             ia, ib = cyc.states.index(a), cyc.states.index(b)
             ax.plot(cyc.orbit[ia], cyc.orbit[ib], color="C3", lw=2.0, label=f"orbit T={cyc.period:.5g} s")
-            ax.plot(cyc.orbit[ia, 0], cyc.orbit[ib, 0], "k^", ms=6, label="orbit start (ref. up-crossing)")
+            ax.plot(cyc.orbit[ia, 0], cyc.orbit[ib, 0], "k^", ms=6, label="orbit start (ref. up-crossing)",
+                    zorder=5)
         ax.set_xlabel(a)
         ax.set_ylabel(b)
         ax.grid(alpha=0.3)
-        if k == 0:
-            ax.legend(fontsize=7, loc="upper right")
+        if k == 0:  # below the axes: a legend inside covered the orbit's start marker
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     ax = fig.add_subplot(gs[nrow_pp, 0])
     if cycles:
         T_show = max(c.period for c in cycles)
         for ci, c in enumerate(cycles):
             reps = max(1, round(T_show / c.period)) if rep.cycle is None else 1
             only_x = any(n.endswith(".x") for n in c.states) and len(c.states) > 2
+            shown: list[np.ndarray] = []
             for i, n in enumerate(c.states):
                 if only_x and not n.endswith(".x"):
                     continue
                 t = np.concatenate([c.period * (r + np.linspace(0, 1, c.orbit.shape[1])) for r in range(reps)])
                 y = np.tile(c.orbit[i], reps)
-                ax.plot(t, y, lw=1.2, ls="-" if ci == 0 else "--", label=n)
+                same = any(np.allclose(y, other, atol=1e-6 * (np.ptp(y) + 1e-12)) for other in shown)
+                shown.append(y)  # a trace equal to an earlier one (x2 = x3 on Yu's Y5 orbit) is drawn dashed on top
+                ax.plot(t, y, lw=2.4 if not same else 1.1, ls=("--" if same else "-") if ci == 0 else ":",
+                        label=n + (" (= an earlier trace)" if same else ""), zorder=3 + len(shown))
             if rep.cycle is not None:
                 ax.axvline(0, color="k", lw=0.6)
                 for n, lag in c.phase_lags.items():
@@ -205,7 +210,7 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
         marks = rep.cycle is not None and len(rep.cycle.phase_lags) > 2
         ax.set_title("orbit over one period" + (" (':' up-crossings of the other states)" if marks else "")
                      + ("" if rep.cycle else " (sub-cycles, no common period)"), fontsize=9)
-        ax.legend(fontsize=7, ncol=2)
+        ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.16), frameon=False)
         ax.grid(alpha=0.3)
     elif X_tr.size:
         for n in rep.states[:6]:

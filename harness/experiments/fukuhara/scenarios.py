@@ -356,7 +356,8 @@ def build(scenario: Scenario) -> RunSetup:
     t_end = float(doc["t_end"]) if doc.get("t_end") is not None else DEFAULT_T_END[setting]
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=t_end,
                     thresholds=_thresholds(ctrl_params), stance=_stance_fn(legs), reflexes=searching_events,
-                    record=_record(amputated), info=info, extra=extra, scenario=scenario)
+                    record=_record(amputated), info=info, extra=extra, scenario=scenario,
+                    event_labels={"searching": "rule 2 search (EarlyStance -> Swing)"})
 
 
 def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> dict[str, Any]:

@@ -193,6 +193,11 @@ def feature_summary(terrain: tr.Terrain) -> dict[str, Any]:
     return out
 
 
+def held_of(res: Results) -> np.ndarray:
+    """Time x 6: the gait FSM holds the leg (its CPG rate is 0 in a Prolong state)."""
+    return res[f"{CONTROLLER}.rate"] < 0.5
+
+
 def build(scenario: Scenario) -> RunSetup:
     """The closed loop a ``kind = "yu"`` / ``"yu-open-loop"`` scenario document describes."""
     doc = scenario.doc
@@ -213,4 +218,4 @@ def build(scenario: Scenario) -> RunSetup:
             "controller_kind": ctrl["kind"], **feature_summary(terrain)}
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
                     thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
-                    waiting=waiting_of, scenario=scenario)
+                    waiting=waiting_of, scenario=scenario, held=held_of)

@@ -128,3 +128,20 @@ def test_integrator_and_step_values():
     assert res["int.y"][-1] == pytest.approx(3.0, abs=1e-9)
     assert res["gain.y"][np.searchsorted(res.time, 0.25)] == pytest.approx(4.0)
     assert res["gain.y"][-1] == pytest.approx(12.0)
+
+
+def test_block_listing_is_generated_from_the_declarations_and_docs_are_current():
+    """`cpgsim blocks --markdown` lists every block with its ports and units; docs/blocks.md is that text."""
+    from pathlib import Path
+
+    from components.catalog import library, markdown
+    from harness.cli.main import main
+
+    names = {e.name for e in library()}
+    assert {"VanDerPolNeuron", "Gain", "YuConverter", "YuGaitFSM", "LimbModeController", "FootTrajectory"} <= names
+    md = markdown()
+    assert "| parameter | `eps` | 1 | real | 0.1 | 0 < v |" in md  # VanDerPolNeuron eps > 0 (Yu Y2)
+    assert "| input | `toe_force[3]` | N |" in md  # YuSensoryNeurons
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "blocks.md").read_text()
+    assert docs.strip() == md.strip(), "docs/blocks.md is stale: run cpgsim blocks --markdown > docs/blocks.md"
+    assert main(["blocks"]) == 0

@@ -1,129 +1,357 @@
-"""Block-diagram drawing with matplotlib (SVG/PNG/PDF): blocks with named ports, wires, graph ports.
+"""Block diagrams: a layered layout (signal flow left to right) with wires routed around the blocks.
 
-Layout: blocks are placed in columns by their longest path from the graph inputs (feedback wires
-are ignored for the layering), ports on the left (inputs) and right (outputs) of each box.
+Layout (Sugiyama style, :func:`layout_graph`): wires that close a loop are chosen by the Eades-Lin-Smyth
+greedy heuristic and drawn as feedback; every block gets the layer of its longest path from the graph inputs; the order
+within a layer is improved by barycentre sweeps. Routing never crosses a block: between two layers lies a
+channel with one vertical track per wire (wires from the same output port share one); a wire between
+adjacent layers runs port -> track -> port; a wire that skips layers runs along its own lane above all
+blocks, a feedback wire along its own lane below them. Nested graphs are drawn collapsed (a box with the
+graph's ports); draw one on its own with ``draw_graph(graph.find("L1"), ...)`` (``cpgsim graph NAME
+--subgraph L1``). SVG output carries tooltips: each port's unit, shape and kind, each wire's ends.
 """
 
 from __future__ import annotations
 
+import html
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import matplotlib
+from components.core import Block, CoSimBlock
+from components.graph import Graph, as_graph
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.patches import FancyBboxPatch  # noqa: E402
-
-from components.core import Block, CoSimBlock  # noqa: E402
-from components.graph import Graph, as_graph  # noqa: E402
-
-PORT_H = 0.32
+PORT_H = 0.32  # vertical distance of two ports
+HEAD_H = 0.62  # block title area
 BOX_W = 2.3
-COL_W = 4.2
+GAP_Y = 0.5  # between blocks of one layer
+TRACK = 0.16  # distance of two vertical tracks (or lanes)
+CHANNEL_MIN = 0.9
+IN, OUT = "$inputs", "$outputs"  # the graph's own inputs and outputs, drawn as pseudo-blocks
 
 
-def _has_feedthrough(blk: Block | CoSimBlock | Graph) -> bool:
-    """Whether some output of ``blk`` reads an input within the same instant."""
-    if isinstance(blk, Graph):
-        return True
-    if isinstance(blk, CoSimBlock):
-        return any(blk.feedthrough.values())
-    import casadi as ca
+@dataclass
+class Box:
+    name: str
+    x: float
+    y: float  # top; y grows downwards
+    w: float
+    h: float
+    inputs: list[str]
+    outputs: list[str]
+    kind: str
 
-    v = blk.symbols()
-    eq = blk.checked_equations(v)
-    return any(ca.depends_on(e, u) for e in eq.outputs.values() for u in v.u.values())
+    def port(self, name: str, side: str) -> tuple[float, float]:
+        names = self.inputs if side == "in" else self.outputs
+        return (self.x if side == "in" else self.x + self.w, self.y + HEAD_H + names.index(name) * PORT_H + 0.1)
 
 
-def _columns(graph: Graph) -> dict[str, int]:
-    """Stateful blocks (no feedthrough) start at column 0; algebraic blocks follow their sources."""
-    preds: dict[str, set[str]] = {b: set() for b in graph.blocks}
-    feed = {b: _has_feedthrough(blk) for b, blk in graph.blocks.items()}
-    for dst, src in graph.connections.items():
-        if src.block != dst.block and feed[dst.block]:
-            preds[dst.block].add(src.block)
-    level: dict[str, int] = {}
-    visiting: set[str] = set()
+@dataclass
+class Wire:
+    source: tuple[str, str]  # block, port
+    target: tuple[str, str]
+    points: list[tuple[float, float]]
+    feedback: bool = False
 
-    def depth(b: str) -> int:
-        if b in level:
-            return level[b]
-        if b in visiting:  # feedback: break the cycle
-            return 0
-        visiting.add(b)
-        d = 1 + max((depth(p) for p in preds[b]), default=-1)
-        visiting.discard(b)
-        level[b] = d
-        return d
 
-    for b in graph.blocks:
-        depth(b)
-    return level
+@dataclass
+class Layout:
+    boxes: dict[str, Box]
+    wires: list[Wire] = field(default_factory=list)
+    width: float = 0.0
+    height: float = 0.0
+
+
+def _ports(graph: Graph, name: str) -> tuple[list[str], list[str]]:
+    if name == IN:
+        return [], list(graph.input_map)
+    if name == OUT:
+        return list(graph.output_map), []
+    blk = graph.blocks[name]
+    return list(blk.inputs), list(blk.outputs)
+
+
+def _edges(graph: Graph) -> list[tuple[tuple[str, str], tuple[str, str]]]:
+    """(source block, port) -> (target block, port) for every wire, graph inputs and outputs included."""
+    edges = [((src.block, src.port), (dst.block, dst.port)) for dst, src in graph.connections.items()]
+    for gname, targets in graph.input_map.items():
+        edges += [((IN, gname), (t.block, t.port)) for t in targets]
+    edges += [((src.block, src.port), (OUT, gname)) for gname, src in graph.output_map.items()]
+    return edges
+
+
+def _feedback_edges(nodes: list[str], edges) -> set[int]:
+    """Indices of the wires drawn as feedback: those that point backwards in the Eades-Lin-Smyth order
+    (sinks to the right, sources to the left, otherwise the node with the most outgoing minus incoming
+    wires next), a small feedback set, so that, e.g., six identical legs share one layer."""
+    succ: dict[str, set[str]] = {n: set() for n in nodes}
+    pred: dict[str, set[str]] = {n: set() for n in nodes}
+    for (a, _), (b, _) in edges:
+        if a != b:
+            succ[a].add(b)
+            pred[b].add(a)
+    left: list[str] = []
+    right: list[str] = []
+    alive = dict.fromkeys(nodes)
+    while alive:
+        changed = True
+        while changed:
+            changed = False
+            for n in list(alive):
+                if not (succ[n] & alive.keys()) and n != IN:
+                    right.insert(0, n)
+                    del alive[n]
+                    changed = True
+                elif not (pred[n] & alive.keys()) and n != OUT:
+                    left.append(n)
+                    del alive[n]
+                    changed = True
+        if alive:
+            best = max(alive, key=lambda n: len(succ[n] & alive.keys()) - len(pred[n] & alive.keys()))
+            left.append(best)
+            del alive[best]
+    order = {n: i for i, n in enumerate(left + right)}
+    return {k for k, ((a, _), (b, _)) in enumerate(edges) if a == b or order[b] <= order[a]}
+
+
+def layout_graph(item: Graph | Block) -> Layout:
+    """Place the blocks of one graph level and route its wires (module docstring)."""
+    graph = as_graph(item)
+    nodes = [IN, *graph.blocks, OUT]
+    edges = _edges(graph)
+    back = _feedback_edges(nodes, edges)
+    forward = [(a[0], b[0]) for k, (a, b) in enumerate(edges) if k not in back and a[0] != b[0]]
+    layer: dict[str, int] = {}
+
+    def depth(n: str, seen: frozenset = frozenset()) -> int:
+        if n not in layer:
+            preds = [a for a, b in forward if b == n and a not in seen]
+            layer[n] = 0 if n == IN else 1 + max((depth(p, seen | {n}) for p in preds), default=0)
+        return layer[n]
+
+    for n in nodes:
+        depth(n)
+    last = max(layer[n] for n in nodes if n != OUT) + 1
+    layer[OUT] = last
+    layers: list[list[str]] = [[n for n in nodes if layer[n] == i] for i in range(last + 1)]
+    for _ in range(4):  # barycentre ordering, forward then backward
+        for i in list(range(1, last + 1)) + list(range(last - 1, -1, -1)):
+            nb = layers[i - 1] if i > 0 else []
+            na = layers[i + 1] if i < last else []
+            cur = tuple(layers[i])
+            keys = {}
+            for n in cur:
+                pos = [nb.index(a) for a, b in forward if b == n and a in nb]
+                pos += [na.index(b) for a, b in forward if a == n and b in na]
+                keys[n] = sum(pos) / len(pos) if pos else cur.index(n)
+            layers[i].sort(key=keys.__getitem__)
+    # tracks per channel c (between layer c-1 and c): edges leaving layer c-1 or entering layer c
+    src_tracks: dict[int, list[tuple[str, str]]] = {c: [] for c in range(last + 2)}
+    dst_tracks: dict[int, list[int]] = {c: [] for c in range(last + 2)}
+    for k, (a, b) in enumerate(edges):
+        la, lb = layer[a[0]], layer[b[0]]
+        if k not in back and a[0] != b[0] and lb == la + 1:
+            if a not in src_tracks[la + 1]:
+                src_tracks[la + 1].append(a)  # one track per source port
+        else:
+            if a not in src_tracks[la + 1]:
+                src_tracks[la + 1].append(a)
+            dst_tracks[lb].append(k)
+    widths = {c: max(CHANNEL_MIN, (len(src_tracks[c]) + len(dst_tracks[c]) + 1) * TRACK) for c in src_tracks}
+    boxes: dict[str, Box] = {}
+    x = widths[0]
+    for i, names in enumerate(layers):
+        y = 0.0
+        w_layer = 0.0
+        for n in names:
+            ins, outs = _ports(graph, n)
+            pseudo = n in (IN, OUT)
+            w = 0.15 if pseudo else BOX_W
+            h = max(len(ins), len(outs), 1) * PORT_H + HEAD_H
+            kind = ("graph inputs" if n == IN else "graph outputs" if n == OUT else
+                    "graph" if isinstance(graph.blocks[n], Graph) else type(graph.blocks[n]).__name__)
+            boxes[n] = Box(n, x, y, w, h, ins, outs, kind)
+            y += h + GAP_Y
+            w_layer = max(w_layer, w)
+        for n in names:  # right-align pseudo blocks' ports with the layer
+            if n == IN:
+                boxes[n].x = x + w_layer - boxes[n].w
+        x += w_layer + widths[i + 1]
+    n_top = sum(1 for k, (a, b) in enumerate(edges)
+                if k not in back and a[0] != b[0] and layer[b[0]] > layer[a[0]] + 1)
+    shift = (n_top + 1) * TRACK + 0.3
+    for b in boxes.values():
+        b.y += shift
+    bottom = max(b.y + b.h for b in boxes.values()) + 0.3
+    lay = Layout(boxes)
+    channel_x0 = {0: 0.0}
+    for i in range(last + 1):
+        channel_x0[i + 1] = max(b.x + b.w for n, b in boxes.items() if layer[n] == i)
+    top_lane, bottom_lane = shift - 0.3, bottom
+    for k, (a, b) in enumerate(edges):
+        p = boxes[a[0]].port(a[1], "out")
+        q = boxes[b[0]].port(b[1], "in")
+        la, lb = layer[a[0]], layer[b[0]]
+        c1 = la + 1
+        xt1 = channel_x0[c1] + (src_tracks[c1].index(a) + 1) * TRACK
+        if k not in back and a[0] != b[0] and lb == la + 1:
+            pts = [p, (xt1, p[1]), (xt1, q[1]), q]
+            lay.wires.append(Wire(a, b, pts))
+            continue
+        xt2 = channel_x0[lb] + (len(src_tracks[lb]) + dst_tracks[lb].index(k) + 1) * TRACK
+        feedback = k in back or a[0] == b[0] or lb <= la
+        if feedback:
+            bottom_lane += TRACK
+            ly = bottom_lane
+        else:
+            top_lane -= TRACK
+            ly = top_lane
+        pts = [p, (xt1, p[1]), (xt1, ly), (xt2, ly), (xt2, q[1]), q]
+        lay.wires.append(Wire(a, b, pts, feedback))
+    lay.width = max(b.x + b.w for b in boxes.values()) + widths[last + 1]
+    lay.height = bottom_lane + 0.4
+    return lay
+
+
+# -- geometry checks ----------------------------------------------------------------------------------
+
+def segment_crosses_box(p: tuple[float, float], q: tuple[float, float], box: Box, eps: float = 1e-9) -> bool:
+    """Whether the axis-parallel segment p-q passes through the inside of ``box``."""
+    x0, x1 = sorted((p[0], q[0]))
+    y0, y1 = sorted((p[1], q[1]))
+    return x0 < box.x + box.w - eps and x1 > box.x + eps and y0 < box.y + box.h - eps and y1 > box.y + eps
+
+
+def crossings(lay: Layout) -> list[str]:
+    """Every (wire segment, block) pair where a wire passes through a block: empty for a good layout."""
+    out = []
+    for w in lay.wires:
+        for p, q in zip(w.points, w.points[1:], strict=False):
+            for name, box in lay.boxes.items():
+                if segment_crosses_box(p, q, box):
+                    out.append(f"{w.source[0]}.{w.source[1]} -> {w.target[0]}.{w.target[1]} crosses {name}")
+    return out
+
+
+# -- drawing ------------------------------------------------------------------------------------------
+
+def _port_info(graph: Graph, block: str, port: str, side: str) -> str:
+    if block == IN:
+        p = graph.inputs.get(port)
+    elif block == OUT:
+        p = graph.outputs.get(port)
+    else:
+        blk = graph.blocks[block]
+        p = (blk.inputs if side == "in" else blk.outputs).get(port)
+    if p is None:
+        return port
+    shape = "x".join(map(str, p.shape))
+    return f"{block}.{port} ({'input' if side == 'in' else 'output'}): unit {p.unit}, shape {shape}, {p.kind}" + (
+        f" - {p.description}" if p.description else "")
+
+
+def _color(graph: Graph, name: str) -> str:
+    if name in (IN, OUT):
+        return "#ffffff"
+    blk = graph.blocks[name]
+    return "#dbe9f6" if isinstance(blk, Block) else "#fde2c8" if isinstance(blk, CoSimBlock) else "#e3f1de"
+
+
+def _svg(graph: Graph, lay: Layout, title: str) -> str:
+    s = 60.0  # px per unit
+    W, H = lay.width * s + 40, lay.height * s + 60
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{W:.0f}" height="{H:.0f}" '
+           f'viewBox="0 0 {W:.0f} {H:.0f}" font-family="DejaVu Sans, Arial, sans-serif">',
+           f'<rect width="{W:.0f}" height="{H:.0f}" fill="white"/>',
+           f'<text x="20" y="24" font-size="15" font-weight="bold">{html.escape(title)}</text>',
+           '<g transform="translate(20,40)">']
+
+    def xy(p):
+        return f"{p[0] * s:.1f},{p[1] * s:.1f}"
+
+    for w in lay.wires:
+        color = "#b04a2e" if w.feedback else "#444444"
+        unit = ""
+        if w.source[0] not in (IN, OUT):
+            unit = graph.blocks[w.source[0]].outputs[w.source[1]].unit
+        tip = f"{w.source[0]}.{w.source[1]} -> {w.target[0]}.{w.target[1]}" + (f" [{unit}]" if unit else "")
+        dash = ' stroke-dasharray="5,3"' if w.feedback else ""
+        points = " ".join(xy(p) for p in w.points)
+        out.append(f'<polyline points="{points}" fill="none" stroke="{color}" stroke-width="1.3"{dash}>'
+                   f'<title>{html.escape(tip.replace("$", ""))}</title></polyline>')
+    for name, b in lay.boxes.items():
+        pseudo = name in (IN, OUT)
+        if not pseudo:
+            out.append(f'<rect x="{b.x * s:.1f}" y="{b.y * s:.1f}" width="{b.w * s:.1f}" height="{b.h * s:.1f}" '
+                       f'rx="6" fill="{_color(graph, name)}" stroke="#333"><title>{html.escape(name)}: '
+                       f'{html.escape(b.kind)}</title></rect>')
+            out.append(f'<text x="{(b.x + b.w / 2) * s:.1f}" y="{(b.y + 0.25) * s:.1f}" text-anchor="middle" '
+                       f'font-size="12" font-weight="bold">{html.escape(name)}</text>')
+            out.append(f'<text x="{(b.x + b.w / 2) * s:.1f}" y="{(b.y + 0.47) * s:.1f}" text-anchor="middle" '
+                       f'font-size="9" font-style="italic" fill="#555">{html.escape(b.kind)}</text>')
+        for side, names in (("in", b.inputs), ("out", b.outputs)):
+            for pname in names:
+                px, py = b.port(pname, side)
+                tip = html.escape(_port_info(graph, name, pname, side).replace("$inputs.", "").replace(
+                    "$outputs.", ""))
+                out.append(f'<circle cx="{px * s:.1f}" cy="{py * s:.1f}" r="3" fill="'
+                           f'{"#1f4e79" if side == "in" else "#7a2e0e"}"><title>{tip}</title></circle>')
+                if pseudo:
+                    anchor, dx, weight = ("end", -6, ' font-weight="bold"') if name == IN else (
+                        "start", 6, ' font-weight="bold"')
+                else:
+                    anchor, dx, weight = ("start", 5, "") if side == "in" else ("end", -5, "")
+                out.append(f'<text x="{px * s + dx:.1f}" y="{py * s + 3:.1f}" font-size="9" text-anchor="{anchor}"'
+                           f'{weight}><title>{tip}</title>{html.escape(pname)}</text>')
+    out.append("</g></svg>")
+    return "\n".join(out)
+
+
+def _matplotlib(graph: Graph, lay: Layout, title: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import FancyBboxPatch
+
+    fig, ax = plt.subplots(figsize=(max(6.0, lay.width * 0.8), max(3.0, lay.height * 0.8)))
+    for w in lay.wires:
+        xs, ys = zip(*w.points, strict=True)
+        ax.plot(xs, ys, color="#b04a2e" if w.feedback else "#444", lw=0.8, ls="--" if w.feedback else "-")
+    for name, b in lay.boxes.items():
+        pseudo = name in (IN, OUT)
+        if not pseudo:
+            ax.add_patch(FancyBboxPatch((b.x, b.y), b.w, b.h, boxstyle="round,pad=0.02", fc=_color(graph, name),
+                                        ec="#333"))
+            ax.text(b.x + b.w / 2, b.y + 0.22, name, ha="center", va="center", fontsize=8, weight="bold")
+            ax.text(b.x + b.w / 2, b.y + 0.44, b.kind, ha="center", va="center", fontsize=6, style="italic")
+        for side, names in (("in", b.inputs), ("out", b.outputs)):
+            for pname in names:
+                px, py = b.port(pname, side)
+                ax.plot([px], [py], "o", ms=2.5, color="#1f4e79" if side == "in" else "#7a2e0e")
+                if pseudo:
+                    ax.text(px + (-0.08 if name == IN else 0.08), py, pname, fontsize=7, va="center",
+                            ha="right" if name == IN else "left", weight="bold")
+                else:
+                    ax.text(px + (0.06 if side == "in" else -0.06), py, pname, fontsize=6, va="center",
+                            ha="left" if side == "in" else "right")
+    ax.set_xlim(-1.5, lay.width + 1.5)
+    ax.set_ylim(lay.height, -0.5)
+    ax.set_axis_off()
+    ax.set_title(title, fontsize=10)
+    fig.savefig(path, bbox_inches="tight", dpi=130)
+    plt.close(fig)
 
 
 def draw_graph(item: Graph | Block, path: str | Path, title: str | None = None) -> Path:
-    """Draw ``item`` (one level; nested graphs are drawn as boxes) to ``path``."""
+    """Draw ``item`` (one level; nested graphs collapsed) to ``path`` (.svg with tooltips, .png, .pdf)."""
     graph = as_graph(item)
-    cols = _columns(graph)
-    n_cols = max(cols.values(), default=0) + 1
-    pos: dict[str, tuple[float, float, float]] = {}  # block -> x, y_top, height
-    for c in range(n_cols):
-        y = 0.0
-        for name in [b for b in graph.blocks if cols[b] == c]:
-            blk = graph.blocks[name]
-            h = max(len(blk.inputs), len(blk.outputs), 1) * PORT_H + 0.7
-            pos[name] = ((c + 1) * COL_W, y, h)
-            y -= h + 0.6
-    port_xy: dict[tuple[str, str, str], tuple[float, float]] = {}
-    height = max((-(y - h) for _, y, h in pos.values()), default=2) + 1.5
-    fig_w = max(6.0, (n_cols + 2) * COL_W * 0.75)
-    fig, ax = plt.subplots(figsize=(fig_w, max(3.0, height * 0.75)))
-    for name, (x, y, h) in pos.items():
-        blk = graph.blocks[name]
-        color = "#dbe9f6" if isinstance(blk, Block) else "#fde2c8" if isinstance(blk, CoSimBlock) else "#e3f1de"
-        ax.add_patch(FancyBboxPatch((x, y - h), BOX_W, h, boxstyle="round,pad=0.02", fc=color, ec="#333"))
-        kind = type(blk).__name__ if not isinstance(blk, Graph) else "graph"
-        ax.text(x + BOX_W / 2, y - 0.22, name, ha="center", va="center", fontsize=9, weight="bold")
-        ax.text(x + BOX_W / 2, y - 0.45, kind, ha="center", va="center", fontsize=6.5, style="italic", color="#555")
-        for i, pname in enumerate(blk.inputs):
-            py = y - 0.7 - i * PORT_H
-            port_xy[(name, pname, "in")] = (x, py)
-            ax.plot([x], [py], marker=">", color="#1f4e79", ms=4)
-            ax.text(x + 0.08, py, pname, fontsize=6.5, va="center")
-        for i, pname in enumerate(blk.outputs):
-            py = y - 0.7 - i * PORT_H
-            port_xy[(name, pname, "out")] = (x + BOX_W, py)
-            ax.plot([x + BOX_W], [py], marker=">", color="#7a2e0e", ms=4)
-            ax.text(x + BOX_W - 0.08, py, pname, fontsize=6.5, va="center", ha="right")
-    for dst, src in graph.connections.items():
-        x0, y0 = port_xy[(src.block, src.port, "out")]
-        x1, y1 = port_xy[(dst.block, dst.port, "in")]
-        if x1 > x0:
-            xm = (x0 + x1) / 2 + 0.05 * hash(str(src)) % 0.3
-            xs, ys = [x0, xm, xm, x1], [y0, y0, y1, y1]
-        else:  # feedback wire: route below
-            low = min(y0, y1) - 0.4
-            xs, ys = [x0, x0 + 0.3, x0 + 0.3, x1 - 0.3, x1 - 0.3, x1], [y0, y0, low, low, y1, y1]
-        ax.plot(xs, ys, color="#444", lw=0.8)
-    for i, (gname, targets) in enumerate(graph.input_map.items()):
-        gx, gy = 0.6, -0.5 - i * 0.5
-        ax.text(gx, gy, gname, fontsize=7.5, ha="right", va="center", color="#1f4e79", weight="bold")
-        for t in targets:
-            x1, y1 = port_xy[(t.block, t.port, "in")]
-            ax.plot([gx + 0.05, x1], [gy, y1], color="#1f4e79", lw=0.6, ls="--")
-    right = (n_cols + 1) * COL_W + 0.5
-    for i, (gname, src) in enumerate(graph.output_map.items()):
-        gy = -0.5 - i * 0.5
-        x0, y0 = port_xy[(src.block, src.port, "out")]
-        ax.plot([x0, right], [y0, gy], color="#7a2e0e", lw=0.6, ls="--")
-        ax.text(right + 0.05, gy, gname, fontsize=7.5, va="center", color="#7a2e0e", weight="bold")
-    ax.set_xlim(-0.6, right + 1.4)
-    ax.set_ylim(-height, 0.6)
-    ax.set_axis_off()
-    ax.set_title(title or f"{graph.name}" + (f": {graph.description}" if getattr(graph, "description", "") else ""),
-                 fontsize=10)
+    lay = layout_graph(graph)
+    title = title or f"{graph.name}" + (f": {graph.description}" if getattr(graph, "description", "") else "")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
+    if path.suffix == ".svg":
+        from harness.results import atomic_write
+
+        atomic_write(path, lambda f: f.write(_svg(graph, lay, title)), text=True)
+    else:
+        _matplotlib(graph, lay, title, path)
     return path

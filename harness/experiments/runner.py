@@ -96,7 +96,13 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         checks = more.pop("checks", {})
         summary.update(more)
     summary.update(judge(setup, res, checks, keep=summary))
+    if plots and save_results and setup.scenario is not None:
+        summary.setdefault("pictures", []).append("report.html")
     atomic_write(out / "summary.json", lambda f: json.dump(summary, f, indent=2, default=_json_default), text=True)
+    if plots and save_results and setup.scenario is not None:
+        from harness.experiments.report import build_report
+
+        build_report(out)
     if error is not None:
         raise error
     return summary

@@ -1,0 +1,286 @@
+"""``report.html``: one self-contained page per robot run, made from its results files (``cpgsim report DIR``).
+
+The page opens offline (plotly's JavaScript is inlined): a 3D replay of the robot (body box and legs from
+the recorded joint angles and body pose, as in DART), the terrain's boxes, the toe forces as arrows and the
+reflex events as markers, with play / pause, speed buttons and a time slider; beside it the linked plots
+(gait diagram with the FSM holds and reflex events, CPG or joint states, vertical toe forces with their
+threshold, body pose), each with a time cursor that follows the replay (click a plot to jump there), and
+the run's summary. ``report.html#frame=K`` opens at frame ``K``; the page sets ``data-ready="1"`` on its
+``<body>`` once the viewer is drawn (the browser test waits for it).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from harness.experiments.plots import _rotation, leg_points_body
+from harness.results import Results, atomic_write
+
+FPS = 20  # replay frames per simulated second
+FORCE_SCALE = 0.004  # m of arrow per N
+LEG_COLORS = ("#1f77b4", "#d62728")  # left, right
+
+
+def _box_mesh(boxes, window: tuple[float, float, float, float]) -> dict[str, list]:
+    """One mesh3d of the terrain boxes clipped to ``window`` = (x0, x1, y0, y1); top faces and sides."""
+    xs, ys, zs, ii, jj, kk, colors = [], [], [], [], [], [], []
+    x0w, x1w, y0w, y1w = window
+    for b in boxes:
+        x0, x1, y0, y1 = max(b.x0, x0w), min(b.x1, x1w), max(b.y0, y0w), min(b.y1, y1w)
+        if x0 >= x1 or y0 >= y1:
+            continue
+        z1, z0 = b.top, max(b.top - b.thickness, -0.3)
+        base = len(xs)
+        for z in (z0, z1):
+            for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1)):
+                xs.append(x)
+                ys.append(y)
+                zs.append(z)
+        faces = [(4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6),
+                 (3, 0, 4), (3, 4, 7)]
+        for a, c, d in faces:
+            ii.append(base + a)
+            jj.append(base + c)
+            kk.append(base + d)
+            colors.append("#b08d57" if b.obstacle else "#9aa59a")
+    return {"type": "mesh3d", "x": xs, "y": ys, "z": zs, "i": ii, "j": jj, "k": kk, "facecolor": colors,
+            "flatshading": True, "opacity": 1.0, "name": "terrain", "hoverinfo": "skip", "showlegend": False}
+
+
+def _lines(segments: list[np.ndarray]) -> tuple[list, list, list]:
+    xs, ys, zs = [], [], []
+    for seg in segments:
+        xs += [*seg[:, 0].tolist(), None]
+        ys += [*seg[:, 1].tolist(), None]
+        zs += [*seg[:, 2].tolist(), None]
+    return xs, ys, zs
+
+
+BOX_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
+
+
+def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force: np.ndarray) -> list[dict]:
+    """The moving traces at one instant: body edges, left legs, right legs, toe force arrows."""
+    R = _rotation(rpy)
+    hl, hw, ht = geometry.body_length / 2, geometry.body_width / 2, geometry.body_thickness / 2
+    corners = np.array([[sx * hw, sy * hl, sz * ht] for sz in (-1, 1) for sx, sy in ((-1, -1), (1, -1), (1, 1),
+                                                                                     (-1, 1))])
+    corners = pos + corners @ R.T
+    body = _lines([corners[[a, b]] for a, b in BOX_EDGES])
+    pts = pos + leg_points_body(geometry, q) @ R.T
+    left, right = _lines([pts[i] for i in range(3)]), _lines([pts[i] for i in range(3, 6)])
+    feet = pts[:, -1]
+    arrows = _lines([np.array([feet[i], feet[i] + FORCE_SCALE * (R @ force[i])]) for i in range(6)])
+    traces = []
+    for (xs, ys, zs), color, width in ((body, "#222222", 6), (left, LEG_COLORS[0], 7), (right, LEG_COLORS[1], 7),
+                                       (arrows, "#2ca02c", 5)):
+        traces.append({"type": "scatter3d", "mode": "lines", "x": xs, "y": ys, "z": zs,
+                       "line": {"color": color, "width": width}, "hoverinfo": "skip", "showlegend": False})
+    return traces
+
+
+def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
+    """Write ``run_dir/report.html`` from ``results.npz``, ``summary.json`` and ``scenario.toml``."""
+    from harness.experiments.scenario import load
+    from harness.experiments.setup import robot_geometry, terrain_of
+
+    run = Path(run_dir)
+    res = Results.load(run / "results.npz")
+    summary = json.loads((run / "summary.json").read_text()) if (run / "summary.json").exists() else {}
+    scenario = load(run / "scenario.toml")
+    geometry = robot_geometry(scenario)
+    terrain = terrain_of(scenario, geometry)
+    robot = "robot"
+    t = res.time
+    step = max(1, int(round(1.0 / (fps * (t[1] - t[0]))))) if len(t) > 1 else 1
+    idx = np.arange(0, len(t), step)
+    q, pos, rpy = res[f"{robot}.q"], res[f"{robot}.body_position"], res[f"{robot}.body_rpy"]
+    force = res[f"{robot}.toe_force"].reshape(len(t), 6, 3)
+    feet_world = res[f"{robot}.foot_position"].reshape(len(t), 6, 3)
+    y_lo, y_hi = float(pos[:, 1].min()) - 0.4, float(pos[:, 1].max()) + 0.4
+    terrain_trace = _box_mesh(terrain.boxes, (-0.45, 0.45, y_lo, y_hi))
+    first = robot_frame(geometry, q[idx[0]], pos[idx[0]], rpy[idx[0]], force[idx[0]])
+    events = summary.get("reflexes", [])
+    ev_k = [int(np.argmin(np.abs(t - e["t"]))) for e in events]
+    event_trace = {"type": "scatter3d", "mode": "markers", "name": "reflex events",
+                   "x": [float(feet_world[k, e["leg_number"] - 1, 0]) for k, e in zip(ev_k, events, strict=True)],
+                   "y": [float(feet_world[k, e["leg_number"] - 1, 1]) for k, e in zip(ev_k, events, strict=True)],
+                   "z": [float(feet_world[k, e["leg_number"] - 1, 2]) for k, e in zip(ev_k, events, strict=True)],
+                   "text": [f"{e['kind']} {e['leg']} at {e['t']:.2f} s" for e in events],
+                   "marker": {"size": 5, "color": "#ff7f0e", "symbol": "diamond"}, "hoverinfo": "text"}
+    frames = [{"name": str(n), "data": robot_frame(geometry, q[k], pos[k], rpy[k], force[k]), "traces": [1, 2, 3, 4]}
+              for n, k in enumerate(idx)]
+    z_lo, z_hi = -0.15, max(0.45, float(pos[:, 2].max()) + 2 * geometry.height)
+    ranges = {"x": 0.9, "y": y_hi - y_lo, "z": z_hi - z_lo}
+    scale = 2.0 / max(ranges.values())  # equal scale on the three axes, as in the world
+    scene = {"xaxis": {"range": [-0.45, 0.45], "title": "x lateral [m]"},
+             "yaxis": {"range": [y_lo, y_hi], "title": "y forward [m]"},
+             "zaxis": {"range": [z_lo, z_hi], "title": "z [m]"},
+             "aspectmode": "manual", "aspectratio": {k: v * scale for k, v in ranges.items()},
+             "camera": {"eye": {"x": 1.5, "y": -1.3, "z": 0.9}}}
+    viewer = {"data": [terrain_trace, *first, event_trace], "frames": frames,
+              "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 30, "b": 0}, "height": 560,
+                         "title": {"text": "3D replay (drag to rotate; arrows: toe forces)", "font": {"size": 13}},
+                         "uirevision": "keep", "showlegend": False}}
+    times = [float(t[k]) for k in idx]
+    plots = _plots(res, summary, idx, robot)
+    page = _page(scenario.name, summary, viewer, plots, times, fps)
+    path = run / "report.html"
+    atomic_write(path, lambda f: f.write(page), text=True)
+    return path
+
+
+def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str, Any]:
+    """The linked plots as one plotly figure with four rows (decimated to the replay's frames x 5)."""
+    t = res.time
+    fine = np.arange(0, len(t), max(1, (idx[1] - idx[0]) // 5 if len(idx) > 1 else 1))
+    ts = t[fine].tolist()
+    labels = ["L1 (1)", "L2 (2)", "L3 (3)", "R1 (4)", "R2 (5)", "R3 (6)"]
+    force = res[f"{robot}.toe_force"].reshape(len(t), 6, 3)
+    if "controller.state" in res:  # Yu: stance from the FSM state, holds from the CPG rate
+        stance = (res["controller.state"] > 0.5) & (res["controller.reflex"] < 0.5)
+        held = res["controller.rate"] < 0.5
+    else:
+        modes = [res[f"ctrl.{n}.mode"] if f"ctrl.{n}.mode" in res else np.zeros(len(t))
+                 for n in ("L1", "L2", "L3", "R1", "R2", "R3")]
+        stance, held = np.column_stack(modes) > 0.5, np.zeros((len(t), 6), bool)
+    code = stance.astype(int) + 2 * held.astype(int)  # 0 swing, 1 stance, 2 held swing, 3 held stance
+    z = code[fine].T[::-1].tolist()
+    traces: list[dict] = [{"type": "heatmap", "x": ts, "y": labels[::-1], "z": z, "zmin": 0, "zmax": 3,
+                           "colorscale": [[0, "#ffffff"], [0.25, "#ffffff"], [0.25, "#000000"], [0.5, "#000000"],
+                                          [0.5, "#d9d9d9"], [0.75, "#d9d9d9"], [0.75, "#8c8c8c"], [1, "#8c8c8c"]],
+                           "showscale": False, "xaxis": "x", "yaxis": "y", "hovertemplate":
+                           "%{y} t=%{x:.2f}s: %{z} (0 swing, 1 stance, 2 held swing, 3 held stance)<extra></extra>"}]
+    for e in summary.get("reflexes", []):
+        traces.append({"type": "scatter", "x": [e["t"]], "y": [labels[e["leg_number"] - 1]], "mode": "markers",
+                       "marker": {"symbol": "triangle-down", "size": 9, "color": "#ff7f0e"}, "xaxis": "x",
+                       "yaxis": "y", "showlegend": False, "hovertext": f"{e['kind']} {e['leg']}", "hoverinfo": "text"})
+    if "controller.x1" in res:
+        states, title = res["controller.x1"], "CPG leader x1 per leg"
+    else:
+        states = np.column_stack([res[f"ctrl.{n}.alpha"] if f"ctrl.{n}.alpha" in res else np.full(len(t), np.nan)
+                                  for n in ("L1", "L2", "L3", "R1", "R2", "R3")])
+        title = "alpha target per leg [rad]"
+    for i in range(6):
+        traces.append({"type": "scatter", "x": ts, "y": states[fine, i].tolist(), "mode": "lines",
+                       "name": labels[i], "xaxis": "x2", "yaxis": "y2", "line": {"width": 1}, "legendgroup": str(i)})
+        traces.append({"type": "scatter", "x": ts, "y": force[fine, i, 2].tolist(), "mode": "lines",
+                       "name": labels[i], "xaxis": "x3", "yaxis": "y3", "line": {"width": 1}, "showlegend": False,
+                       "legendgroup": str(i)})
+    pos, rpy = res[f"{robot}.body_position"], res[f"{robot}.body_rpy"]
+    for y, name in ((100 * pos[fine, 2], "body height [cm]"), (np.degrees(rpy[fine, 0]), "roll [deg]"),
+                    (np.degrees(rpy[fine, 1]), "pitch [deg]")):
+        traces.append({"type": "scatter", "x": ts, "y": np.asarray(y).tolist(), "mode": "lines",
+                       "name": name, "xaxis": "x4", "yaxis": "y4", "line": {"width": 1.2}})
+    fz = summary.get("thresholds_N", {}).get("Fcz")
+    shapes = [{"type": "line", "xref": f"x{'' if r == 1 else r}", "yref": f"y{'' if r == 1 else r} domain",
+               "x0": ts[0], "x1": ts[0], "y0": 0, "y1": 1, "line": {"color": "#ff7f0e", "width": 2}}
+              for r in range(1, 5)]
+    if fz is not None:
+        shapes.append({"type": "line", "xref": "x3 domain", "yref": "y3", "x0": 0, "x1": 1, "y0": fz, "y1": fz,
+                       "line": {"color": "gray", "dash": "dash", "width": 1}})
+    dom = [(0.79, 1.0), (0.53, 0.74), (0.27, 0.48), (0.0, 0.22)]
+    titles = ["gait (black stance, white swing, grey: held by the FSM; triangles: reflexes)", title,
+              f"vertical toe force Fz [N]{f' (dashed: Fcz = {fz:g} N)' if fz is not None else ''}",
+              "body height [cm], roll and pitch [deg]"]
+    layout: dict[str, Any] = {"height": 760, "margin": {"l": 70, "r": 10, "t": 20, "b": 40}, "shapes": shapes,
+                              "legend": {"orientation": "h", "y": -0.06, "font": {"size": 10}},
+                              "hovermode": "closest", "annotations": []}
+    for r, ((lo, hi), text) in enumerate(zip(dom, titles, strict=True), start=1):
+        sx = "" if r == 1 else str(r)
+        layout[f"xaxis{sx}"] = {"domain": [0, 1], "anchor": f"y{sx}", "range": [ts[0], ts[-1]],
+                                **({"matches": "x"} if r > 1 else {}), "showticklabels": r == 4}
+        layout[f"yaxis{sx}"] = {"domain": [lo, hi], "anchor": f"x{sx}"}
+        layout["annotations"].append({"text": text, "xref": "paper", "yref": "paper", "x": 0, "y": hi + 0.005,
+                                      "xanchor": "left", "yanchor": "bottom", "showarrow": False,
+                                      "font": {"size": 11}})
+    layout["xaxis4"]["title"] = "time [s]"
+    return {"data": traces, "layout": layout}
+
+
+def _summary_html(summary: dict) -> str:
+    keys = ["scenario", "t_end", "complete", "success", "criteria_failed", "distance_m", "speed_m_s", "fell",
+            "fell_reason", "max_tilt_deg", "height_drop_m", "stalled", "waiting_share", "real_time_factor"]
+    rows = []
+    for k in keys:
+        if k in summary:
+            v = summary[k]
+            v = f"{v:.4g}" if isinstance(v, float) and math.isfinite(v) else v
+            rows.append(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>")
+    ev = "".join(f"<li>{html.escape(e['kind'])} on {html.escape(e['leg'])} (leg {e['leg_number']}) at "
+                 f"{e['t']:.3f} s</li>" for e in summary.get("reflexes", [])[:40])
+    return f"<table>{''.join(rows)}</table><h3>reflex events</h3><ul>{ev or '<li>none</li>'}</ul>"
+
+
+def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
+    from plotly.offline import get_plotlyjs
+
+    data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps}, separators=(",", ":"),
+                      allow_nan=False, default=float).replace("</", "<\\/")
+    verdict = "success" if summary.get("success") else "failed: " + ", ".join(summary.get("criteria_failed", []))
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>cpgsim run: {html.escape(name)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 12px; color: #222; }}
+#top {{ display: flex; gap: 12px; }} #left {{ flex: 1.1; min-width: 480px; }} #right {{ flex: 1; min-width: 420px; }}
+#controls {{ display: flex; gap: 6px; align-items: center; margin: 6px 0; }}
+#controls input[type=range] {{ flex: 1; }} button {{ padding: 3px 10px; }}
+table {{ border-collapse: collapse; font-size: 13px; }} th, td {{ border-bottom: 1px solid #ddd; padding: 2px 8px;
+text-align: left; }}
+</style>
+<script>{get_plotlyjs()}</script></head>
+<body data-ready="0"><h2>{html.escape(name)}: {html.escape(verdict)}</h2>
+<div id="top"><div id="left"><div id="viewer"></div>
+<div id="controls"><button id="play">play</button><button id="pause">pause</button>
+<label>speed <select id="speed"><option value="0.25">0.25x</option><option value="0.5">0.5x</option>
+<option value="1" selected>1x</option><option value="2">2x</option><option value="4">4x</option></select></label>
+<input id="slider" type="range" min="0" value="0"><span id="clock">0.00 s</span></div>
+<div id="summary">{_summary_html(summary)}</div></div>
+<div id="right"><div id="plots"></div></div></div>
+<script>
+const D = {data};
+const viewer = document.getElementById('viewer'), plots = document.getElementById('plots');
+const slider = document.getElementById('slider'), clock = document.getElementById('clock');
+slider.max = D.times.length - 1;
+let frame = 0, timer = null;
+function show(k) {{
+  frame = Math.max(0, Math.min(D.times.length - 1, k));
+  const f = D.viewer.frames[frame];
+  Plotly.restyle(viewer, {{x: f.data.map(d => d.x), y: f.data.map(d => d.y), z: f.data.map(d => d.z)}}, f.traces);
+  const t = D.times[frame];
+  const upd = {{}};
+  for (let i = 0; i < 4; i++) {{ upd['shapes[' + i + '].x0'] = t; upd['shapes[' + i + '].x1'] = t; }}
+  Plotly.relayout(plots, upd);
+  slider.value = frame; clock.textContent = t.toFixed(2) + ' s';
+  document.body.dataset.frame = String(frame);
+}}
+function play() {{
+  pause();
+  const speed = parseFloat(document.getElementById('speed').value);
+  timer = setInterval(() => {{ if (frame >= D.times.length - 1) {{ pause(); return; }} show(frame + 1); }},
+                      1000 / (D.fps * speed));
+}}
+function pause() {{ if (timer) {{ clearInterval(timer); timer = null; }} }}
+document.getElementById('play').onclick = play;
+document.getElementById('pause').onclick = pause;
+document.getElementById('speed').onchange = () => {{ if (timer) play(); }};
+slider.oninput = () => {{ pause(); show(parseInt(slider.value)); }};
+Promise.all([Plotly.newPlot(viewer, D.viewer.data, D.viewer.layout, {{responsive: true}}),
+             Plotly.newPlot(plots, D.plots.data, D.plots.layout, {{responsive: true}})]).then(() => {{
+  plots.on('plotly_click', ev => {{
+    const t = ev.points[0].x; let k = 0;
+    while (k < D.times.length - 1 && D.times[k + 1] <= t) k++;
+    pause(); show(k);
+  }});
+  const m = /frame=(\\d+)/.exec(location.hash);
+  show(m ? parseInt(m[1]) : 0);
+  document.body.dataset.ready = '1';
+}});
+</script></body></html>
+"""

@@ -24,7 +24,10 @@ def test_the_examples_are_all_here():
                         "04_robot_scenario.py", "05_sweep.py"]
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
+SLOW = {"04_robot_scenario.py", "05_sweep.py"}  # DART runs
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in EXAMPLES])
 def test_example_runs(name, tmp_path):
     proc = _run([sys.executable, str(ROOT / "examples" / name)], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr

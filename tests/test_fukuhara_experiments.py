@@ -16,6 +16,8 @@ from harness.experiments.fukuhara.scenarios import gait_summary, gap_outcome
 from harness.experiments.runner import build_scenario, fell_from
 from harness.simulate import Simulator
 
+pytestmark = pytest.mark.slow  # closed-loop robot runs: the full suite only
+
 
 def _simulate(name: str, sets: dict, t_end: float, seed: int = 0):
     setup = build_scenario(name, sets, seed=seed)

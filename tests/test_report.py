@@ -22,6 +22,9 @@ FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--window-size=1600,1100", "--virtual-time-budget=30000", "--hide-scrollbars"]
 
 
+pytestmark = pytest.mark.slow  # a DART run and a browser: the full suite only
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("flat")

@@ -31,6 +31,7 @@ def client():
     cluster.close()
 
 
+@pytest.mark.slow
 def test_localcluster_sweep_matches_serial(tmp_path, client):
     par = run_sweep("fukuhara-gaits", 4, 7, tmp_path / "par", sets=SETS, t_end=T_END, progress=False,
                     client=client)
@@ -62,6 +63,7 @@ def _flaky_trial(scenario, seed, sets, out_dir, t_end=None, plots=False):
     return {"seed": seed, "dir": out_dir, "status": "ok", "error": None, "outcome": {"success": seed == 0}}
 
 
+@pytest.mark.slow
 def test_crashed_trials_are_recorded_and_the_sweep_goes_on(tmp_path, client):
     doc = run_sweep("fukuhara-gap", 4, 0, tmp_path, progress=False, client=client, trial_fn=_flaky_trial)
     trials = doc["groups"][0]["trials"]
@@ -111,6 +113,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(__import__("os"), "geteuid") or __import__("os").geteuid() != 0
                     or __import__("shutil").which("unshare") is None,
                     reason="needs root and unshare(1) to give the worker a file system of its own")

@@ -18,6 +18,8 @@ from harness.experiments.runner import run_scenario
 from harness.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
 from harness.results import Results
 
+pytestmark = pytest.mark.slow  # closed-loop robot runs: the full suite only
+
 RIGHT, LEFT = (3, 4, 5), (0, 1, 2)
 R_FOOT = YU_RUN.leg.foot_radius
 MM = 1e-3

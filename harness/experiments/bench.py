@@ -191,7 +191,8 @@ def cell_stats(controller: str, terrain: str, trials: list[dict[str, Any]]) -> d
         vals = [o[key] for o in outs if o.get(key) is not None and np.isfinite(o[key])]
         return float(np.median(vals)) if vals else None
 
-    return {"controller": controller, "terrain": terrain, "n": n, "successes": succ,
+    distinct = len({(bool(o.get("success")), round(float(o.get("distance_m") or 0.0), 6)) for o in outs})
+    return {"controller": controller, "terrain": terrain, "n": n, "successes": succ, "distinct_outcomes": distinct,
             "success_ratio": succ / n if n else float("nan"), "ci95": [lo, hi],
             "falls": sum(1 for o in outs if o.get("fell")), "stalls": sum(1 for o in outs if o.get("stalled")),
             "crashed": n - len(ok), "median_speed_m_s": median("speed_m_s"),
@@ -206,7 +207,9 @@ def markdown_table(doc: Mapping[str, Any]) -> str:
     ctrls = doc["controllers"]
     lines = [f"Suite `{doc['suite']}`: {len(doc['seeds'])} seeds per cell ({doc['seeds'][0]}-{doc['seeds'][-1]}), "
              f"{doc['t_end']} s per trial; cell: successes/trials (Wilson 95 % CI), median speed in cm/s, "
-             "falls F / stalls S / crashed C.", "",
+             "falls F / stalls S / crashed C; `=`: every trial gave the same outcome (a deterministic controller "
+             "on a terrain the seed does not change: one experiment, not n, so its interval overstates what "
+             "is known).", "",
              "| terrain | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
     for t in doc["terrains"]:
         row = []
@@ -215,8 +218,9 @@ def markdown_table(doc: Mapping[str, Any]) -> str:
             lo, hi = cell["ci95"]
             speed = cell["median_speed_m_s"]
             marks = "".join(f" {k}{cell[v]}" for k, v in (("F", "falls"), ("S", "stalls"), ("C", "crashed")) if cell[v])
+            same = " =" if cell["n"] > 1 and cell.get("distinct_outcomes") == 1 else ""
             row.append(f"{cell['successes']}/{cell['n']} ({lo:.0%}-{hi:.0%}), "
-                       f"{'-' if speed is None else f'{100 * speed:.1f}'}{marks}")
+                       f"{'-' if speed is None else f'{100 * speed:.1f}'}{marks}{same}")
         lines.append(f"| {t} | " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 

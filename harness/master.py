@@ -12,6 +12,12 @@ once is decided in :class:`_Plan` before the loop: where each input comes from, 
 columns are plain slices of a block's output, and whether the compiled step may commit its new
 state itself (one C call that also checks it for NaN/inf: no feedthrough blocks). A failing block
 is named by the stage variable the loop keeps, without a wrapper per call.
+
+A block may ask to end the run by raising :class:`~harness.errors.StopRequested` (an FMU that
+terminates the simulation): not a failure. The block is not stepped again; the master records every
+macro step up to the last one at or before the requested time (if the block completed the step it
+was asked for, the row at the step's end too, with the block's outputs there), terminates the blocks
+and returns a :class:`StopInfo` naming the block.
 """
 
 from __future__ import annotations
@@ -23,7 +29,19 @@ import numpy as np
 
 from components.core import CoSimBlock
 from harness.compile import CompiledModel
-from harness.errors import SimulationError
+from harness.errors import SimulationError, StopRequested
+
+
+class StopInfo:
+    """Which block ended the run (``path``), at which time and why (``message``)."""
+
+    def __init__(self, path: str, time: float, message: str) -> None:
+        self.path = path
+        self.time = time
+        self.message = message
+
+    def as_meta(self) -> dict[str, Any]:
+        return {"block": self.path, "time": self.time, "message": self.message}
 
 
 class _Plan:
@@ -97,13 +115,14 @@ class _Plan:
 def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times: np.ndarray,
                u_free: np.ndarray, picks, rec, order: str, progress_bar,
                on_block_error: Callable[[str, str, Exception], Exception],
-               on_diverged: Callable[[], None]) -> None:
+               on_diverged: Callable[[], None]) -> StopInfo | None:
     """Run the macro steps ``times[0] .. times[-1]`` (see the module docstring).
 
     ``step(t)`` evaluates the compiled step on ``buffers = (x, z, u, y, x_next, z_next)``;
     ``step.commit(t)`` also moves the new state in when it is finite. ``on_block_error(path, what,
     exc)`` builds the exception for a failing block; ``on_diverged()`` raises for a non-finite
-    state (``x_next`` holds it, ``x`` the last finite one).
+    state (``x_next`` holds it, ``x`` the last finite one). Returns the :class:`StopInfo` of a
+    block that asked to stop, else None.
     """
     x, z, u, y, x_next, z_next = buffers
     plan = _Plan(m, cs, picks)
@@ -118,6 +137,15 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     data = rec.data
     started: list[CoSimBlock] = []
     stage: tuple[str, str] | None = None
+    stop: StopInfo | None = None
+    last_row = n  # the last row to record (earlier after a stop request)
+
+    def stopped(path: str, exc: StopRequested, row: int) -> None:
+        nonlocal stop, last_row
+        if stop is None or exc.time < stop.time:
+            stop = StopInfo(path, exc.time, str(exc))
+        last_row = min(last_row, row)
+
     try:
         for path, blk in cs.items():
             stage = (path, "setup")
@@ -127,7 +155,11 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
             t = t_list[k]
             for path, get in getters:
                 stage = (path, "get_outputs")
-                outputs[path] = get()
+                try:
+                    outputs[path] = get()
+                except StopRequested as exc:  # e.g. an event at t_k ends the run: outputs at t_k
+                    stopped(path, exc, k)
+                    outputs[path] = get()
             stage = None
             for sl, rows in plan.free_to_u:
                 u[sl] = u_free[rows, k]
@@ -141,7 +173,10 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                 for _ in range(len(plan.ft_paths)):  # direct feedthrough: inputs at t before outputs at t
                     for path in plan.ft_paths:
                         stage = (path, "set_inputs")
-                        cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                        try:
+                            cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                        except StopRequested as exc:
+                            stopped(path, exc, k)
                         stage = (path, "get_outputs")
                         outputs[path] = cs[path].get_outputs()
                     stage = None
@@ -150,24 +185,31 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                     step(t)
             plan.record(data[k], y, outputs)
             rec.n = k + 1
-            if k == n:
+            if k >= last_row:
                 break
             if not committed and (commit or not np.isfinite(x_next.sum())):  # a sum is finite iff all are
                 on_diverged()
             for path, set_inputs, do_step, get in steppers:
-                stage = (path, "set_inputs")
-                set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
-                stage = (path, "do_step")
-                do_step(t, dt)
+                try:
+                    stage = (path, "set_inputs")
+                    set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                    stage = (path, "do_step")
+                    do_step(t, dt)
+                except StopRequested as exc:  # completed the step (row k+1 recorded) or stopped within it
+                    stopped(path, exc, k + 1 if exc.time >= t_list[k + 1] - 1e-9 * dt else k)
+                    continue
                 if gauss_seidel:
                     stage = (path, "get_outputs")
                     outputs[path] = get()
             stage = None
+            if last_row <= k:
+                break
             if not committed:
                 x[:] = x_next
                 z[:] = z_next
             if k % 100 == 0:
                 progress_bar.update(min(100, n - k))
+        return stop
     except Exception as exc:
         if stage is None or _is_simulation_error(exc):
             raise

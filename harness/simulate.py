@@ -111,11 +111,17 @@ class Simulator:
         rec.aliases = {a: leaf for a, leaf in self.aliases.items()
                        if any(c == leaf or c.startswith(leaf + "[") for c in columns)}
         cs = m.flat.cosim_blocks()
+        stop = None
         if cs:
-            self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
+            stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
         else:
             self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
-        return rec.results(complete=True, message="")
+        if stop is None:
+            return rec.results(complete=True, message="")
+        res = rec.results(complete=True, message=f"stopped at t={rec.last_time():.9g} s: block {stop.path!r} "
+                                                 f"asked to end the run ({stop.message})")
+        res.meta["stopped_by"] = stop.as_meta()
+        return res
 
     # -- setup helpers ---------------------------------------------------------------------------
     def _initial_states(self, x0: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -291,8 +297,9 @@ class Simulator:
 
     # -- co-simulation master ---------------------------------------------------------------------
     def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
-                   progress: bool) -> None:
-        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors."""
+                   progress: bool):
+        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors;
+        returns the master's :class:`~harness.master.StopInfo` (a block asked to stop) or None."""
         m = self.model
         u = np.zeros(m.inputs.size)
         y = np.zeros(m.signals_layout.size)
@@ -309,7 +316,7 @@ class Simulator:
 
         bar = _progress(len(times) - 1, progress, m.name)
         try:
-            run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
+            stop = run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
                        block_error, diverged)
         except KeyboardInterrupt as exc:
             raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
@@ -319,6 +326,7 @@ class Simulator:
             if hasattr(step, "stop_thread"):
                 step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
+        return stop
 
 
 def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) -> np.ndarray:

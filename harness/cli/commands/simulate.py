@@ -30,6 +30,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--isolate", action="store_true",
                    help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
+    p.add_argument("--solver", choices=("rk4", "cvode"), default=None,
+                   help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
+                        "or cvode (adaptive BDF for stiff models); events are located inside the step either way")
+    p.add_argument("--rtol", type=positive_float, default=None, help="CVODE relative tolerance (default 1e-6)")
+    p.add_argument("--atol", type=positive_float, default=None,
+                   help="CVODE absolute tolerance (default: rtol times each state's nominal value)")
     add_set_argument(p)
 
 
@@ -48,6 +54,13 @@ def run(args: argparse.Namespace) -> int:
         from fmus.importer.block import set_isolation
 
         set_isolation(graph)
+    if args.solver is not None or args.rtol is not None or args.atol is not None:
+        from fmus.importer.block import set_solver
+
+        if (args.rtol is not None or args.atol is not None) and args.solver != "cvode":
+            raise CliError("--rtol/--atol apply to --solver cvode")
+        if not set_solver(graph, args.solver or "rk4", args.rtol, args.atol):
+            raise CliError(f"--solver: {args.graph} has no model-exchange FMU")
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):
         graph.set(**params)
@@ -62,5 +75,7 @@ def run(args: argparse.Namespace) -> int:
                   + ", ".join(map(str, written)))
         raise CliError(str(exc), code=1) from exc
     written = results.save(out)
+    if results.meta.get("stopped_by"):
+        print(results.message)
     print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to " + ", ".join(map(str, written)))
     return 0

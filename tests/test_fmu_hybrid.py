@@ -193,3 +193,107 @@ def test_cli_simulate_with_cvode(c_fmus, tmp_path):
     assert data["Ballbounces"][-1] == 1
     assert data["Ballt_bounce"][-1] == pytest.approx(math.sqrt(2 / G), abs=1e-6)
     assert json.loads(out.with_suffix(".meta.json").read_text())["complete"] is True
+
+
+# --------------------------------------------------------------------------------------------------
+# FMUs that ask to end the run at t = 9 (x integrates dx/dt = 1, so x = t)
+# --------------------------------------------------------------------------------------------------
+STOP_C = r"""
+#define NX 1
+#define NZ 1
+#define NR 4
+#define NI 0
+#define NU 0
+#define NB 0
+static const int XVR[NX] = {0};
+/*HOOKS*/
+static void model_init(M *m) { m->r[0] = 0.0; }
+static void model_deriv(M *m, double *dx) { dx[0] = 1.0; }
+static void model_z(M *m, double *z) { z[0] = m->r[0] - 9.0; }
+static void model_event(M *m) {
+    m->next_defined = 0;
+    if (m->r[0] >= 9.0 - 1e-9) { m->terminate = 1; return; }
+    if (TIME_EVENT) { m->next_defined = 1; m->next_time = 9.0; }
+}
+static int model_cs_step(M *m, double t, double h) {
+    if (!STOP_AFTER && t >= 9.0 - 1e-9) { m->time = t; return 1; }   /* refuses the step from 9 */
+    m->r[0] += h; m->time = t + h;
+    return STOP_AFTER && m->time >= 9.0 - 1e-9;                        /* completes the step to 9, then asks */
+}
+"""
+
+STOP_MD2 = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="Stop9" guid="{5f1c9c1e-2f0b-4d55-9d3e-1f5a7c2b9e01}"
+  numberOfEventIndicators="1">
+  <ModelExchange modelIdentifier="Stop9"/>
+  <CoSimulation modelIdentifier="Stop9"/>
+  <ModelVariables>
+    <ScalarVariable name="x" valueReference="0" causality="output" variability="continuous" initial="exact">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="der(x)" valueReference="1" causality="local" variability="continuous"
+      initial="calculated"><Real derivative="1"/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="1"/></Outputs>
+    <Derivatives><Unknown index="2"/></Derivatives>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+STOP_MD3 = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="Stop9" instantiationToken="{7a2e4b6c-8d10-4f3a-b5c7-9e1d2f3a4b5c}">
+  <ModelExchange modelIdentifier="Stop9"/>
+  <CoSimulation modelIdentifier="Stop9"/>
+  <ModelVariables>
+    <Float64 name="time" valueReference="3" causality="independent" variability="continuous"/>
+    <Float64 name="x" valueReference="0" causality="output" variability="continuous" initial="exact" start="0"/>
+    <Float64 name="der(x)" valueReference="1" causality="local" variability="continuous" derivative="0"/>
+    <Float64 name="z" valueReference="2" causality="local" variability="continuous"/>
+  </ModelVariables>
+  <ModelStructure>
+    <Output valueReference="0"/>
+    <ContinuousStateDerivative valueReference="1"/>
+    <EventIndicator valueReference="2"/>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+
+@pytest.fixture(scope="module")
+def stop_fmus(tmp_path_factory):
+    """FMI 2: doStep from t = 9 returns fmi2Discard + fmi2Terminated; ME stops at a time event at 9.
+    FMI 3: doStep to 9 returns terminateSimulation; ME stops at a state event (x - 9 crosses zero)."""
+    d = tmp_path_factory.mktemp("stop_fmus")
+    return {2: build_c_fmu(d / "fmi2", "#define TIME_EVENT 1\n#define STOP_AFTER 0\n" + STOP_C, STOP_MD2, 2, "Stop9"),
+            3: build_c_fmu(d / "fmi3", "#define TIME_EVENT 0\n#define STOP_AFTER 1\n" + STOP_C, STOP_MD3, 3, "Stop9")}
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_fmu_asking_to_stop_ends_the_run_cleanly_at_9(stop_fmus, fmi, kind):
+    res = simulate(FmuBlock("stop", stop_fmus[fmi], kind=kind), t_end=20.0, dt=0.1)
+    assert res.complete
+    assert len(res.time) == 91 and res.time[-1] == pytest.approx(9.0, abs=1e-12)
+    np.testing.assert_allclose(res["stop.x"], res.time, atol=1e-9)  # nothing dropped, the last row included
+    stop = res.meta["stopped_by"]
+    assert stop["block"] == "stop" and stop["time"] == pytest.approx(9.0, abs=1e-9)
+    assert "asked to stop" in stop["message"] and "Stop9.fmu" in stop["message"]
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_stop_request_of_an_isolated_fmu(stop_fmus, fmi):
+    res = simulate(FmuBlock("stop", stop_fmus[fmi], kind="cs", isolate=True), t_end=20.0, dt=0.1)
+    assert res.time[-1] == pytest.approx(9.0) and res["stop.x"][-1] == pytest.approx(9.0)
+    assert res.meta["stopped_by"]["block"] == "stop"
+
+
+def test_cli_stop_request_exits_0_with_a_message_and_metadata(stop_fmus, tmp_path, capsys):
+    from harness.cli.main import main
+
+    out = tmp_path / "stop.csv"
+    assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "stopped at t=9 s" in printed and "asked to" in printed
+    meta = json.loads(out.with_suffix(".meta.json").read_text())
+    assert meta["complete"] is True and meta["rows"] == 91
+    assert meta["stopped_by"]["block"] == "Stop9" and meta["stopped_by"]["time"] == pytest.approx(9.0)

@@ -211,6 +211,8 @@ class FmuRuntime:
                 for name, start, size in parts:
                     out[name] = vals[start:start + size].copy()
             return out
+        except StopRequested:
+            raise
         except Exception as exc:  # noqa: BLE001
             raise self._fail(f"reading outputs at t={self._time:g}", exc) from None
 

@@ -52,6 +52,13 @@ class _Plan:
         self.free_to_u = [(m.inputs.index("$" + name).slice, rows) for name, rows in free_rows.items()]
         self.cs_to_u = [(m.inputs.index(s.name).slice, *s.name.rsplit(".", 1))
                         for s in m.inputs.slots if not s.name.startswith("$")]
+        # 64-bit integer outputs (``exact_outputs`` of a block): exact to block inputs and to the results;
+        # into the compiled (float64) part only while the values are exact in float64
+        exact = {path: dict(getattr(blk, "exact_outputs", {}) or {}) for path, blk in cs.items()}
+        to_eq = {src for dst, src in m.flat.sources.items() if dst.rsplit(".", 1)[0] not in cs}
+        self.exact_to_u = [(sl, path, port) for sl, path, port in self.cs_to_u
+                           if port in exact.get(path, {}) and f"{path}.{port}" in to_eq]
+        self.exact_rec: list[tuple[str, str, str]] = []
         # each block input: ("y", signal slice), ("free", row slice), ("cs", (path, port)) or ("const", value)
         self.feeds: dict[str, list[tuple[str, tuple[str, Any]]]] = {}
         for path, blk in cs.items():
@@ -59,11 +66,12 @@ class _Plan:
             for iname, port in blk.inputs.items():
                 src = m.cosim_feeds.get(f"{path}.{iname}")
                 if src is None:
-                    feeds.append((iname, ("const", np.full(port.size, port.default))))
+                    feeds.append((iname, ("const", port.default_values())))
                 elif src.startswith("$"):
                     feeds.append((iname, ("free", free_rows[src[1:]])))
                 elif src.rsplit(".", 1)[0] in cs:
-                    feeds.append((iname, ("cs", tuple(src.rsplit(".", 1)))))
+                    spath, sport = src.rsplit(".", 1)
+                    feeds.append((iname, ("exact" if sport in exact.get(spath, {}) else "cs", (spath, sport))))
                 else:
                     feeds.append((iname, ("y", m.signals_layout.index(src).slice)))
             self.feeds[path] = feeds
@@ -83,6 +91,8 @@ class _Plan:
                 elems.append(i)
         for src, (cols, elems) in groups.items():
             path, port = src.rsplit(".", 1)
+            if port in exact.get(path, {}):
+                self.exact_rec.append((src, path, port))
             size = cs[path].outputs[port].size
             if elems == list(range(size)) and cols == list(range(cols[0], cols[0] + size)):
                 self.c_slices.append((path, port, slice(cols[0], cols[0] + size)))
@@ -99,9 +109,24 @@ class _Plan:
                 values[port] = u_free[where, k].copy()
             elif kind == "cs":
                 values[port] = np.asarray(outputs[where[0]][where[1]], dtype=float)
+            elif kind == "exact":
+                values[port] = np.asarray(outputs[where[0]][where[1]])
             else:
                 values[port] = where
         return values
+
+    def check_exact(self, outputs: dict[str, dict[str, np.ndarray]]) -> None:
+        """Refuse a 64-bit integer that the compiled part (float64) would round."""
+        for _sl, path, port in self.exact_to_u:
+            v = np.asarray(outputs[path][port])
+            if v.size and np.any(v.astype(object) != v.astype(float).astype(object)):
+                bad = next(int(a) for a in v if int(a) != int(float(a)))
+                raise OverflowError(f"output {path}.{port} = {bad} feeds an equation block (float64), which would "
+                                    f"round it to {float(bad):.17g}; connect it to a 64-bit integer input instead")
+
+    def record_exact(self, exact: dict[str, list], outputs: dict[str, dict[str, np.ndarray]]) -> None:
+        for key, path, port in self.exact_rec:
+            exact.setdefault(key, []).append(np.asarray(outputs[path][port]).copy())
 
     def record(self, row: np.ndarray, y: np.ndarray, outputs: dict[str, dict[str, np.ndarray]]) -> None:
         if self.yj.size:
@@ -163,6 +188,10 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
             stage = None
             for sl, rows in plan.free_to_u:
                 u[sl] = u_free[rows, k]
+            if plan.exact_to_u:
+                stage = (plan.exact_to_u[0][1], "output to an equation block")
+                plan.check_exact(outputs)
+                stage = None
             for sl, path, port in plan.cs_to_u:
                 u[sl] = outputs[path][port]
             if commit and k < n:
@@ -184,6 +213,8 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                         u[sl] = outputs[path][port]
                     step(t)
             plan.record(data[k], y, outputs)
+            if plan.exact_rec:
+                plan.record_exact(rec.exact, outputs)
             rec.n = k + 1
             if k >= last_row:
                 break

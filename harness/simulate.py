@@ -146,7 +146,7 @@ class Simulator:
             if name in inputs:
                 rows.append(_input_series(name, inputs[name], port.size, times))
             elif port.default is not None:
-                rows.append(np.full((port.size, len(times)), port.default))
+                rows.append(np.repeat(port.default_values()[:, None], len(times), axis=1))
             else:
                 raise ModelError(f"graph input {name!r} is free: give a value with inputs={{{name!r}: ...}}")
         unknown = set(inputs) - set(m.free_inputs)
@@ -384,6 +384,7 @@ class _Recorder:
         self.columns = columns
         self.units = units
         self.aliases: dict[str, str] = {}
+        self.exact: dict[str, list[np.ndarray]] = {}  # "block.port" -> exact 64-bit integer rows
 
     def add_row(self, row: np.ndarray) -> None:
         self.data[self.n] = row
@@ -397,8 +398,23 @@ class _Recorder:
         return float(self.times[self.n - 1]) if self.n else float(self.times[0])
 
     def results(self, complete: bool, message: str) -> Results:
+        meta: dict[str, Any] = {"aliases": dict(self.aliases)}
+        if self.exact:
+            meta["exact_integers"] = self._exact_columns()
         return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
-                       self.data[:self.n].copy(), complete, message, {"aliases": dict(self.aliases)})
+                       self.data[:self.n].copy(), complete, message, meta)
+
+    def _exact_columns(self) -> dict[str, dict[str, Any]]:
+        """Recorded 64-bit integer columns, exactly: ``{column: {"dtype": "int64", "values": [...]}}``
+        (JSON integers, so the metadata file keeps them exact too)."""
+        out: dict[str, dict[str, Any]] = {}
+        for key, rows in self.exact.items():
+            table = np.array(rows[:self.n])
+            for col in self.columns:
+                if col == key or (col.startswith(key + "[") and col.endswith("]")):
+                    i = 0 if col == key else int(col[len(key) + 1:-1])
+                    out[col] = {"dtype": str(table.dtype), "values": [int(v) for v in table[:, i]]}
+        return out
 
 
 def _progress(total: int, enabled: bool, name: str):

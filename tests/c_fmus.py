@@ -15,7 +15,8 @@ Hooks the model code defines (``M`` is the instance; ``m->r[vr]`` holds Float64/
 - ``static void model_event(M *m)``: the event update (may set ``m->terminate``, ``m->next_defined``,
   ``m->next_time``);
 - ``static int model_cs_step(M *m, double t, double h)``: a CS step, returns 0, or 1 to ask to stop
-  (``m->time`` is then the last successful time).
+  (``m->time`` is then the last successful time);
+- any FMI function the layer lacks (e.g. ``fmi3SetString``), after ``/*HOOKS*/``.
 """
 
 from __future__ import annotations
@@ -45,7 +46,6 @@ typedef struct {
 """
 
 FMI2 = r"""
-#include "fmi2Functions.h"
 const char* fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char* fmi2GetVersion(void) { return fmi2Version; }
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) { return fmi2OK; }
@@ -99,7 +99,6 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* 
 """
 
 FMI3 = r"""
-#include "fmi3Functions.h"
 const char* fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean on, size_t n, const fmi3String cat[]) { return fmi3OK; }
 static M* newM(int cs) { M *m = (M*) calloc(1, sizeof(M)); m->cs = cs; model_init(m); return m; }
@@ -180,7 +179,8 @@ def build_c_fmu(dest: Path, model_code: str, model_description: str, fmi: int, i
     work = dest / f"{identifier}_build"
     work.mkdir(exist_ok=True)
     layer = FMI2 if fmi == 2 else FMI3
-    source = (f"#define VSIZE(vr) ({vsize})\n" + model_code.split("/*HOOKS*/")[0] + COMMON
+    source = (f"#define VSIZE(vr) ({vsize})\n#include \"fmi{fmi}Functions.h\"\n"
+              + model_code.split("/*HOOKS*/")[0] + COMMON
               + model_code.split("/*HOOKS*/")[1] + layer)
     (work / "model.c").write_text(source)
     (work / "stubs.c").write_text(_stubs(source, fmi))

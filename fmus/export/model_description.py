@@ -25,6 +25,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 from components.core import ModelError
 from fmus.units import unit_definition
@@ -100,10 +101,10 @@ def collect_variables(model: CompiledModel) -> Variables:
     for slot in model.inputs.slots:
         name = slot.name[1:]
         port = model.free_inputs[name]
-        start = 0.0 if port.default is None else float(port.default)
+        starts = np.zeros(port.size) if port.default is None else port.default_values()
         for i, el in enumerate(_elements(slot)):
             items.append(Variable(el[1:], "input", slot.start + i, slot.kind, "input", kind_var(slot.kind), None,
-                                  start, slot.unit, slot.description))
+                                  float(starts[i]), slot.unit, slot.description))
     sig = model.signals_layout
     if model.graph_outputs:
         k = 0

@@ -93,6 +93,7 @@ class FmuBlock(CoSimBlock):
         self.strict = strict
         self._feed_override = feedthrough
         self._runtime: Any = None
+        self.value_values: dict[str, Any] = {}  # array and String parameters set by the user
         super().__init__(name, **params)
 
     # -- declaration ------------------------------------------------------------------------------
@@ -118,12 +119,40 @@ class FmuBlock(CoSimBlock):
         self.feedthrough = {out: set(ins) for out, ins in feed.items() if ins}
 
     @property
+    def exact_outputs(self) -> dict[str, str]:
+        """Outputs of FMI 3 type Int64/UInt64 (``{port: "int64"/"uint64"}``): their values stay exact
+        integers from the FMU to FMU inputs and to the results (``Results[...]`` returns them exactly)."""
+        return {n: p.element.type.lower() for n, p in self.info.outputs.items()
+                if p.element.type in ("Int64", "UInt64")}
+
+    @property
     def fmi_version(self) -> int:
         return self.info.fmi_version
 
-    def changed_parameters(self) -> dict[str, float]:
-        """Parameters whose value differs from the FMU's start value (the ones sent to the FMU)."""
-        out = {}
+    @property
+    def value_parameters(self) -> dict[str, Any]:
+        """The FMU's array and String parameters (:class:`~fmus.importer.description.ValueParamSpec`):
+        not block parameters (those are numbers), but settable the same way (keyword, ``set``,
+        ``Graph.set_param``, ``--set``)."""
+        return self.info.value_parameters
+
+    def set(self, **values: Any) -> FmuBlock:
+        """Set parameters: numbers (validated against their bounds), arrays and strings (checked
+        against the FMU's shape and type)."""
+        plain = {}
+        for key, value in values.items():
+            spec = self.info.value_parameters.get(key)
+            if spec is None:
+                plain[key] = value
+            else:
+                self.value_values[key] = spec.check(value, self.name)
+        super().set(**plain)
+        return self
+
+    def changed_parameters(self) -> dict[str, Any]:
+        """Parameters whose value differs from the FMU's start value (the ones sent to the FMU), and
+        the array and String parameters that were set."""
+        out: dict[str, Any] = dict(self.value_values)
         for name, spec in self.info.parameters.items():
             v = self.values[name]
             if spec.start is None or not math.isclose(v, spec.start, rel_tol=0.0, abs_tol=0.0):

@@ -142,7 +142,7 @@ class IsolatedRuntime:
     def set_inputs(self, values: Mapping[str, Any]) -> None:
         """Buffer inputs; values equal to those the FMU already has are not sent again."""
         for k, v in values.items():
-            arr = np.array(v, dtype=float, copy=True)
+            arr = np.array(v, copy=True)  # 64-bit integers stay exact
             if k in self._sent and k not in self._pending and np.array_equal(self._sent[k], arr):
                 continue
             self._pending[k] = arr

@@ -46,7 +46,33 @@ _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 _ABANDONED: list = []  # instances that reported fmiFatal: not freed, library and logger kept alive
 
 
+EXACT_INT = {"Int64": np.int64, "UInt64": np.uint64}
+"""FMI 3 types whose values do not all fit a float64: kept as exact integers end to end."""
+_INT_RANGE = {"Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1)}
+
+
+def as_values(value: Any, fmi_type: str) -> np.ndarray:
+    """A port value as a flat array: float64, or exact int64/uint64 for the 64-bit integer types."""
+    if fmi_type not in EXACT_INT:
+        return np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    arr = np.atleast_1d(np.asarray(value)).ravel()
+    if arr.dtype.kind in "iu" and arr.dtype != np.dtype(EXACT_INT[fmi_type]):
+        arr = np.array([int(v) for v in arr], dtype=object)
+    if arr.dtype.kind not in "iu":  # floats or Python ints: exact conversion with a range check
+        lo, hi = _INT_RANGE[fmi_type]
+        ints = []
+        for v in arr:
+            iv = int(v) if isinstance(v, (int, np.integer)) or float(v).is_integer() else None
+            if iv is None or not lo <= iv <= hi:
+                raise ValueError(f"{v!r} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
+            ints.append(iv)
+        arr = np.array(ints, dtype=EXACT_INT[fmi_type])
+    return arr
+
+
 def _convert(fmi_type: str, values: np.ndarray) -> list:
+    if fmi_type in EXACT_INT:
+        return [int(v) for v in values]
     if fmi_type == "Boolean":
         return [bool(v > 0.5) for v in values]
     if fmi_type in ("Real", "Float64", "Float32"):
@@ -119,10 +145,10 @@ class FmuRuntime:
             vals = getattr(self.fmu, _FMI2_GET[fmi_type])(list(vrs))
         else:
             vals = getattr(self.fmu, _FMI3_GET[fmi_type])(list(vrs), nValues=count)
-        return np.asarray(vals, dtype=float).ravel()
+        return np.asarray(vals, dtype=EXACT_INT.get(fmi_type, float)).ravel()
 
     def _set(self, fmi_type: str, vrs: tuple[int, ...], values: np.ndarray) -> None:
-        vals = _convert(fmi_type, np.atleast_1d(np.asarray(values, dtype=float)).ravel())
+        vals = _convert(fmi_type, as_values(values, fmi_type))
         if self.desc.fmi_version == 2:
             getattr(self.fmu, _FMI2_GET[fmi_type].replace("get", "set"))(list(vrs), vals)
         else:
@@ -130,9 +156,12 @@ class FmuRuntime:
 
     def _set_port(self, name: str, value: Any) -> None:
         spec = self.desc.inputs[name]
-        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        try:
+            arr = as_values(value, spec.element.type)
+        except ValueError as exc:
+            raise FmuRuntimeError(f"{self._where('input ' + name)}: {exc}") from None
         if arr.size == 1 and spec.size > 1:
-            arr = np.full(spec.size, float(arr[0]))
+            arr = np.full(spec.size, arr[0], dtype=arr.dtype)
         if arr.size != spec.size:
             raise FmuRuntimeError(f"{self._where('input ' + name)} needs {spec.size} value(s), got {arr.size}")
         last = self._last_set.get(name)
@@ -181,8 +210,14 @@ class FmuRuntime:
                 self.fmu.instantiate(loggingOn=True, logMessage=self._log3)
                 self._state = "instantiated"
             for name, value in (params or {}).items():
-                spec = self.desc.parameters[name]
-                self._set(spec.type, (spec.vr,), np.array([value]))
+                vspec = self.desc.value_parameters.get(name)
+                if vspec is not None and vspec.type == "String":
+                    self.fmu.setString([vspec.vr], [str(value)])
+                elif vspec is not None:
+                    self._set(vspec.type, (vspec.vr,), np.asarray(value, dtype=float).ravel())
+                else:
+                    spec = self.desc.parameters[name]
+                    self._set(spec.type, (spec.vr,), np.array([value]))
             if self.desc.fmi_version == 2:
                 self.fmu.enterInitializationMode()
             else:
@@ -222,7 +257,7 @@ class FmuRuntime:
                 changed = {}
                 for name, value in values.items():
                     if name in self._discrete_inputs:
-                        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+                        arr = np.atleast_1d(np.asarray(value)).ravel()
                         if name not in self._last_discrete or not np.array_equal(arr, self._last_discrete[name]):
                             changed[name] = arr
                     else:

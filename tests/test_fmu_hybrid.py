@@ -297,3 +297,39 @@ def test_cli_stop_request_exits_0_with_a_message_and_metadata(stop_fmus, tmp_pat
     meta = json.loads(out.with_suffix(".meta.json").read_text())
     assert meta["complete"] is True and meta["rows"] == 91
     assert meta["stopped_by"]["block"] == "Stop9" and meta["stopped_by"]["time"] == pytest.approx(9.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# archives with a member zipped twice
+# --------------------------------------------------------------------------------------------------
+def _twice(src, dst, member: str, second: bytes | None = None):
+    import warnings
+    import zipfile
+
+    with zipfile.ZipFile(src) as zin:
+        members = [(info.filename, zin.read(info)) for info in zin.infolist()]
+    with zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as zout, warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # zipfile warns about the duplicate name
+        for name, data in members:
+            zout.writestr(name, data)
+        zout.writestr(member, dict(members)[member] if second is None else second)
+    return dst
+
+
+def test_identical_duplicate_members_are_accepted(stop_fmus, tmp_path):
+    import fmpy
+
+    lib = f"binaries/{fmpy.platform}/Stop9{fmpy.sharedLibraryExtension}"
+    fmu = _twice(stop_fmus[2], tmp_path / "twice.fmu", lib)
+    _twice(stop_fmus[2], tmp_path / "md_twice.fmu", "modelDescription.xml")
+    for f in (fmu, tmp_path / "md_twice.fmu"):
+        res = simulate(FmuBlock("stop", f, kind="cs"), t_end=1.0, dt=0.1)
+        assert res["stop.x"][-1] == pytest.approx(1.0)
+
+
+def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
+    from fmus.errors import UnsafeArchiveError
+
+    fmu = _twice(stop_fmus[2], tmp_path / "conflict.fmu", "modelDescription.xml", b"<other/>")
+    with pytest.raises(UnsafeArchiveError, match="'modelDescription.xml' appears twice with different contents"):
+        FmuBlock("stop", fmu)

@@ -20,8 +20,12 @@ HELP = "simulate a graph and write results"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("graph", nargs="?", help="built-in graph name, path/to/module.py:function, FILE.fmu or FILE.ssp")
-    p.add_argument("--t-end", type=positive_float, default=10.0, help="end time in s (default 10)")
-    p.add_argument("--dt", type=positive_float, default=1e-3, help="macro step in s (default 0.001)")
+    p.add_argument("--t-end", type=positive_float, default=None,
+                   help="end time in s (default: an SSP's DefaultExperiment stopTime, else 10)")
+    p.add_argument("--t0", type=float, default=None,
+                   help="start time in s (default: an SSP's DefaultExperiment startTime, else 0)")
+    p.add_argument("--dt", type=positive_float, default=None,
+                   help="macro step in s (default: the step an SSP exported by cpgsim records, else 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
     p.add_argument("-o", "--output", default="results.csv", help="results file: .csv or .npz")
     p.add_argument("--record", action="append", default=None, metavar="PATTERN",
@@ -65,9 +69,14 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(graph, Graph):
         graph.set(**params)
         params = {}
-    sim = Simulator(graph, dt=args.dt, substeps=args.substeps, params=params, record=args.record)
+    t0 = args.t0 if args.t0 is not None else (getattr(graph, "ssp_start_time", None) or 0.0)
+    t_end = args.t_end if args.t_end is not None else (getattr(graph, "ssp_stop_time", None) or 10.0)
+    dt = args.dt if args.dt is not None else (getattr(graph, "ssp_step", None) or 1e-3)
+    if not t_end > t0:
+        raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
+    sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
     try:
-        results = sim.run(args.t_end, progress=args.progress)
+        results = sim.run(t_end, t0=t0, progress=args.progress)
     except SimulationError as exc:
         if exc.results is not None:
             written = exc.results.save(out)

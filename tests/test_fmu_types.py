@@ -192,3 +192,18 @@ def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):
     assert "'blob' of type Binary (Binary values are not supported)" in text
     desc = describe_fmu(types_fmu)
     assert set(desc.value_parameters) == {"A", "label"}
+
+
+def test_scheduled_execution_fmu_is_refused_naming_the_clocks(tmp_path):
+    import zipfile
+
+    from fmus.errors import ModelDescriptionError
+
+    md = TYPES_MD.replace('<CoSimulation modelIdentifier="Types"/>', '<ScheduledExecution modelIdentifier="Types"/>')
+    md = md.replace('<Float64 name="time"', '<Clock name="tick" valueReference="60" causality="input" '
+                    'intervalVariability="constant" intervalDecimal="0.01"/>\n    <Float64 name="time"')
+    fmu = tmp_path / "se.fmu"
+    with zipfile.ZipFile(fmu, "w") as zf:
+        zf.writestr("modelDescription.xml", md)
+    with pytest.raises(ModelDescriptionError, match=r"Scheduled Execution FMU \(clocks: tick\).*clocks"):
+        describe_fmu(fmu)

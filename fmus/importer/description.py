@@ -382,7 +382,13 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         raise ModelDescriptionError(f"FMI version {md.fmiVersion} is not supported (need 2.0 or 3.0)")
     cs = md.coSimulation.modelIdentifier if md.coSimulation is not None else None
     me = md.modelExchange.modelIdentifier if md.modelExchange is not None else None
+    clocks = [v.name for v in md.modelVariables if v.type == "Clock"]
     if not cs and not me:
+        if getattr(md, "scheduledExecution", None) is not None:
+            named = f" (clocks: {', '.join(clocks[:8])}{', ...' if len(clocks) > 8 else ''})" if clocks else ""
+            raise ModelDescriptionError(
+                f"is an FMI 3 Scheduled Execution FMU{named}: cpgsim does not activate clocks or model "
+                f"partitions; it imports CoSimulation and ModelExchange FMUs only")
         raise ModelDescriptionError("declares neither CoSimulation nor ModelExchange")
     by_vr = {v.valueReference: v for v in md.modelVariables}
     taken: set[str] = set()
@@ -422,7 +428,9 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         v = g[0]
         kind = kind_of(v.type)
         if kind is None:
-            skipped.append(f"{v.causality} {v.name!r} of type {v.type} (not real/integer/boolean)")
+            why = {"Clock": "clocks are not activated: the FMU runs as if the clock never ticks",
+                   "Binary": "Binary values are not supported"}.get(v.type, "not real/integer/boolean")
+            skipped.append(f"{v.causality} {v.name!r} of type {v.type} ({why})")
             continue
         if len(g) > 1:
             shape: tuple[int, ...] | None = (len(g),)

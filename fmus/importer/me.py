@@ -40,7 +40,11 @@ SOLVERS = ("rk4", "cvode")
 
 
 class FmuModel:
-    """The FMI calls a solver needs, on numpy buffers (one instance per FMU)."""
+    """The FMI calls a solver needs, on numpy buffers (one instance per FMU).
+
+    The four calls of the integration loop (set time, set states, get derivatives, get event
+    indicators) go straight to the FMU's library (fmpy's wrappers cost more than the call itself);
+    a status above fmiWarning raises :class:`~fmus.errors.FmuRuntimeError` naming the call."""
 
     def __init__(self, fmu: Any, fmi_version: int, nx: int, nz: int, where: Callable[[str], str]) -> None:
         self.fmu = fmu
@@ -53,16 +57,31 @@ class FmuModel:
         self._pxs = self._xs.ctypes.data_as(POINTER(c_double))
         self._pdx = self._dx.ctypes.data_as(POINTER(c_double))
         self._pz = self._z.ctypes.data_as(POINTER(c_double))
-        self._get_dx = fmu.getDerivatives if fmi_version == 2 else fmu.getContinuousStateDerivatives
+        p = f"fmi{fmi_version}"
+        names = (f"{p}SetTime", f"{p}SetContinuousStates",
+                 f"{p}GetDerivatives" if fmi_version == 2 else "fmi3GetContinuousStateDerivatives",
+                 f"{p}GetEventIndicators")
+        comp = fmu.component
+        raw = [getattr(fmu.dll, n) for n in names]
+
+        def checked(fn: Any, name: str) -> Callable[..., None]:
+            def call(*args: Any) -> None:
+                status = fn(comp, *args)
+                if status > 1:
+                    raise FmuRuntimeError(f"{where(name)} failed with status {status}")
+            return call
+
+        self.setTime, self.setContinuousStates, self._get_dx, self.getEventIndicators = (
+            checked(fn, n) for fn, n in zip(raw, names, strict=True))
         self.n_deriv = 0
 
     def set_time(self, t: float) -> None:
-        self.fmu.setTime(float(t))
+        self.setTime(float(t))
 
     def set_x(self, x: np.ndarray) -> None:
         if self.nx:
             self._xs[:] = x
-            self.fmu.setContinuousStates(self._pxs, self.nx)
+            self.setContinuousStates(self._pxs, self.nx)
 
     def get_x(self) -> np.ndarray:
         if not self.nx:
@@ -71,11 +90,11 @@ class FmuModel:
         return self._xs[:self.nx].copy()
 
     def deriv(self, t: float, x: np.ndarray) -> np.ndarray:
-        self.fmu.setTime(float(t))
+        self.setTime(float(t))
         if not self.nx:
             return np.zeros(0)
         self._xs[:] = x
-        self.fmu.setContinuousStates(self._pxs, self.nx)
+        self.setContinuousStates(self._pxs, self.nx)
         self._get_dx(self._pdx, self.nx)
         self.n_deriv += 1
         return self._dx[:self.nx].copy()
@@ -83,7 +102,7 @@ class FmuModel:
     def indicators(self) -> np.ndarray:
         if not self.nz:
             return np.zeros(0)
-        self.fmu.getEventIndicators(self._pz, self.nz)
+        self.getEventIndicators(self._pz, self.nz)
         return self._z[:self.nz].copy()
 
     def nominals(self) -> np.ndarray:
@@ -245,6 +264,7 @@ class CvodeSolver:
         self._f = cv.CVRhsFn(self._rhs)
         self._g = cv.CVRootFn(self._root)
         self._eh = sd.SUNErrHandlerFn(self._err)
+        self._data = sd.NV_DATA_S
         self._load_state()
         _check(cv.CVodeInit(self.mem, self._f, float(t0), self.y), "CVodeInit")
         _check(cv.CVodeSVtolerances(self.mem, self.rtol, self.abstol), "CVodeSVtolerances")
@@ -267,15 +287,15 @@ class CvodeSolver:
 
     # -- callbacks (exceptions must not cross the C boundary: kept and re-raised after CVode) ------------
     def _rhs(self, t, y, ydot, _user) -> int:
-        try:
+        try:  # pointers straight into the FMU: no numpy in the hot path
             m = self.model
-            out = np.ctypeslib.as_array(self._cv_data(ydot), (self.nx,))
+            m.setTime(t)
             if m.nx:
-                out[:] = m.deriv(t, np.ctypeslib.as_array(self._cv_data(y), (self.nx,)))
+                m.setContinuousStates(self._data(y), m.nx)
+                m._get_dx(self._data(ydot), m.nx)
             else:
-                m.set_time(t)
-                out[:] = 0.0
-            return 0 if np.all(np.isfinite(out)) else 1  # > 0: recoverable, CVODE retries a smaller step
+                self._data(ydot)[0] = 0.0
+            return 0
         except BaseException as exc:  # noqa: BLE001
             self._exc = exc
             return -1
@@ -283,12 +303,10 @@ class CvodeSolver:
     def _root(self, t, y, gout, _user) -> int:
         try:
             m = self.model
-            m.set_time(t)
+            m.setTime(t)
             if m.nx:
-                m.set_x(np.ctypeslib.as_array(self._cv_data(y), (self.nx,)))
-            z = m.indicators()
-            for i in range(m.nz):
-                gout[i] = z[i]
+                m.setContinuousStates(self._data(y), m.nx)
+            m.getEventIndicators(gout, m.nz)
             return 0
         except BaseException as exc:  # noqa: BLE001
             self._exc = exc
@@ -296,12 +314,6 @@ class CvodeSolver:
 
     def _err(self, line, func, file, msg, code, user, ctx) -> None:
         self.error = f"{_dec(func)}: {_dec(msg)} (code {code})"
-
-    @staticmethod
-    def _cv_data(v):
-        from fmpy.sundials import NV_DATA_S
-
-        return NV_DATA_S(v)
 
     # -- interface -------------------------------------------------------------------------------------
     def _load_state(self) -> None:
@@ -337,9 +349,11 @@ class CvodeSolver:
                                       f"{self.error or f'flag {flag}'}")
             t = tret.value if flag != 1 else float(t_stop)  # CV_TSTOP_RETURN lands on t_stop
             self.t = t
-            m.set_time(t)
+            m.setTime(t)
             if m.nx:
-                m.set_x(self.ya)
+                if not np.all(np.isfinite(self.ya)):
+                    raise FmuRuntimeError(f"{m.where('CVODE step')}: a state became non-finite at t={t:g}")
+                m.setContinuousStates(self._py, m.nx)
             step_event = m.completed_step(t)
             if flag == cv.CV_ROOT_RETURN:
                 self.n_events += 1

@@ -15,7 +15,8 @@ Hooks the model code defines (``M`` is the instance; ``m->r[vr]`` holds Float64/
 - ``static void model_event(M *m)``: the event update (may set ``m->terminate``, ``m->next_defined``,
   ``m->next_time``);
 - ``static int model_cs_step(M *m, double t, double h)``: a CS step, returns 0, or 1 to ask to stop
-  (``m->time`` is then the last successful time);
+  (``m->time`` is then the last successful time), or 2 (FMI 2) for ``fmi2Discard`` without
+  ``fmi2Terminated``;
 - any FMI function the layer lacks (e.g. ``fmi3SetString``), after ``/*HOOKS*/``.
 """
 
@@ -91,7 +92,8 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x[], size
     for (size_t k = 0; k < nx; k++) x[k] = 1.0; return fmi2OK; }
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet) {
     M *m = (M*)c; if (m->terminated) return fmi2Error;
-    if (model_cs_step(m, t, h)) { m->terminated = 1; return fmi2Discard; } return fmi2OK; }
+    int r = model_cs_step(m, t, h); if (r == 2) return fmi2Discard;   /* a plain discard: not a stop request */
+    if (r) { m->terminated = 1; return fmi2Discard; } return fmi2OK; }
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* v) {
     if (s != fmi2Terminated) return fmi2Discard; *v = ((M*)c)->terminated; return fmi2OK; }
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real* v) {

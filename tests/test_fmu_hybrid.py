@@ -216,7 +216,7 @@ static void model_event(M *m) {
     if (TIME_EVENT) { m->next_defined = 1; m->next_time = 9.0; }
 }
 static int model_cs_step(M *m, double t, double h) {
-    if (!STOP_AFTER && t >= 9.0 - 1e-9) { m->time = t; return 1; }   /* refuses the step from 9 */
+    if (!STOP_AFTER && t >= 9.0 - 1e-9) { m->time = t; return PLAIN_DISCARD ? 2 : 1; }  /* refuses the step from 9 */
     m->r[0] += h; m->time = t + h;
     return STOP_AFTER && m->time >= 9.0 - 1e-9;                        /* completes the step to 9, then asks */
 }
@@ -264,8 +264,10 @@ def stop_fmus(tmp_path_factory):
     """FMI 2: doStep from t = 9 returns fmi2Discard + fmi2Terminated; ME stops at a time event at 9.
     FMI 3: doStep to 9 returns terminateSimulation; ME stops at a state event (x - 9 crosses zero)."""
     d = tmp_path_factory.mktemp("stop_fmus")
-    return {2: build_c_fmu(d / "fmi2", "#define TIME_EVENT 1\n#define STOP_AFTER 0\n" + STOP_C, STOP_MD2, 2, "Stop9"),
-            3: build_c_fmu(d / "fmi3", "#define TIME_EVENT 0\n#define STOP_AFTER 1\n" + STOP_C, STOP_MD3, 3, "Stop9")}
+    head = "#define PLAIN_DISCARD {}\n#define TIME_EVENT {}\n#define STOP_AFTER {}\n"
+    return {2: build_c_fmu(d / "fmi2", head.format(0, 1, 0) + STOP_C, STOP_MD2, 2, "Stop9"),
+            3: build_c_fmu(d / "fmi3", head.format(0, 0, 1) + STOP_C, STOP_MD3, 3, "Stop9"),
+            "discard": build_c_fmu(d / "discard", head.format(1, 1, 0) + STOP_C, STOP_MD2, 2, "Stop9")}
 
 
 @pytest.mark.parametrize("fmi", [2, 3])
@@ -285,6 +287,23 @@ def test_stop_request_of_an_isolated_fmu(stop_fmus, fmi):
     res = simulate(FmuBlock("stop", stop_fmus[fmi], kind="cs", isolate=True), t_end=20.0, dt=0.1)
     assert res.time[-1] == pytest.approx(9.0) and res["stop.x"][-1] == pytest.approx(9.0)
     assert res.meta["stopped_by"]["block"] == "stop"
+
+
+def test_discard_without_terminated_is_a_failure_with_partial_results(stop_fmus):
+    from harness.simulate import CoSimulationError
+
+    with pytest.raises(CoSimulationError) as info:
+        simulate(FmuBlock("stop", stop_fmus["discard"], kind="cs"), t_end=20.0, dt=0.1)
+    msg = str(info.value)
+    assert "\n" not in msg and "fmi2DoStep" in msg and "discard" in msg and "Stop9.fmu" in msg
+    res = info.value.results
+    assert not res.complete and res.time[-1] == pytest.approx(9.0)
+
+
+def test_isolated_me_fmu_with_cvode_locates_the_bounces(c_fmus):
+    res = simulate(FmuBlock("ball", c_fmus["ball"], solver="cvode", rtol=1e-10, atol=1e-10, isolate=True),
+                   t_end=T_END, dt=0.01)
+    assert np.max(np.abs(_bounce_times(res)[:10] - _analytic_bounces(10))) < 1e-6
 
 
 def test_cli_stop_request_exits_0_with_a_message_and_metadata(stop_fmus, tmp_path, capsys):

@@ -352,3 +352,15 @@ def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
     fmu = _twice(stop_fmus[2], tmp_path / "conflict.fmu", "modelDescription.xml", b"<other/>")
     with pytest.raises(UnsafeArchiveError, match="'modelDescription.xml' appears twice with different contents"):
         FmuBlock("stop", fmu)
+
+
+def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path):
+    """--solver on an FMU that offers both interfaces runs it as ME (here: the time event at 9 stops it)."""
+    from harness.cli.main import main
+
+    out = tmp_path / "s.csv"
+    assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "--solver", "cvode",
+                 "-o", str(out)]) == 0
+    meta = json.loads(out.with_suffix(".meta.json").read_text())
+    assert meta["stopped_by"]["message"].startswith("FMU Stop9.fmu (instance 'Stop9') event update")
+    assert main(["simulate", str(stop_fmus[2]), "--rtol", "1e-6", "-o", str(out)]) == 2  # rtol needs cvode

@@ -232,13 +232,20 @@ def set_isolation(graph: Any, isolate: bool = True, timeout: float | None = None
     return len(blocks)
 
 
-def set_solver(graph: Any, solver: str, rtol: float | None = None, atol: float | None = None) -> int:
-    """Use ``solver`` (``"rk4"``/``"cvode"``, tolerances for CVODE) for every ME FMU block of ``graph``;
-    returns how many there are."""
+def set_solver(graph: Any, solver: str, rtol: float | None = None, atol: float | None = None,
+               switch_to_me: bool = False) -> int:
+    """Use ``solver`` (``"rk4"``/``"cvode"``, tolerances for CVODE) for every ME FMU block of ``graph``
+    (with ``switch_to_me``, also for CS blocks whose FMU offers model exchange, which then run as ME);
+    returns how many blocks use it."""
     from fmus.importer.me import SOLVERS
 
     if solver not in SOLVERS:
         raise ModelError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    if switch_to_me:
+        for blk in fmu_blocks(graph):
+            if blk.kind == "cs" and "me" in blk.info.kinds:
+                check_binary(blk.info, "me")
+                blk.kind = "me"
     blocks = [b for b in fmu_blocks(graph) if b.kind == "me"]
     for blk in blocks:
         blk.solver = solver

@@ -36,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
     p.add_argument("--solver", choices=("rk4", "cvode"), default=None,
                    help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
-                        "or cvode (adaptive BDF for stiff models); events are located inside the step either way")
+                        "or cvode (adaptive BDF for stiff models); events are located inside the step either way. "
+                        "FMUs that offer both interfaces then run as model exchange")
     p.add_argument("--rtol", type=positive_float, default=None, help="CVODE relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=positive_float, default=None,
                    help="CVODE absolute tolerance (default: rtol times each state's nominal value)")
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
         if (args.rtol is not None or args.atol is not None) and args.solver != "cvode":
             raise CliError("--rtol/--atol apply to --solver cvode")
-        if not set_solver(graph, args.solver or "rk4", args.rtol, args.atol):
+        if not set_solver(graph, args.solver or "rk4", args.rtol, args.atol, switch_to_me=True):
             raise CliError(f"--solver: {args.graph} has no model-exchange FMU")
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):

@@ -165,8 +165,11 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     stop: StopInfo | None = None
     last_row = n  # the last row to record (earlier after a stop request)
 
+    halted: set[str] = set()  # blocks that asked to stop: read, never given inputs or stepped again
+
     def stopped(path: str, exc: StopRequested, row: int) -> None:
         nonlocal stop, last_row
+        halted.add(path)
         if stop is None or exc.time < stop.time:
             stop = StopInfo(path, exc.time, str(exc))
         last_row = min(last_row, row)
@@ -203,7 +206,8 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                     for path in plan.ft_paths:
                         stage = (path, "set_inputs")
                         try:
-                            cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                            if path not in halted:
+                                cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
                         except StopRequested as exc:
                             stopped(path, exc, k)
                         stage = (path, "get_outputs")

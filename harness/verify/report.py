@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from harness.verify.result import STATUS_TEXT, Cycle, VerifyOptions, VerifyReport
 
+from harness.verify.result import STATUS_TEXT, Cycle, VerifyOptions, VerifyReport
 from harness.verify.shooting import verify
 
 SWEEP_EPS = (0.05, 0.1, 0.5, 1.0)

@@ -42,6 +42,10 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+
+from components.core import Block
+from components.graph import Graph
+from harness.compile import CompiledModel, compile_graph
 from harness.verify.result import (
     N_ORBIT,
     Cycle,
@@ -51,10 +55,6 @@ from harness.verify.result import (
     complex_json,
     format_dict,
 )
-
-from components.core import Block
-from components.graph import Graph
-from harness.compile import CompiledModel, compile_graph
 from harness.verify.sync import sync_analysis
 from harness.verify.system import AutonomousSystem, IntegrationFailed, interp_crossing, up_crossings
 

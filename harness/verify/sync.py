@@ -20,9 +20,9 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from harness.verify.result import N_ORBIT, Cycle, VerifyInputError, VerifyOptions, VerifyReport
 
 from harness.compile import CompiledModel
+from harness.verify.result import N_ORBIT, Cycle, VerifyInputError, VerifyOptions, VerifyReport
 from harness.verify.system import AutonomousSystem, IntegrationFailed
 
 

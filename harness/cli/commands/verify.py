@@ -55,9 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.verify.result import VerifyOptions
-
     from harness.verify.report import format_report, plot_report, sweep, sweep_markdown, write_json
+    from harness.verify.result import VerifyOptions
     from harness.verify.shooting import verify
 
     if args.sweep:

@@ -66,7 +66,8 @@ class Port:
 
     ``shape`` is the shape of the value (flattened column-major into ``size`` scalars), ``unit``
     a unit string compared exactly after normalisation, ``kind`` real/integer/boolean. An input
-    with ``default`` set may stay unconnected; one without must be wired.
+    with ``default`` set may stay unconnected; one without must be wired. ``default`` is a number
+    (every element) or a tuple of ``size`` numbers (one per element, e.g. an FMU's vector start value).
     """
 
     name: str
@@ -75,10 +76,16 @@ class Port:
     unit: str = "1"
     kind: Kind = "real"
     description: str = ""
-    default: float | None = None
+    default: float | tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         check_name(self.name, "port")
+        if isinstance(self.default, (tuple, list, np.ndarray)):
+            vals = tuple(float(v) for v in np.asarray(self.default, dtype=float).ravel())
+            size = int(np.prod(_as_shape(self.shape)))
+            if len(vals) not in (1, size):
+                raise DeclarationError(f"port {self.name!r}: default has {len(vals)} values for {size} elements")
+            object.__setattr__(self, "default", vals[0] if len(vals) == 1 or len(set(vals)) == 1 else vals)
         if self.direction not in ("in", "out"):
             raise DeclarationError(f"port {self.name!r}: direction must be 'in' or 'out'")
         if self.kind not in KINDS:
@@ -89,6 +96,12 @@ class Port:
     @property
     def size(self) -> int:
         return int(np.prod(self.shape))
+
+    def default_values(self) -> np.ndarray | None:
+        """The default as ``size`` numbers (None without a default)."""
+        if self.default is None:
+            return None
+        return np.broadcast_to(np.asarray(self.default, dtype=float), (self.size,)).copy()
 
     def element_names(self, prefix: str) -> list[str]:
         """Column names ``prefix`` (scalar) or ``prefix[i]`` (vector)."""
@@ -211,7 +224,7 @@ class _Declared:
 
     # -- declarations ---------------------------------------------------------------------------
     def add_input(self, name: str, shape: int | tuple[int, ...] = 1, unit: str = "1", kind: Kind = "real",
-                  description: str = "", default: float | None = None) -> Port:
+                  description: str = "", default: float | tuple[float, ...] | None = None) -> Port:
         self._check_free(name)
         port = Port(name, "in", _as_shape(shape), unit, kind, description, default)
         self.inputs[name] = port

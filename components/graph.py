@@ -165,6 +165,7 @@ class Graph(_Declared):
                 out += [f"{bname}.{p}" for p in blk.parameter_paths()]
             else:
                 out += [f"{bname}.{p}" for p in blk.parameters]
+                out += [f"{bname}.{p}" for p in getattr(blk, "value_parameters", {})]  # arrays, strings
         return out
 
     def find(self, path: str) -> Node | Graph:

@@ -9,8 +9,11 @@ FMI variable names (one per element of a vector port); the graph's exposed input
 become the system's connectors. Real connectors carry their unit, defined in ``Units`` with SI
 base exponents. Each component's ``implementation`` attribute records whether it runs as
 co-simulation or model exchange; the macro step (``dt``) is kept in an annotation
-(``org.cpgsim.simulation``) and ``t_end`` in ``DefaultExperiment``. The result validates against
-the SSP 1.0 schema and fmpy's ``fmpy.ssp`` reads (and, for FMI 2 CS, simulates) it.
+(``org.cpgsim.simulation``) and ``t_end`` in ``DefaultExperiment``. The system's annotations start
+with OpenModelica's (``org.openmodelica``: ``oms:Annotations/oms:SimulationInformation/
+oms:FixedStepMaster`` with the step): OMSimulator takes a system's type only from it and fails on a
+system without it. The result validates against the SSP 1.0 schema and fmpy's ``fmpy.ssp`` reads
+(and, for FMI 2 CS, simulates) it.
 
 :func:`import_ssp` reads an ``.ssp`` (checked like an FMU: safe extraction, no DTDs) into a
 :class:`~components.graph.Graph` of ``FmuBlock``\\ s, nested ``System``\\ s as nested graphs. Inline
@@ -46,12 +49,15 @@ NS = {
     "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
 }
 ANNOTATION = "org.cpgsim.simulation"
+OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+OMS_DEFAULT_STEP = 1e-3  # the fixed step OpenModelica's annotation states when export_ssp gets no dt
 _INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
 _IMPL = {"cs": "CoSimulation", "me": "ModelExchange"}
 
 for _p, _u in NS.items():
     ET.register_namespace(_p, _u)
 ET.register_namespace("cpgsim", "urn:cpgsim")
+ET.register_namespace("oms", OMS_NS)
 
 
 def _q(prefix: str, tag: str) -> str:
@@ -94,9 +100,10 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
         for name, comp in comps.items():
             _write_component(elements, name, comp, graph, units)
         _write_connections(system, graph, comps)
+        annotations = ET.SubElement(system, _q("ssd", "Annotations"))
+        _openmodelica_annotation(annotations, OMS_DEFAULT_STEP if dt is None else float(dt))
         if dt is not None:
-            ann = ET.SubElement(ET.SubElement(system, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
-                                {"type": ANNOTATION})
+            ann = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": ANNOTATION})
             ET.SubElement(ann, "{urn:cpgsim}Simulation", {"stepSize": repr(float(dt))})
         if units:
             _write_units(root, units)
@@ -117,6 +124,14 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
+
+
+def _openmodelica_annotation(annotations: ET.Element, step: float) -> None:
+    """OpenModelica's system annotation, a fixed-step co-simulation master (first in ``annotations``)."""
+    ann = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": "org.openmodelica"})
+    info = ET.SubElement(ET.SubElement(ann, f"{{{OMS_NS}}}Annotations"), f"{{{OMS_NS}}}SimulationInformation")
+    ET.SubElement(info, f"{{{OMS_NS}}}FixedStepMaster", {"description": "oms-ma", "stepSize": repr(step),
+                                                          "absoluteTolerance": "0.0001", "relativeTolerance": "0.0001"})
 
 
 @dataclass
@@ -316,7 +331,8 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
 
     ``params`` overrides parameters after the SSP's bindings (``{"block.param": value}``, block
     parameter names). The graph has ``ssp_step`` (the macro step recorded by
-    :func:`export_ssp`, or None) and ``ssp_stop_time`` attributes.
+    :func:`export_ssp`, or None), ``ssp_start_time`` and ``ssp_stop_time`` (the
+    ``DefaultExperiment``'s, or None) attributes.
     """
     path = Path(path)
     with open_zip(path, "SSP") as zf:
@@ -348,6 +364,10 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
         exp = root.find("ssd:DefaultExperiment", NS)
         graph.ssp_step = step  # type: ignore[attr-defined]
         graph.ssp_stop_time = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else None  # type: ignore[attr-defined]
+        graph.ssp_start_time = _experiment_time(exp, "startTime", path)  # type: ignore[attr-defined]
+        if graph.ssp_stop_time is not None and not graph.ssp_stop_time > (graph.ssp_start_time or 0.0):
+            raise ModelDescriptionError(f"SSP {path}: DefaultExperiment stopTime {graph.ssp_stop_time:g} is not "
+                                        f"after its startTime {graph.ssp_start_time or 0.0:g}")
         graph.ssp_dir = unzipdir  # type: ignore[attr-defined]
         for key, value in (params or {}).items():
             graph.set_param(key, value)
@@ -356,6 +376,15 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
         raise
     weakref.finalize(graph, remove_tree, str(unzipdir))
     return graph
+
+
+def _experiment_time(exp: ET.Element | None, attr: str, ssp: Path) -> float | None:
+    if exp is None or not exp.get(attr):
+        return None
+    try:
+        return float(exp.get(attr))
+    except ValueError:
+        raise ModelDescriptionError(f"SSP {ssp}: DefaultExperiment {attr} {exp.get(attr)!r} is not a number") from None
 
 
 def _bindings(element: ET.Element, unzipdir: Path, ssp: Path) -> dict[str, tuple[str, str]]:

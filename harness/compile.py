@@ -194,7 +194,7 @@ class _Compiler:
             key = f"{path}.{port.name}"
             src = self.flat.sources.get(key)
             if src is None:
-                return ca.SX(np.full((port.size, 1), port.default))
+                return ca.SX(port.default_values().reshape(-1, 1))
             if src.startswith("$") or src in self.inputs:
                 return U[self.inputs.index(src).slice]
             active.append(key)

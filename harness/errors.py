@@ -22,3 +22,16 @@ class SimulationDiverged(SimulationError):
 
 class CoSimulationError(SimulationError):
     """A co-simulation block failed in ``setup``/``do_step``/``get_outputs``."""
+
+
+class StopRequested(Exception):  # noqa: N818 - a request, not an error
+    """Raised by a co-simulation block that asks to end the run cleanly (not a failure).
+
+    ``time`` is the block's last successful time. The master records every macro step up to the
+    last one at or before ``time`` (the block must still answer ``get_outputs`` there), stops, and
+    returns complete results whose ``meta["stopped_by"]`` names the block, the time and ``message``.
+    """
+
+    def __init__(self, message: str, time: float) -> None:
+        super().__init__(message)
+        self.time = float(time)

@@ -12,6 +12,12 @@ once is decided in :class:`_Plan` before the loop: where each input comes from, 
 columns are plain slices of a block's output, and whether the compiled step may commit its new
 state itself (one C call that also checks it for NaN/inf: no feedthrough blocks). A failing block
 is named by the stage variable the loop keeps, without a wrapper per call.
+
+A block may ask to end the run by raising :class:`~harness.errors.StopRequested` (an FMU that
+terminates the simulation): not a failure. The block is not stepped again; the master records every
+macro step up to the last one at or before the requested time (if the block completed the step it
+was asked for, the row at the step's end too, with the block's outputs there), terminates the blocks
+and returns a :class:`StopInfo` naming the block.
 """
 
 from __future__ import annotations
@@ -23,7 +29,19 @@ import numpy as np
 
 from components.core import CoSimBlock
 from harness.compile import CompiledModel
-from harness.errors import SimulationError
+from harness.errors import SimulationError, StopRequested
+
+
+class StopInfo:
+    """Which block ended the run (``path``), at which time and why (``message``)."""
+
+    def __init__(self, path: str, time: float, message: str) -> None:
+        self.path = path
+        self.time = time
+        self.message = message
+
+    def as_meta(self) -> dict[str, Any]:
+        return {"block": self.path, "time": self.time, "message": self.message}
 
 
 class _Plan:
@@ -34,6 +52,13 @@ class _Plan:
         self.free_to_u = [(m.inputs.index("$" + name).slice, rows) for name, rows in free_rows.items()]
         self.cs_to_u = [(m.inputs.index(s.name).slice, *s.name.rsplit(".", 1))
                         for s in m.inputs.slots if not s.name.startswith("$")]
+        # 64-bit integer outputs (``exact_outputs`` of a block): exact to block inputs and to the results;
+        # into the compiled (float64) part only while the values are exact in float64
+        exact = {path: dict(getattr(blk, "exact_outputs", {}) or {}) for path, blk in cs.items()}
+        to_eq = {src for dst, src in m.flat.sources.items() if dst.rsplit(".", 1)[0] not in cs}
+        self.exact_to_u = [(sl, path, port) for sl, path, port in self.cs_to_u
+                           if port in exact.get(path, {}) and f"{path}.{port}" in to_eq]
+        self.exact_rec: list[tuple[str, str, str]] = []
         # each block input: ("y", signal slice), ("free", row slice), ("cs", (path, port)) or ("const", value)
         self.feeds: dict[str, list[tuple[str, tuple[str, Any]]]] = {}
         for path, blk in cs.items():
@@ -41,11 +66,12 @@ class _Plan:
             for iname, port in blk.inputs.items():
                 src = m.cosim_feeds.get(f"{path}.{iname}")
                 if src is None:
-                    feeds.append((iname, ("const", np.full(port.size, port.default))))
+                    feeds.append((iname, ("const", port.default_values())))
                 elif src.startswith("$"):
                     feeds.append((iname, ("free", free_rows[src[1:]])))
                 elif src.rsplit(".", 1)[0] in cs:
-                    feeds.append((iname, ("cs", tuple(src.rsplit(".", 1)))))
+                    spath, sport = src.rsplit(".", 1)
+                    feeds.append((iname, ("exact" if sport in exact.get(spath, {}) else "cs", (spath, sport))))
                 else:
                     feeds.append((iname, ("y", m.signals_layout.index(src).slice)))
             self.feeds[path] = feeds
@@ -65,6 +91,8 @@ class _Plan:
                 elems.append(i)
         for src, (cols, elems) in groups.items():
             path, port = src.rsplit(".", 1)
+            if port in exact.get(path, {}):
+                self.exact_rec.append((src, path, port))
             size = cs[path].outputs[port].size
             if elems == list(range(size)) and cols == list(range(cols[0], cols[0] + size)):
                 self.c_slices.append((path, port, slice(cols[0], cols[0] + size)))
@@ -81,9 +109,24 @@ class _Plan:
                 values[port] = u_free[where, k].copy()
             elif kind == "cs":
                 values[port] = np.asarray(outputs[where[0]][where[1]], dtype=float)
+            elif kind == "exact":
+                values[port] = np.asarray(outputs[where[0]][where[1]])
             else:
                 values[port] = where
         return values
+
+    def check_exact(self, outputs: dict[str, dict[str, np.ndarray]]) -> None:
+        """Refuse a 64-bit integer that the compiled part (float64) would round."""
+        for _sl, path, port in self.exact_to_u:
+            v = np.asarray(outputs[path][port])
+            if v.size and np.any(v.astype(object) != v.astype(float).astype(object)):
+                bad = next(int(a) for a in v if int(a) != int(float(a)))
+                raise OverflowError(f"output {path}.{port} = {bad} feeds an equation block (float64), which would "
+                                    f"round it to {float(bad):.17g}; connect it to a 64-bit integer input instead")
+
+    def record_exact(self, exact: dict[str, list], outputs: dict[str, dict[str, np.ndarray]]) -> None:
+        for key, path, port in self.exact_rec:
+            exact.setdefault(key, []).append(np.asarray(outputs[path][port]).copy())
 
     def record(self, row: np.ndarray, y: np.ndarray, outputs: dict[str, dict[str, np.ndarray]]) -> None:
         if self.yj.size:
@@ -97,13 +140,14 @@ class _Plan:
 def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times: np.ndarray,
                u_free: np.ndarray, picks, rec, order: str, progress_bar,
                on_block_error: Callable[[str, str, Exception], Exception],
-               on_diverged: Callable[[], None]) -> None:
+               on_diverged: Callable[[], None]) -> StopInfo | None:
     """Run the macro steps ``times[0] .. times[-1]`` (see the module docstring).
 
     ``step(t)`` evaluates the compiled step on ``buffers = (x, z, u, y, x_next, z_next)``;
     ``step.commit(t)`` also moves the new state in when it is finite. ``on_block_error(path, what,
     exc)`` builds the exception for a failing block; ``on_diverged()`` raises for a non-finite
-    state (``x_next`` holds it, ``x`` the last finite one).
+    state (``x_next`` holds it, ``x`` the last finite one). Returns the :class:`StopInfo` of a
+    block that asked to stop, else None.
     """
     x, z, u, y, x_next, z_next = buffers
     plan = _Plan(m, cs, picks)
@@ -118,6 +162,18 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     data = rec.data
     started: list[CoSimBlock] = []
     stage: tuple[str, str] | None = None
+    stop: StopInfo | None = None
+    last_row = n  # the last row to record (earlier after a stop request)
+
+    halted: set[str] = set()  # blocks that asked to stop: read, never given inputs or stepped again
+
+    def stopped(path: str, exc: StopRequested, row: int) -> None:
+        nonlocal stop, last_row
+        halted.add(path)
+        if stop is None or exc.time < stop.time:
+            stop = StopInfo(path, exc.time, str(exc))
+        last_row = min(last_row, row)
+
     try:
         for path, blk in cs.items():
             stage = (path, "setup")
@@ -127,10 +183,18 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
             t = t_list[k]
             for path, get in getters:
                 stage = (path, "get_outputs")
-                outputs[path] = get()
+                try:
+                    outputs[path] = get()
+                except StopRequested as exc:  # e.g. an event at t_k ends the run: outputs at t_k
+                    stopped(path, exc, k)
+                    outputs[path] = get()
             stage = None
             for sl, rows in plan.free_to_u:
                 u[sl] = u_free[rows, k]
+            if plan.exact_to_u:
+                stage = (plan.exact_to_u[0][1], "output to an equation block")
+                plan.check_exact(outputs)
+                stage = None
             for sl, path, port in plan.cs_to_u:
                 u[sl] = outputs[path][port]
             if commit and k < n:
@@ -141,7 +205,11 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                 for _ in range(len(plan.ft_paths)):  # direct feedthrough: inputs at t before outputs at t
                     for path in plan.ft_paths:
                         stage = (path, "set_inputs")
-                        cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                        try:
+                            if path not in halted:
+                                cs[path].set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                        except StopRequested as exc:
+                            stopped(path, exc, k)
                         stage = (path, "get_outputs")
                         outputs[path] = cs[path].get_outputs()
                     stage = None
@@ -149,25 +217,34 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                         u[sl] = outputs[path][port]
                     step(t)
             plan.record(data[k], y, outputs)
+            if plan.exact_rec:
+                plan.record_exact(rec.exact, outputs)
             rec.n = k + 1
-            if k == n:
+            if k >= last_row:
                 break
             if not committed and (commit or not np.isfinite(x_next.sum())):  # a sum is finite iff all are
                 on_diverged()
             for path, set_inputs, do_step, get in steppers:
-                stage = (path, "set_inputs")
-                set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
-                stage = (path, "do_step")
-                do_step(t, dt)
+                try:
+                    stage = (path, "set_inputs")
+                    set_inputs(plan.inputs_of(path, y, u_free, k, outputs))
+                    stage = (path, "do_step")
+                    do_step(t, dt)
+                except StopRequested as exc:  # completed the step (row k+1 recorded) or stopped within it
+                    stopped(path, exc, k + 1 if exc.time >= t_list[k + 1] - 1e-9 * dt else k)
+                    continue
                 if gauss_seidel:
                     stage = (path, "get_outputs")
                     outputs[path] = get()
             stage = None
+            if last_row <= k:
+                break
             if not committed:
                 x[:] = x_next
                 z[:] = z_next
             if k % 100 == 0:
                 progress_bar.update(min(100, n - k))
+        return stop
     except Exception as exc:
         if stage is None or _is_simulation_error(exc):
             raise

@@ -40,6 +40,9 @@ class Results:
         if name == "time":
             return self.time
         name = self.meta.get("aliases", {}).get(name, name)
+        exact = self.meta.get("exact_integers", {}).get(name)
+        if exact is not None:  # a 64-bit integer column: its exact values (the float column rounds them)
+            return np.array(exact["values"], dtype=exact["dtype"])
         if name in self._index:
             return self.data[:, self._index[name]]
         matches = [c for c in self.columns if c.startswith(name + "[")]

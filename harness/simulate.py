@@ -113,11 +113,17 @@ class Simulator:
         rec.aliases = {a: leaf for a, leaf in self.aliases.items()
                        if any(c == leaf or c.startswith(leaf + "[") for c in columns)}
         cs = m.flat.cosim_blocks()
+        stop = None
         if cs:
-            self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
+            stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
         else:
             self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
-        return rec.results(complete=True, message="")
+        if stop is None:
+            return rec.results(complete=True, message="")
+        res = rec.results(complete=True, message=f"stopped at t={rec.last_time():.9g} s: block {stop.path!r} "
+                                                 f"asked to end the run ({stop.message})")
+        res.meta["stopped_by"] = stop.as_meta()
+        return res
 
     # -- setup helpers ---------------------------------------------------------------------------
     def _initial_states(self, x0: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +148,7 @@ class Simulator:
             if name in inputs:
                 rows.append(_input_series(name, inputs[name], port.size, times))
             elif port.default is not None:
-                rows.append(np.full((port.size, len(times)), port.default))
+                rows.append(np.repeat(port.default_values()[:, None], len(times), axis=1))
             else:
                 raise ModelError(f"graph input {name!r} is free: give a value with inputs={{{name!r}: ...}}")
         unknown = set(inputs) - set(m.free_inputs)
@@ -290,8 +296,9 @@ class Simulator:
 
     # -- co-simulation master ---------------------------------------------------------------------
     def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
-                   progress: bool) -> None:
-        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors."""
+                   progress: bool):
+        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors;
+        returns the master's :class:`~harness.master.StopInfo` (a block asked to stop) or None."""
         m = self.model
         u = np.zeros(m.inputs.size)
         y = np.zeros(m.signals_layout.size)
@@ -308,7 +315,7 @@ class Simulator:
 
         bar = _progress(len(times) - 1, progress, m.name)
         try:
-            run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
+            stop = run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
                        block_error, diverged)
         except KeyboardInterrupt as exc:
             raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
@@ -318,6 +325,7 @@ class Simulator:
             if hasattr(step, "stop_thread"):
                 step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
+        return stop
 
 
 def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) -> np.ndarray:
@@ -375,6 +383,7 @@ class _Recorder:
         self.columns = columns
         self.units = units
         self.aliases: dict[str, str] = {}
+        self.exact: dict[str, list[np.ndarray]] = {}  # "block.port" -> exact 64-bit integer rows
 
     def add_row(self, row: np.ndarray) -> None:
         self.data[self.n] = row
@@ -388,8 +397,23 @@ class _Recorder:
         return float(self.times[self.n - 1]) if self.n else float(self.times[0])
 
     def results(self, complete: bool, message: str) -> Results:
+        meta: dict[str, Any] = {"aliases": dict(self.aliases)}
+        if self.exact:
+            meta["exact_integers"] = self._exact_columns()
         return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
-                       self.data[:self.n].copy(), complete, message, {"aliases": dict(self.aliases)})
+                       self.data[:self.n].copy(), complete, message, meta)
+
+    def _exact_columns(self) -> dict[str, dict[str, Any]]:
+        """Recorded 64-bit integer columns, exactly: ``{column: {"dtype": "int64", "values": [...]}}``
+        (JSON integers, so the metadata file keeps them exact too)."""
+        out: dict[str, dict[str, Any]] = {}
+        for key, rows in self.exact.items():
+            table = np.array(rows[:self.n])
+            for col in self.columns:
+                if col == key or (col.startswith(key + "[") and col.endswith("]")):
+                    i = 0 if col == key else int(col[len(key) + 1:-1])
+                    out[col] = {"dtype": str(table.dtype), "values": [int(v) for v in table[:, i]]}
+        return out
 
 
 def _progress(total: int, enabled: bool, name: str):

@@ -150,3 +150,61 @@ def test_force_servo_equals_moving_rest_position_servo():
             robot.do_step(k * 1e-3, 1e-3)
         final.append(robot.model.skeleton.getPositions())
     assert np.max(np.abs(final[0] - final[1])) < 1e-9
+
+
+class Stopper(CoSimBlock):
+    """y = u + t (direct feedthrough); asks to end the run when a step reaches ``t_stop``; any input
+    or step after that is a failure (the master must not touch it again)."""
+
+    def __init__(self, name: str, t_stop: float, within: bool = False) -> None:
+        self.t_stop, self.within = t_stop, within
+        super().__init__(name)
+
+    def declare(self) -> None:
+        self.add_input("u", default=0.0)
+        self.add_output("y")
+        self.feedthrough = {"y": {"u"}}
+
+    def setup(self, t0: float) -> None:
+        self._t, self._u, self._done = t0, 0.0, False
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        return {"y": np.array([self._u + self._t])}
+
+    def set_inputs(self, values) -> None:
+        if self._done:
+            raise RuntimeError("inputs set after the stop request")
+        self._u = float(np.asarray(values["u"]).ravel()[0])
+
+    def do_step(self, t: float, dt: float) -> None:
+        from harness.errors import StopRequested
+
+        if self._done:
+            raise RuntimeError("stepped after the stop request")
+        if t + dt >= self.t_stop - 1e-12:
+            self._done = True
+            if self.within:  # stopped inside the step: last successful time t
+                raise StopRequested("stopper: no further", t)
+            self._t = t + dt
+            raise StopRequested("stopper: reached the end", t + dt)
+        self._t = t + dt
+
+
+@pytest.mark.parametrize("within", [False, True])
+def test_a_block_asking_to_stop_ends_the_run_cleanly(within):
+    """Generic (no FMU): the stop time is the last row, the rows before are all there, the block is
+    not given inputs or stepped again (even with direct feedthrough), the other blocks' columns too."""
+    from components.basic import Constant
+
+    g = Graph("g")
+    g.add(Constant("c", value=2.0))
+    g.add(Stopper("s", 0.5, within))
+    g.connect("c.y", "s.u")
+    from harness.simulate import simulate
+
+    res = simulate(g, 2.0, dt=0.1)
+    assert res.complete and res.meta["stopped_by"]["block"] == "s"
+    end = 0.4 if within else 0.5
+    assert res.time[-1] == pytest.approx(end) and len(res.time) == round(end / 0.1) + 1
+    np.testing.assert_allclose(res["s.y"], 2.0 + res.time, atol=1e-12)
+    assert res.meta["stopped_by"]["time"] == pytest.approx(0.4 if within else 0.5)

@@ -717,3 +717,25 @@ def test_cli_export(tmp_path, capsys):
         assert cli_main(bad) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("cpgsim export: error:") and "\n" not in err
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_value_references_are_dense_in_declaration_order(exported, fmi):
+    """Value reference = position in ModelVariables (FMI 3: time is 0), so tools that index by value
+    reference find the variable; the category is in the description; derivative/dependency attributes
+    point at the right variables."""
+    fmu = exported("network", fmi, "both")
+    md = read_model_description(str(fmu.path))
+    assert [v.valueReference for v in md.modelVariables] == list(range(len(md.modelVariables)))
+    if fmi == 3:
+        assert md.modelVariables[0].name == "time"
+    by_name = {v.name: v for v in md.modelVariables}
+    assert by_name["z1.eps"].description.startswith("[parameter p[")
+    for v in md.modelVariables:
+        if v.name.startswith("der("):
+            assert v.derivative is by_name[v.name[4:-1]]
+            assert v.description.startswith("[derivative x[")
+    for unknown in md.outputs + md.derivatives:
+        assert all(d.causality in ("input", "local", "output") or d.name.startswith("states.")
+                   for d in (unknown.dependencies or []))
+    assert fmu.vr("z1.eps") == by_name["z1.eps"].valueReference

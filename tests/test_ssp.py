@@ -192,3 +192,51 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
     r = cli("simulate", ssp, "--t-end", "0.1", "--dt", "0.01", "--isolate", "-o", tmp_path / "out.csv")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "out.csv").read_text().splitlines()[0] == "time,a.x,b.x"
+
+
+def test_default_experiment_is_used_unless_the_cli_overrides_it(tmp_path, integrator):
+    from harness.cli.main import main
+    from harness.results import Results
+
+    ssp = export_ssp(_chain(integrator), tmp_path / "chain.ssp", dt=0.01, t_end=0.3)
+    out = tmp_path / "out.csv"
+    assert main(["simulate", str(ssp), "-o", str(out)]) == 0
+    res = Results.load(out)
+    assert res.time[-1] == pytest.approx(0.3) and res.time[1] - res.time[0] == pytest.approx(0.01)
+    assert main(["simulate", str(ssp), "--t-end", "0.2", "--dt", "0.05", "-o", str(out)]) == 0
+    res = Results.load(out)
+    assert res.time[-1] == pytest.approx(0.2) and len(res.time) == 5
+    # a startTime other than 0
+    shifted = tmp_path / "shifted.ssp"
+    with zipfile.ZipFile(ssp) as zin, zipfile.ZipFile(shifted, "w") as zout:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename == "SystemStructure.ssd":
+                data = data.replace(b'startTime="0.0"', b'startTime="0.1"')
+            zout.writestr(info.filename, data)
+    assert main(["simulate", str(shifted), "-o", str(out)]) == 0
+    res = Results.load(out)
+    assert res.time[0] == pytest.approx(0.1) and res.time[-1] == pytest.approx(0.3)
+
+
+def test_exported_ssp_starts_its_annotations_with_openmodelicas(tmp_path, integrator):
+    """OMSimulator takes the system's type from its own annotation, the first in the system; fmpy still reads it."""
+    import xml.etree.ElementTree as ET
+
+    from fmpy.ssp.ssd import read_ssd
+
+    for dt in (0.01, None):
+        ssp = export_ssp(_chain(integrator), tmp_path / "chain.ssp", dt=dt, t_end=1.0)
+        with zipfile.ZipFile(ssp) as zf:
+            root = ET.fromstring(zf.read("SystemStructure.ssd"))
+        ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+              "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+              "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"}
+        anns = root.findall("ssd:System/ssd:Annotations/ssc:Annotation", ns)
+        assert anns[0].get("type") == "org.openmodelica"
+        master = anns[0].find("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", ns)
+        assert master is not None and float(master.get("stepSize")) == (dt or 1e-3)
+        assert list(root.find("ssd:System", ns))[-1].tag.endswith("Annotations")  # where the schema wants it
+        assert [e.name for e in read_ssd(str(ssp)).system.elements] == ["a", "b"]  # schema-validated
+        back = import_ssp(ssp)
+        assert back.ssp_step == dt

@@ -205,6 +205,9 @@ def generate_header(variables: Variables, identifier: str, guid: str, kinds: tup
         f"static const char CPG_P_KIND[] = {_c_str(kinds_of(m.params))};",
         f"static const char CPG_Z_KIND[] = {_c_str(kinds_of(m.dstates))};",
         f"static const char CPG_Y_KIND[] = {_c_str(kinds_of(m.signals_layout))};",
+        "#define CPG_NVR " + str(max((v.vr for v in variables.items), default=0) + 1),
+        "/* value reference -> internal code category * 1000000 + index (0xFFFFFFFF: none) */",
+        "static const unsigned CPG_VR_CODE[] = {" + ", ".join(_vr_codes(variables)) + "};",
         "static const int CPG_OUT_SIG[] = {" + (", ".join(str(v.signal) for v in outputs) or "0") + "};",
         f"static const char *const CPG_U_NAME[] = {_c_strings([v.name for v in variables.of('input')])};",
         f"static const char *const CPG_OUT_NAME[] = {_c_strings([v.name for v in outputs])};",
@@ -302,3 +305,12 @@ def write_fmu(staging: Path, path: Path) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _vr_codes(variables) -> list[str]:
+    """The C table from a (dense) value reference to the internal code; time (code 0) at 0."""
+    codes = ["0xFFFFFFFFu"] * (max((v.vr for v in variables.items), default=0) + 1)
+    codes[0] = "0u"  # time (FMI 3 declares it; unused in FMI 2, where vr 0 is the first variable)
+    for v in variables.items:
+        codes[v.vr] = f"{v.code}u"
+    return codes

@@ -120,7 +120,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         else:  # a single block: "param" or "<block>.param"
             item.set(**{k[len(item.name) + 1:] if k.startswith(item.name + ".") else k: v for k, v in params.items()})
     model = compile_graph(item, dt, substeps)
-    variables = collect_variables(model)
+    variables = collect_variables(model, fmi)
     identifier = model_identifier(name or model.name)
     kinds = KINDS[kind]
     desc = description or getattr(item, "description", "") or f"cpgsim model {model.name}"
@@ -152,6 +152,6 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
     return ExportedFmu(path, variables, identifier, guid, fmi, kinds)
 
 
-def describe(item: Graph | Block, dt: float = 1e-3) -> Variables:
+def describe(item: Graph | Block, dt: float = 1e-3, fmi: int = 2) -> Variables:
     """The FMU variables ``item`` would export to (names, value references, start values)."""
-    return collect_variables(compile_graph(item, dt))
+    return collect_variables(compile_graph(item, dt), fmi)

@@ -1,21 +1,27 @@
 """The FMU's variables (with their value references) and its ``modelDescription.xml`` (FMI 2 and 3).
 
-Value references (stable and documented; ``i`` is the element index in the named vector, in the
-order of the compiled model's layouts, i.e. the order blocks were added to the graph)::
+Value references are dense: the position of the variable in ``ModelVariables`` (FMI 2: ``0..n-1``;
+FMI 3: ``time`` is 0 and the others ``1..n``), so tools that index their variable list by value
+reference (OMSimulator's FMI 3 loader does) find the right variable. The variables come in this
+order (``i`` is the element index in the named vector, in the order of the compiled model's
+layouts, i.e. the order blocks were added to the graph); each one's description starts with its
+category and element, e.g. ``[parameter p[3]]``::
 
-    0            time                      (FMI 3 only: the independent variable)
-    1_000_000+i  inputs        u[i]        graph free inputs (causality input)
-    2_000_000+i  outputs                   graph outputs, or every block output if none is exposed
-    3_000_000+i  parameters    p[i]        every block parameter ``block.param`` (causality parameter)
-    4_000_000+i  states        x[i]        continuous states, named ``states.<block>.<state>``
-    5_000_000+i  derivatives               ``der(states.<block>.<state>)``
-    6_000_000+i  discrete      z[i]        discrete states, named ``dstates.<block>.<state>``
-    7_000_000+i  signals       y[i]        every block output ``block.port`` (locals; only when the
-                                           graph exposes outputs, otherwise they are the outputs)
+    category    vector  variables
+    time                FMI 3 only: the independent variable
+    input       u[i]    graph free inputs (causality input)
+    output              graph outputs, or every block output if none is exposed
+    parameter   p[i]    every block parameter ``block.param`` (causality parameter)
+    state       x[i]    continuous states, named ``states.<block>.<state>``
+    derivative          ``der(states.<block>.<state>)``
+    dstate      z[i]    discrete states, named ``dstates.<block>.<state>``
+    signal      y[i]    every block output ``block.port`` (locals; only when the graph exposes
+                        outputs, otherwise they are the outputs)
 
-The C layer decodes a value reference as ``category = vr / 1000000``, ``index = vr % 1000000``. Vector
-elements are separate scalar variables ``name[k]`` (0-based, as in the results' columns). The same
-numbers are used in FMI 2 and FMI 3 (unique across types, as FMI 3 requires).
+The C layer maps a value reference through a generated table (``CPG_VR_CODE``) to the internal code
+``category * 1000000 + index`` and decodes that. Vector elements are separate scalar variables
+``name[k]`` (0-based, as in the results' columns). Value references are unique across types, as
+FMI 3 requires.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 from components.core import ModelError
 from fmus.units import unit_definition
@@ -63,10 +70,19 @@ class Variable:
     max: float | None = None
     signal: int | None = None  # outputs: index into the signal vector y
     depends: list[int] = field(default_factory=list)  # outputs/derivatives: indices into Variables.items
+    vr: int = -1  # the value reference: dense, set by collect_variables
 
     @property
-    def vr(self) -> int:
+    def code(self) -> int:
+        """The C layer's internal code: ``category * 1000000 + index``."""
         return CATEGORIES[self.category] * VR_STRIDE + self.index
+
+    @property
+    def tag(self) -> str:
+        """``[category vector[index]]``, the start of the variable's description in the FMU."""
+        vec = {"input": "u", "parameter": "p", "state": "x", "derivative": "x", "dstate": "z", "signal": "y"}
+        where = f" {vec[self.category]}[{self.index}]" if self.category in vec else f" {self.index}"
+        return f"[{self.category}{where}]"
 
 
 @dataclass
@@ -85,8 +101,9 @@ def _elements(slot) -> list[str]:
     return slot.element_names()
 
 
-def collect_variables(model: CompiledModel) -> Variables:
-    """The FMI variables of a compiled model (see the module docstring for names and numbering)."""
+def collect_variables(model: CompiledModel, fmi: int = 2) -> Variables:
+    """The FMI variables of a compiled model (see the module docstring for names and numbering;
+    ``fmi`` decides whether value reference 0 is ``time``)."""
     flat = model.flat
     if flat.cosim_blocks():
         raise ExportError(
@@ -100,10 +117,10 @@ def collect_variables(model: CompiledModel) -> Variables:
     for slot in model.inputs.slots:
         name = slot.name[1:]
         port = model.free_inputs[name]
-        start = 0.0 if port.default is None else float(port.default)
+        starts = np.zeros(port.size) if port.default is None else port.default_values()
         for i, el in enumerate(_elements(slot)):
             items.append(Variable(el[1:], "input", slot.start + i, slot.kind, "input", kind_var(slot.kind), None,
-                                  start, slot.unit, slot.description))
+                                  float(starts[i]), slot.unit, slot.description))
     sig = model.signals_layout
     if model.graph_outputs:
         k = 0
@@ -159,6 +176,9 @@ def collect_variables(model: CompiledModel) -> Variables:
         seen[v.name] = v
         if v.index >= VR_STRIDE:
             raise ExportError(f"too many {v.category} elements for the value-reference scheme (max {VR_STRIDE})")
+    first = 1 if fmi == 3 else 0  # FMI 3 declares time first, as value reference 0
+    for k, v in enumerate(items):
+        v.vr = first + k
     has_events = _discrete_changes_something(model)
     variables = Variables(items, model, has_events)
     _dependencies(variables)
@@ -247,9 +267,8 @@ def _log_categories(parent: ET.Element) -> None:
 
 
 def _common_attrs(v: Variable) -> dict[str, str]:
-    attrs = {"name": v.name, "valueReference": str(v.vr)}
-    if v.description:
-        attrs["description"] = v.description
+    attrs = {"name": v.name, "valueReference": str(v.vr),
+             "description": f"{v.tag} {v.description}" if v.description else v.tag}
     attrs["causality"] = v.causality
     attrs["variability"] = v.variability
     if v.initial is not None:

@@ -2,7 +2,8 @@
 
 :func:`check_archive` inspects the central directory without writing anything and refuses:
 a file that is not a zip archive; members with absolute paths, drive letters, backslashes or
-``..`` components; symbolic links; encrypted members; duplicate names; more than
+``..`` components; symbolic links; encrypted members; a name given twice with different contents
+(a member zipped twice with the same bytes, as some build systems do, is accepted once); more than
 ``MAX_MEMBERS`` members; a member over ``MAX_MEMBER_BYTES`` or a total over ``MAX_TOTAL_BYTES``
 (uncompressed); a compression ratio over ``MAX_RATIO`` (zip bombs). :func:`safe_extract`
 checks the same and then streams each member into a fresh directory, counting bytes as it
@@ -80,12 +81,43 @@ def check_archive(zf: zipfile.ZipFile, path: str | os.PathLike, what: str = "FMU
             raise UnsafeArchiveError(f"{what} {path}: refusing archive member {info.filename!r}: it {problem}")
         key = info.filename.rstrip("/")
         if key in seen:
-            raise UnsafeArchiveError(f"{what} {path}: archive member {info.filename!r} appears twice")
+            continue  # checked (identical or refused) by _without_duplicates
         seen.add(key)
         total += info.file_size
         if total > MAX_TOTAL_BYTES:
             raise UnsafeArchiveError(f"{what} {path}: archive expands to more than {MAX_TOTAL_BYTES} bytes")
-    return infos
+    return _without_duplicates(zf, infos, path, what)
+
+
+def _without_duplicates(zf: zipfile.ZipFile, infos: list[zipfile.ZipInfo], path: str | os.PathLike,
+                        what: str) -> list[zipfile.ZipInfo]:
+    """The members with repeated names dropped when every copy has the same bytes; a name whose
+    copies differ raises :class:`UnsafeArchiveError` naming it (which one would a tool use?)."""
+    first: dict[str, zipfile.ZipInfo] = {}
+    out = []
+    for info in infos:
+        key = info.filename.rstrip("/")
+        if key not in first:
+            first[key] = info
+            out.append(info)
+            continue
+        a = first[key]
+        same = a.is_dir() == info.is_dir() and (a.is_dir() or (
+            a.file_size == info.file_size and a.CRC == info.CRC and _same_bytes(zf, a, info)))
+        if not same:
+            raise UnsafeArchiveError(f"{what} {path}: archive member {info.filename!r} appears twice with "
+                                     f"different contents")
+    return out
+
+
+def _same_bytes(zf: zipfile.ZipFile, a: zipfile.ZipInfo, b: zipfile.ZipInfo) -> bool:
+    with zf.open(a) as fa, zf.open(b) as fb:
+        while True:
+            ca, cb = fa.read(1 << 20), fb.read(1 << 20)
+            if ca != cb:
+                return False
+            if not ca:
+                return True
 
 
 def read_member(zf: zipfile.ZipFile, name: str, limit: int = MAX_XML_BYTES) -> bytes | None:

@@ -11,11 +11,13 @@ block is a :class:`~components.core.CoSimBlock`: the co-simulation master exchan
 at every macro step.
 
 - ``kind="cs"``: the FMU's own solver advances it with ``doStep(t, dt)``.
-- ``kind="me"``: the FMU's derivatives are integrated by our solver -- fixed-step RK4 at the
-  macro step (``substeps`` per step), inputs held over the step, events handled at step ends
-  (:mod:`fmus.importer.runtime`). The compiler cannot put an FMU inside its CasADi functions, so ME
-  states are not integrated in the same RK4 stages as the equation blocks: the coupling to the
-  rest of the graph is sampled at the macro step, as for a CS FMU.
+- ``kind="me"``: the FMU's derivatives are integrated within each macro step by our solver, inputs
+  held over the step: ``solver="rk4"`` (default; fixed step, ``substeps`` per macro step) or
+  ``solver="cvode"`` (CVODE BDF, adaptive and stiff, ``rtol`` default 1e-6, ``atol`` default ``rtol``
+  times each state's nominal). State, time and step events are located inside the step
+  (:mod:`fmus.importer.me`, :mod:`fmus.importer.runtime`). The compiler cannot put an FMU inside
+  its CasADi functions, so ME states are not integrated in the same RK4 stages as the equation
+  blocks: the coupling to the rest of the graph is sampled at the macro step, as for a CS FMU.
 - ``kind="auto"`` (default): CS if the FMU has it, else ME.
 - ``isolate=True``: the FMU runs in a child process (:mod:`fmus.importer.isolation`); a crash there
   (segmentation fault, abort) becomes an :class:`~fmus.errors.FmuCrashedError`, which the
@@ -43,14 +45,15 @@ from components.graph import Graph, as_graph
 from fmus.errors import FmuError
 from fmus.importer.description import FmuDescription, check_binary, describe_fmu, identifier
 
-__all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation"]
+__all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation", "set_solver"]
 
 
 class FmuBlock(CoSimBlock):
     """An FMU as a co-simulation block (see the module docstring).
 
     ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"`` or ``"me"``; ``substeps``: RK4
-    steps per macro step for ME; ``isolate``: run in a child process; ``timeout``: seconds an
+    steps per macro step for ME; ``solver``: ``"rk4"`` or ``"cvode"`` for ME, with ``rtol``/``atol``
+    for CVODE; ``isolate``: run in a child process; ``timeout``: seconds an
     isolated FMU may take for one call (None: no limit); ``workdir``: where the FMU is extracted
     (default: the system temp directory; removed at ``terminate``); ``strict``: refuse an XML
     that fails the FMI schema; keyword arguments set parameters (by their block names).
@@ -59,7 +62,8 @@ class FmuBlock(CoSimBlock):
     def __init__(self, name: str, path: str | Path, *, kind: str = "auto", substeps: int = 1,
                  isolate: bool = False, timeout: float | None = None, workdir: str | Path | None = None,
                  strict: bool = False, feedthrough: Mapping[str, Any] | None = None,
-                 description: FmuDescription | None = None, **params: Any) -> None:
+                 description: FmuDescription | None = None, solver: str = "rk4", rtol: float | None = None,
+                 atol: float | None = None, **params: Any) -> None:
         self.path = Path(path)
         self.info = description if description is not None else describe_fmu(self.path, strict=strict)
         if kind == "auto":
@@ -71,6 +75,16 @@ class FmuBlock(CoSimBlock):
         check_binary(self.info, kind)
         if int(substeps) != substeps or substeps < 1:
             raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
+        from fmus.importer.me import SOLVERS
+
+        if solver not in SOLVERS:
+            raise ModelError(f"FMU block {name!r}: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+        for what, tol in (("rtol", rtol), ("atol", atol)):
+            if tol is not None and not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol > 0):
+                raise ModelError(f"FMU block {name!r}: {what} must be a positive number, got {tol!r}")
+        self.solver = solver
+        self.rtol = rtol
+        self.atol = atol
         self.kind = kind
         self.substeps = int(substeps)
         self.isolate = bool(isolate)
@@ -79,6 +93,7 @@ class FmuBlock(CoSimBlock):
         self.strict = strict
         self._feed_override = feedthrough
         self._runtime: Any = None
+        self.value_values: dict[str, Any] = {}  # array and String parameters set by the user
         super().__init__(name, **params)
 
     # -- declaration ------------------------------------------------------------------------------
@@ -104,12 +119,40 @@ class FmuBlock(CoSimBlock):
         self.feedthrough = {out: set(ins) for out, ins in feed.items() if ins}
 
     @property
+    def exact_outputs(self) -> dict[str, str]:
+        """Outputs of FMI 3 type Int64/UInt64 (``{port: "int64"/"uint64"}``): their values stay exact
+        integers from the FMU to FMU inputs and to the results (``Results[...]`` returns them exactly)."""
+        return {n: p.element.type.lower() for n, p in self.info.outputs.items()
+                if p.element.type in ("Int64", "UInt64")}
+
+    @property
     def fmi_version(self) -> int:
         return self.info.fmi_version
 
-    def changed_parameters(self) -> dict[str, float]:
-        """Parameters whose value differs from the FMU's start value (the ones sent to the FMU)."""
-        out = {}
+    @property
+    def value_parameters(self) -> dict[str, Any]:
+        """The FMU's array and String parameters (:class:`~fmus.importer.description.ValueParamSpec`):
+        not block parameters (those are numbers), but settable the same way (keyword, ``set``,
+        ``Graph.set_param``, ``--set``)."""
+        return self.info.value_parameters
+
+    def set(self, **values: Any) -> FmuBlock:
+        """Set parameters: numbers (validated against their bounds), arrays and strings (checked
+        against the FMU's shape and type)."""
+        plain = {}
+        for key, value in values.items():
+            spec = self.info.value_parameters.get(key)
+            if spec is None:
+                plain[key] = value
+            else:
+                self.value_values[key] = spec.check(value, self.name)
+        super().set(**plain)
+        return self
+
+    def changed_parameters(self) -> dict[str, Any]:
+        """Parameters whose value differs from the FMU's start value (the ones sent to the FMU), and
+        the array and String parameters that were set."""
+        out: dict[str, Any] = dict(self.value_values)
         for name, spec in self.info.parameters.items():
             v = self.values[name]
             if spec.start is None or not math.isclose(v, spec.start, rel_tol=0.0, abs_tol=0.0):
@@ -121,7 +164,7 @@ class FmuBlock(CoSimBlock):
         self.terminate()
         args = dict(path=str(self.path), kind=self.kind, instance_name=self.name,
                     workdir=None if self.workdir is None else str(self.workdir), substeps=self.substeps,
-                    strict=self.strict)
+                    strict=self.strict, solver=self.solver, rtol=self.rtol, atol=self.atol)
         if self.isolate:
             from fmus.importer.isolation import IsolatedRuntime
 
@@ -186,6 +229,30 @@ def set_isolation(graph: Any, isolate: bool = True, timeout: float | None = None
         blk.isolate = isolate
         if timeout is not None:
             blk.timeout = timeout
+    return len(blocks)
+
+
+def set_solver(graph: Any, solver: str, rtol: float | None = None, atol: float | None = None,
+               switch_to_me: bool = False) -> int:
+    """Use ``solver`` (``"rk4"``/``"cvode"``, tolerances for CVODE) for every ME FMU block of ``graph``
+    (with ``switch_to_me``, also for CS blocks whose FMU offers model exchange, which then run as ME);
+    returns how many blocks use it."""
+    from fmus.importer.me import SOLVERS
+
+    if solver not in SOLVERS:
+        raise ModelError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    if switch_to_me:
+        for blk in fmu_blocks(graph):
+            if blk.kind == "cs" and "me" in blk.info.kinds:
+                check_binary(blk.info, "me")
+                blk.kind = "me"
+    blocks = [b for b in fmu_blocks(graph) if b.kind == "me"]
+    for blk in blocks:
+        blk.solver = solver
+        if rtol is not None:
+            blk.rtol = rtol
+        if atol is not None:
+            blk.atol = atol
     return len(blocks)
 
 

@@ -73,11 +73,12 @@ class PortSpec:
         return int(math.prod(self.shape))
 
     @property
-    def default(self) -> float | None:
-        """The port default (for an unconnected input): the start value if it is uniform."""
+    def default(self) -> float | tuple[float, ...] | None:
+        """The port default (for an unconnected input): the start value, one number if it is uniform,
+        else one per element."""
         if not self.start:
             return None
-        return self.start[0] if all(v == self.start[0] for v in self.start) else None
+        return self.start[0] if all(v == self.start[0] for v in self.start) else tuple(self.start)
 
 
 @dataclass(frozen=True)
@@ -94,6 +95,52 @@ class ParamSpec:
     bounds: tuple[float, float]
     description: str
     variability: str
+
+
+@dataclass(frozen=True)
+class ValueParamSpec:
+    """A parameter that is not one number: an FMI 3 array (``shape``, Float/Int types) or a String.
+    Set from Python as a nested list / array / ``str`` (FMU block keyword or ``set``); ``--set``
+    takes ``A=[1,2;3,4]`` (rows separated by ``;``), ``A=1,2,3,4`` or ``label="text"``."""
+
+    name: str
+    fmi_name: str
+    vr: int
+    type: str
+    shape: tuple[int, ...]  # () for a String
+    start: tuple[float, ...] | str | None
+    unit: str
+    description: str
+    variability: str
+
+    @property
+    def size(self) -> int:
+        return int(math.prod(self.shape)) if self.shape else 1
+
+    def check(self, value: Any, owner: str) -> Any:
+        """``value`` in the form the runtime sets (flat float tuple, or ``str``); a ParameterError
+        names the parameter otherwise."""
+        from components.core import ParameterError
+
+        where = f"parameter {owner}.{self.name}"
+        if self.type == "String":
+            if not isinstance(value, str):
+                raise ParameterError(f"{where}: expected a string, got {value!r}")
+            return value
+        try:
+            import numpy as np
+
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{where}: expected {self.size} numbers (shape {self.shape}), got {value!r}") from None
+        if arr.size != self.size or (arr.ndim > 1 and arr.shape != self.shape):
+            raise ParameterError(f"{where}: expected shape {self.shape} ({self.size} values), got shape "
+                                 f"{arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ParameterError(f"{where}: values must be finite")
+        if kind_of(self.type) == "integer" and not np.all(arr == np.round(arr)):
+            raise ParameterError(f"{where}: values must be integers")
+        return tuple(float(v) for v in arr.ravel())  # FMI 3 arrays are serialised row-major
 
 
 @dataclass
@@ -121,6 +168,8 @@ class FmuDescription:
     skipped: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     members: frozenset[str] = field(default_factory=frozenset, repr=False)
+    value_parameters: dict[str, ValueParamSpec] = field(default_factory=dict)
+    structural_parameters: list[str] = field(default_factory=list)
 
     @property
     def kinds(self) -> list[str]:
@@ -165,6 +214,18 @@ class FmuDescription:
             bounds = "" if q.bounds == (-math.inf, math.inf) else f" bounds=[{q.bounds[0]:g}, {q.bounds[1]:g}]"
             start = "" if q.start is None else f" = {q.start:g}"
             lines.append(f"    {q.name:24s} [{q.unit}] {q.kind}{start}{bounds}{fmi}")
+        if self.value_parameters:
+            lines.append(f"  array and string parameters ({len(self.value_parameters)}):")
+            for q in self.value_parameters.values():
+                what = "String" if q.type == "String" else f"{q.type} shape={q.shape}"
+                start = "" if q.start is None else (f" = {q.start!r}" if isinstance(q.start, str)
+                                                    else f" = {_fmt(q.start)}")
+                fmi = "" if q.fmi_name == q.name else f" (FMI {q.fmi_name})"
+                lines.append(f"    {q.name:24s} [{q.unit}] {what}{start}{fmi}")
+        if self.structural_parameters:
+            lines.append(f"  structural parameters ({len(self.structural_parameters)}, fixed at their start values):")
+            for line in self.structural_parameters:
+                lines.append(f"    {line}")
         for s in self.skipped:
             lines.append(f"  skipped: {s}")
         for w in self.warnings:
@@ -321,7 +382,13 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         raise ModelDescriptionError(f"FMI version {md.fmiVersion} is not supported (need 2.0 or 3.0)")
     cs = md.coSimulation.modelIdentifier if md.coSimulation is not None else None
     me = md.modelExchange.modelIdentifier if md.modelExchange is not None else None
+    clocks = [v.name for v in md.modelVariables if v.type == "Clock"]
     if not cs and not me:
+        if getattr(md, "scheduledExecution", None) is not None:
+            named = f" (clocks: {', '.join(clocks[:8])}{', ...' if len(clocks) > 8 else ''})" if clocks else ""
+            raise ModelDescriptionError(
+                f"is an FMI 3 Scheduled Execution FMU{named}: cpgsim does not activate clocks or model "
+                f"partitions; it imports CoSimulation and ModelExchange FMUs only")
         raise ModelDescriptionError("declares neither CoSimulation nor ModelExchange")
     by_vr = {v.valueReference: v for v in md.modelVariables}
     taken: set[str] = set()
@@ -361,7 +428,9 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         v = g[0]
         kind = kind_of(v.type)
         if kind is None:
-            skipped.append(f"{v.causality} {v.name!r} of type {v.type} (not real/integer/boolean)")
+            why = {"Clock": "clocks are not activated: the FMU runs as if the clock never ticks",
+                   "Binary": "Binary values are not supported"}.get(v.type, "not real/integer/boolean")
+            skipped.append(f"{v.causality} {v.name!r} of type {v.type} ({why})")
             continue
         if len(g) > 1:
             shape: tuple[int, ...] | None = (len(g),)
@@ -391,15 +460,25 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
             var_port[id(x)] = name
 
     # --- parameters ----------------------------------------------------------------------------
+    value_params: dict[str, ValueParamSpec] = {}
+    structural = _structural(md, by_vr)
     for v in md.modelVariables:
         if v.causality != "parameter":
+            if v.type == "Binary" and v.causality not in ("input", "output"):
+                skipped.append(f"{v.causality} {v.name!r} of type Binary (Binary values are not supported)")
             continue
         kind = kind_of(v.type)
+        if (kind is None or getattr(v, "dimensions", None)) and v.variability in ("fixed", "tunable", None):
+            vp = _value_param(v, by_vr, taken)
+            if vp is not None:
+                value_params[vp.name] = vp
+                continue
         if kind is None:
-            skipped.append(f"parameter {v.name!r} of type {v.type}")
+            note = " (Binary values are not supported)" if v.type == "Binary" else ""
+            skipped.append(f"parameter {v.name!r} of type {v.type}{note}")
             continue
         if getattr(v, "dimensions", None):
-            skipped.append(f"parameter {v.name!r}: array parameters are not supported")
+            skipped.append(f"parameter {v.name!r}: array with variable dimensions")
             continue
         if v.variability not in ("fixed", "tunable", None):
             skipped.append(f"parameter {v.name!r} with variability {v.variability}")
@@ -451,5 +530,36 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
         platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
         needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
-        skipped=skipped, members=frozenset(members))
+        skipped=skipped, members=frozenset(members), value_parameters=value_params,
+        structural_parameters=structural)
     return desc
+
+
+def _value_param(v: Any, by_vr: dict[int, Any], taken: set[str]) -> ValueParamSpec | None:
+    """An array parameter of fixed shape (Float/Int types) or a String parameter; None otherwise."""
+    if v.type == "String" and not getattr(v, "dimensions", None):
+        start: tuple[float, ...] | str | None = None if v.start is None else str(v.start)
+        shape: tuple[int, ...] = ()
+    elif kind_of(v.type) in ("real", "integer"):
+        shape = _dims(v, by_vr)
+        if not shape:
+            return None
+        start = _parse_start(v, v.type, int(math.prod(shape)))
+    else:
+        return None
+    name = identifier(v.name, taken)
+    return ValueParamSpec(name=name, fmi_name=v.name, vr=v.valueReference, type=v.type, shape=shape, start=start,
+                          unit=normalize_unit(_attr(v, "unit") or ""), description=one_line(v.description or "", 200),
+                          variability=v.variability or "fixed")
+
+
+def _structural(md: Any, by_vr: dict[int, Any]) -> list[str]:
+    """FMI 3 structural parameters (array sizes and the like), as lines for ``cpgsim inspect``."""
+    out = []
+    for v in md.modelVariables:
+        if v.causality == "structuralParameter":
+            users = [u.name for u in md.modelVariables
+                     if any(d.valueReference == v.valueReference for d in (getattr(u, "dimensions", None) or []))]
+            used = f", dimension of {', '.join(users)}" if users else ""
+            out.append(f"{v.name} ({v.type}) = {v.start if v.start is not None else '?'}{used}")
+    return out

@@ -33,6 +33,7 @@ import numpy as np
 
 from fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
 from fmus.importer.archive import remove_tree
+from harness.errors import StopRequested
 
 _ERRORS = {cls.__name__: cls for cls in (FmuRuntimeError, FmuCrashedError, FmuTimeoutError)}
 _STARTUP_TIMEOUT = 120.0
@@ -103,6 +104,9 @@ class IsolatedRuntime:
         status, value = reply
         if status == "ok":
             return value
+        if status == "stop":  # the FMU asked to end the run: its outputs are read again from the child
+            self._outputs = None
+            raise StopRequested(*value)
         cls_name, message = value
         if cls_name in _ERRORS:
             raise _ERRORS[cls_name](message)
@@ -138,7 +142,7 @@ class IsolatedRuntime:
     def set_inputs(self, values: Mapping[str, Any]) -> None:
         """Buffer inputs; values equal to those the FMU already has are not sent again."""
         for k, v in values.items():
-            arr = np.array(v, dtype=float, copy=True)
+            arr = np.array(v, copy=True)  # 64-bit integers stay exact
             if k in self._sent and k not in self._pending and np.array_equal(self._sent[k], arr):
                 continue
             self._pending[k] = arr
@@ -224,6 +228,8 @@ def _serve(fd: int) -> None:
             else:
                 raise FmuRuntimeError(f"unknown request {what!r}")
             conn.send(("ok", value))
+        except StopRequested as exc:
+            conn.send(("stop", (str(exc), exc.time)))
         except FmuError as exc:
             conn.send(("err", ("load", str(exc))))
         except Exception as exc:  # noqa: BLE001 - report every failure to the parent

@@ -4,23 +4,30 @@
 child process with ``isolate=True``, see :mod:`fmus.importer.isolation`). Values cross its interface as
 ``{port: numpy array}`` with the ports of :mod:`fmus.importer.description`.
 
-Model exchange ("integrated by our solver"): the FMU's continuous states are integrated by
-classic fixed-step RK4 -- the same scheme the compiler uses for equation blocks -- with
-``substeps`` steps per macro step and the inputs held over the macro step. Events are handled
-at step ends, without localisation: after each step ``completedIntegratorStep`` is called, the
-event indicators are compared with their signs before the step and time events are checked;
-any event puts the FMU in event mode, and the event iteration (``newDiscreteStates`` /
-``updateDiscreteStates``) runs when the inputs at that instant are set (:meth:`FmuRuntime.set_inputs`,
-or the next step), as an FMI master does; outputs read before that are the values just before the
-event (the master re-reads the outputs of blocks with direct feedthrough after setting their inputs).
-A change of a discrete (integer/boolean) input is applied in event mode at once.
+Model exchange ("integrated by our solver"): the FMU's continuous states are integrated within each
+macro step by the block's solver (:mod:`fmus.importer.me`: fixed-step RK4 with ``substeps`` steps per
+macro step, or CVODE BDF with ``rtol``/``atol``), the inputs held over the macro step. Events are
+located inside the step: state events (an event indicator changes sign; the crossing is found by root
+finding), time events (the solver stops exactly at ``nextEventTime``) and step events
+(``completedIntegratorStep``). An event inside the step runs the event iteration (``newDiscreteStates``
+/ ``updateDiscreteStates``) to convergence at once, the states are re-read (they may have been reset)
+and the solver restarts from them. An event at the step's end is iterated when the inputs at that
+instant are set (:meth:`FmuRuntime.set_inputs`, or the next step), as an FMI master does; outputs read
+before that are the values just before the event (the master re-reads the outputs of blocks with
+direct feedthrough after setting their inputs). A change of a discrete (integer/boolean) input is
+applied in event mode at once.
+
+Termination: ``fmi2Discard`` from ``fmi2DoStep`` with ``fmi2GetBooleanStatus(fmi2Terminated)`` true,
+``terminateSimulation`` from ``fmi3DoStep``, from the event iteration or from
+``completedIntegratorStep`` raise :class:`~harness.errors.StopRequested` with the FMU's last
+successful time; the outputs stay readable, and the master ends the run cleanly there.
 """
 
 from __future__ import annotations
 
 import collections
 from collections.abc import Mapping
-from ctypes import POINTER, byref, c_double
+from ctypes import byref
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +36,7 @@ import numpy as np
 from fmus.errors import FmuRuntimeError, MissingBinaryError, one_line
 from fmus.importer.archive import remove_tree, safe_extract
 from fmus.importer.description import FmuDescription, check_binary, describe_fmu
+from harness.errors import StopRequested
 
 _FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8", "UInt8": "getUInt8",
              "Int16": "getInt16", "UInt16": "getUInt16", "Int32": "getInt32", "UInt32": "getUInt32",
@@ -38,7 +46,33 @@ _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 _ABANDONED: list = []  # instances that reported fmiFatal: not freed, library and logger kept alive
 
 
+EXACT_INT = {"Int64": np.int64, "UInt64": np.uint64}
+"""FMI 3 types whose values do not all fit a float64: kept as exact integers end to end."""
+_INT_RANGE = {"Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1)}
+
+
+def as_values(value: Any, fmi_type: str) -> np.ndarray:
+    """A port value as a flat array: float64, or exact int64/uint64 for the 64-bit integer types."""
+    if fmi_type not in EXACT_INT:
+        return np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    arr = np.atleast_1d(np.asarray(value)).ravel()
+    if arr.dtype.kind in "iu" and arr.dtype != np.dtype(EXACT_INT[fmi_type]):
+        arr = np.array([int(v) for v in arr], dtype=object)
+    if arr.dtype.kind not in "iu":  # floats or Python ints: exact conversion with a range check
+        lo, hi = _INT_RANGE[fmi_type]
+        ints = []
+        for v in arr:
+            iv = int(v) if isinstance(v, (int, np.integer)) or float(v).is_integer() else None
+            if iv is None or not lo <= iv <= hi:
+                raise ValueError(f"{v!r} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
+            ints.append(iv)
+        arr = np.array(ints, dtype=EXACT_INT[fmi_type])
+    return arr
+
+
 def _convert(fmi_type: str, values: np.ndarray) -> list:
+    if fmi_type in EXACT_INT:
+        return [int(v) for v in values]
     if fmi_type == "Boolean":
         return [bool(v > 0.5) for v in values]
     if fmi_type in ("Real", "Float64", "Float32"):
@@ -50,7 +84,8 @@ class FmuRuntime:
     """One instance of an FMU (see module docstring). ``kind`` is ``"cs"`` or ``"me"``."""
 
     def __init__(self, path: str | Path, kind: str, instance_name: str, workdir: str | Path | None = None,
-                 substeps: int = 1, strict: bool = False, desc: FmuDescription | None = None) -> None:
+                 substeps: int = 1, strict: bool = False, desc: FmuDescription | None = None,
+                 solver: str = "rk4", rtol: float | None = None, atol: float | None = None) -> None:
         self.path = Path(path)
         self.desc = desc if desc is not None else describe_fmu(self.path, strict)
         if kind not in self.desc.kinds:
@@ -61,6 +96,11 @@ class FmuRuntime:
         self.instance_name = instance_name
         self.workdir = workdir
         self.substeps = max(1, int(substeps))
+        self.solver = solver
+        self.rtol = rtol
+        self.atol = atol
+        self._terminated = False
+        self._inputs_changed = False
         self.fmu: Any = None
         self.unzipdir: Path | None = None
         self.log: collections.deque[str] = collections.deque(maxlen=20)
@@ -105,10 +145,10 @@ class FmuRuntime:
             vals = getattr(self.fmu, _FMI2_GET[fmi_type])(list(vrs))
         else:
             vals = getattr(self.fmu, _FMI3_GET[fmi_type])(list(vrs), nValues=count)
-        return np.asarray(vals, dtype=float).ravel()
+        return np.asarray(vals, dtype=EXACT_INT.get(fmi_type, float)).ravel()
 
     def _set(self, fmi_type: str, vrs: tuple[int, ...], values: np.ndarray) -> None:
-        vals = _convert(fmi_type, np.atleast_1d(np.asarray(values, dtype=float)).ravel())
+        vals = _convert(fmi_type, as_values(values, fmi_type))
         if self.desc.fmi_version == 2:
             getattr(self.fmu, _FMI2_GET[fmi_type].replace("get", "set"))(list(vrs), vals)
         else:
@@ -116,9 +156,12 @@ class FmuRuntime:
 
     def _set_port(self, name: str, value: Any) -> None:
         spec = self.desc.inputs[name]
-        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+        try:
+            arr = as_values(value, spec.element.type)
+        except ValueError as exc:
+            raise FmuRuntimeError(f"{self._where('input ' + name)}: {exc}") from None
         if arr.size == 1 and spec.size > 1:
-            arr = np.full(spec.size, float(arr[0]))
+            arr = np.full(spec.size, arr[0], dtype=arr.dtype)
         if arr.size != spec.size:
             raise FmuRuntimeError(f"{self._where('input ' + name)} needs {spec.size} value(s), got {arr.size}")
         last = self._last_set.get(name)
@@ -126,6 +169,7 @@ class FmuRuntime:
             return  # the FMU already has this value
         self._set(spec.element.type, spec.element.vrs, arr)
         self._last_set[name] = arr.copy()
+        self._inputs_changed = True
 
     # -- lifecycle -----------------------------------------------------------------------------
     def setup(self, t0: float, params: Mapping[str, float] | None = None,
@@ -166,8 +210,14 @@ class FmuRuntime:
                 self.fmu.instantiate(loggingOn=True, logMessage=self._log3)
                 self._state = "instantiated"
             for name, value in (params or {}).items():
-                spec = self.desc.parameters[name]
-                self._set(spec.type, (spec.vr,), np.array([value]))
+                vspec = self.desc.value_parameters.get(name)
+                if vspec is not None and vspec.type == "String":
+                    self.fmu.setString([vspec.vr], [str(value)])
+                elif vspec is not None:
+                    self._set(vspec.type, (vspec.vr,), np.asarray(value, dtype=float).ravel())
+                else:
+                    spec = self.desc.parameters[name]
+                    self._set(spec.type, (spec.vr,), np.array([value]))
             if self.desc.fmi_version == 2:
                 self.fmu.enterInitializationMode()
             else:
@@ -180,7 +230,7 @@ class FmuRuntime:
                 self._me_start()
                 if not self.desc.inputs:
                     self._leave_event_mode()
-        except FmuRuntimeError:
+        except (FmuRuntimeError, StopRequested):
             raise
         except Exception as exc:  # noqa: BLE001
             raise self._fail(f"initialisation at t={t0:g}", exc) from None
@@ -188,7 +238,7 @@ class FmuRuntime:
 
     def get_outputs(self) -> dict[str, np.ndarray]:
         try:
-            if self.kind == "me" and self._in_event_mode and not self.desc.inputs:
+            if self.kind == "me" and self._in_event_mode and not self.desc.inputs and not self._terminated:
                 self._leave_event_mode()
             out: dict[str, np.ndarray] = {}
             for fmi_type, vrs, count, parts in self._out_groups:  # one FMI call per type
@@ -196,6 +246,8 @@ class FmuRuntime:
                 for name, start, size in parts:
                     out[name] = vals[start:start + size].copy()
             return out
+        except StopRequested:
+            raise
         except Exception as exc:  # noqa: BLE001
             raise self._fail(f"reading outputs at t={self._time:g}", exc) from None
 
@@ -205,7 +257,7 @@ class FmuRuntime:
                 changed = {}
                 for name, value in values.items():
                     if name in self._discrete_inputs:
-                        arr = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+                        arr = np.atleast_1d(np.asarray(value)).ravel()
                         if name not in self._last_discrete or not np.array_equal(arr, self._last_discrete[name]):
                             changed[name] = arr
                     else:
@@ -220,7 +272,7 @@ class FmuRuntime:
             else:
                 for name, value in values.items():
                     self._set_port(name, value)
-        except FmuRuntimeError:
+        except (FmuRuntimeError, StopRequested):
             raise
         except Exception as exc:  # noqa: BLE001
             raise self._fail(f"setting inputs at t={self._time:g}", exc) from None
@@ -228,21 +280,66 @@ class FmuRuntime:
     def do_step(self, t: float, dt: float) -> None:
         try:
             if self.kind == "cs":
+                if self._terminated:
+                    raise StopRequested(f"{self._where('doStep')}: the FMU asked to stop at t={self._time:.9g}",
+                                        self._time)
                 if self.desc.fmi_version == 2:
-                    self.fmu.doStep(currentCommunicationPoint=float(t), communicationStepSize=float(dt))
+                    self._do_step2(float(t), float(dt))
                 else:
-                    _event, terminate, _early, _last = self.fmu.doStep(
-                        currentCommunicationPoint=float(t), communicationStepSize=float(dt))
-                    if terminate:
-                        raise FmuRuntimeError(f"{self._where('doStep')} requested termination at t={t + dt:g}")
+                    self._do_step3(float(t), float(dt))
             else:
                 self._me_step(float(t), float(dt))
-        except FmuRuntimeError:
+        except (FmuRuntimeError, StopRequested):
             raise
         except Exception as exc:  # noqa: BLE001
             name = "fmi2DoStep" if self.desc.fmi_version == 2 else "fmi3DoStep"
-            raise self._fail(f"{name if self.kind == 'cs' else 'RK4 step'} at t={t:g}", exc) from None
-        self._time = float(t) + float(dt)
+            raise self._fail(f"{name if self.kind == 'cs' else self.solver + ' step'} at t={t:g}", exc) from None
+        if not self._terminated:
+            self._time = float(t) + float(dt)
+
+    def _do_step2(self, t: float, dt: float) -> None:
+        """``fmi2DoStep``; ``fmi2Discard`` with ``fmi2Terminated`` true is a request to stop."""
+        from fmpy import fmi2
+
+        try:
+            self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
+        except Exception as exc:  # noqa: BLE001
+            if getattr(exc, "status", None) != 2:
+                raise
+            try:
+                stop = self.fmu.getBooleanStatus(fmi2.fmi2Terminated)
+            except Exception:  # noqa: BLE001 - no status: a plain discard, a failure
+                raise exc from None
+            if not stop:
+                raise
+            try:
+                last = float(self.fmu.getRealStatus(fmi2.fmi2LastSuccessfulTime))
+            except Exception:  # noqa: BLE001 - optional: the step's start
+                last = t
+            self._stop(min(max(last, t), t + dt), "fmi2DoStep returned fmi2Discard with fmi2Terminated")
+
+    def _do_step3(self, t: float, dt: float) -> None:
+        """``fmi3DoStep`` called directly (fmpy raises on fmi3Discard and loses ``terminateSimulation``)."""
+        from ctypes import byref as ref
+
+        from fmpy import fmi3
+
+        event, terminate, early, last = fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Float64()
+        status = self.fmu.dll.fmi3DoStep(self.fmu.component, t, dt, fmi3.fmi3Boolean(True), ref(event),
+                                         ref(terminate), ref(early), ref(last))
+        if status > 2 or (status == 2 and not terminate.value):
+            from fmpy.fmi1 import FMICallException
+
+            raise FMICallException("fmi3DoStep", status)
+        if terminate.value:
+            t_last = float(last.value) if status == 2 or early.value else t + dt
+            self._stop(min(max(t_last, t), t + dt), "fmi3DoStep returned terminateSimulation")
+
+    def _stop(self, t_last: float, why: str) -> None:
+        self._terminated = True
+        self._time = t_last
+        raise StopRequested(f"{self._where('doStep')} asked to stop the simulation at t={t_last:.9g} ({why})",
+                            t_last)
 
     def terminate(self) -> None:
         """Terminate and free the instance, unload the library, remove the extracted files."""
@@ -277,6 +374,8 @@ class FmuRuntime:
     def _me_start(self) -> None:
         """After ``exitInitializationMode`` the FMU is in event mode: the event iteration waits for
         the inputs at ``t0`` (the first :meth:`set_inputs`), see :meth:`_leave_event_mode`."""
+        from fmus.importer.me import FmuModel
+
         d = self.desc
         nx = d.n_states
         if d.fmi_version == 3:
@@ -286,15 +385,15 @@ class FmuRuntime:
                 nx = d.n_states
         self.nx = int(nx)
         self.nz = int(d.n_event_indicators)
-        self.x = np.zeros(self.nx)
-        self.dx = np.zeros(self.nx)
-        self.z = np.zeros(self.nz)
-        self._px = self.x.ctypes.data_as(POINTER(c_double))
-        self._pz = self.z.ctypes.data_as(POINTER(c_double))
-        self._xs = np.zeros(self.nx)
-        self._pxs = self._xs.ctypes.data_as(POINTER(c_double))
-        self._pdx = self.dx.ctypes.data_as(POINTER(c_double))
-        self._get_dx = self.fmu.getDerivatives if d.fmi_version == 2 else self.fmu.getContinuousStateDerivatives
+        if d.fmi_version == 3:
+            try:
+                self.nz = int(self.fmu.getNumberOfEventIndicators())
+            except Exception:  # noqa: BLE001
+                pass
+        self.model = FmuModel(self.fmu, d.fmi_version, self.nx, self.nz, self._where)
+        self._solver: Any = None
+        self._need_reset = True
+        self.n_events = 0
         for name in self._discrete_inputs:  # remember the start values of discrete inputs
             spec = d.inputs[name]
             if spec.start is not None:
@@ -302,11 +401,14 @@ class FmuRuntime:
         self._in_event_mode = True
 
     def _leave_event_mode(self) -> None:
-        """If in event mode: iterate the discrete states, enter continuous-time mode, re-read states.
+        """If in event mode: iterate the discrete states to convergence, enter continuous-time mode;
+        the solver re-reads the states (they may have been reset) before it integrates again.
 
         Events found at the end of a step (and the initial one) are handled here, once the inputs
-        at that instant have been set, as an FMI master does before it reads the outputs."""
-        if not self._in_event_mode:
+        at that instant have been set, as an FMI master does before it reads the outputs; events
+        inside a step are handled at once, with the inputs held over the step. ``terminateSimulation``
+        raises :class:`~harness.errors.StopRequested` at the event's time."""
+        if not self._in_event_mode or self._terminated:
             return
         update = self.fmu.newDiscreteStates if self.desc.fmi_version == 2 else self.fmu.updateDiscreteStates
         self._next_event = None
@@ -315,58 +417,57 @@ class FmuRuntime:
             if next_defined:
                 self._next_event = float(next_time)
             if terminate:
-                raise FmuRuntimeError(f"{self._where('event iteration')} requested termination at t={self._time:g}")
+                self._terminated = True
+                raise StopRequested(f"{self._where('event update')} asked to stop the simulation at "
+                                    f"t={self._time:.9g}", self._time)
             if not needed:
                 break
         else:
             raise FmuRuntimeError(f"{self._where('event iteration')} did not converge at t={self._time:g}")
         self.fmu.enterContinuousTimeMode()
         self._in_event_mode = False
-        if self.nx:
-            self.fmu.getContinuousStates(self._px, self.nx)
-        if self.nz:
-            self.fmu.getEventIndicators(self._pz, self.nz)
-
-    def _deriv(self, t: float, x: np.ndarray) -> np.ndarray:
-        self.fmu.setTime(t)
-        if self.nx:
-            self._xs[:] = x
-            self.fmu.setContinuousStates(self._pxs, self.nx)
-            self._get_dx(self._pdx, self.nx)
-        return self.dx.copy()
+        self._need_reset = True
+        self.n_events += 1
 
     def _me_step(self, t: float, dt: float) -> None:
+        """Integrate from ``t`` to ``t + dt`` with the chosen solver, events located inside the step."""
+        from fmus.importer.me import make_solver
+
         self._leave_event_mode()
-        h = dt / self.substeps
-        x = self.x.copy()
-        for i in range(self.substeps):
-            ti = t + i * h
-            if self.nx:
-                k1 = self._deriv(ti, x)
-                k2 = self._deriv(ti + h / 2, x + h / 2 * k1)
-                k3 = self._deriv(ti + h / 2, x + h / 2 * k2)
-                k4 = self._deriv(ti + h, x + h * k3)
-                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if self._terminated:
+            raise StopRequested(f"{self._where('do_step')}: the FMU asked to stop at t={self._time:.9g}", self._time)
         t1 = t + dt
-        self.fmu.setTime(t1)
-        self._time = t1
-        if self.nx:
-            if not np.all(np.isfinite(x)):
-                raise FmuRuntimeError(f"{self._where('RK4 step')}: a state became non-finite at t={t1:g}")
-            self.x[:] = x
-            self.fmu.setContinuousStates(self._px, self.nx)
-        step_event, terminate = self.fmu.completedIntegratorStep()
-        if terminate:
-            raise FmuRuntimeError(f"{self._where('completedIntegratorStep')} requested termination at t={t1:g}")
-        state_event = False
-        if self.nz:
-            before = self.z.copy()
-            self.fmu.getEventIndicators(self._pz, self.nz)
-            state_event = bool(np.any((before < 0) != (self.z < 0)) or np.any((before > 0) & (self.z == 0)))
-        time_event = self._next_event is not None and t1 >= self._next_event - 1e-9 * dt
-        if step_event or state_event or time_event:
+        eps = 1e-12 * max(1.0, abs(t1))
+        if self._solver is None:
+            self._solver = make_solver(self.solver, self.model, t, dt / self.substeps, self.rtol, self.atol)
+        elif self._need_reset or self._inputs_changed or abs(self._solver.t - t) > eps:
+            self._solver.reset(t)
+        self._need_reset = self._inputs_changed = False
+        solver = self._solver
+        for _ in range(100_000):
+            te = self._next_event
+            t_stop = te if te is not None and solver.t + eps < te < t1 - eps else t1
+            try:
+                tr, kind = solver.advance(t_stop)
+            except StopRequested as exc:
+                self._terminated = True
+                self._time = exc.time
+                raise
+            self._time = tr
+            time_event = te is not None and tr >= te - eps
+            if kind is None and not time_event:
+                break
             self.fmu.enterEventMode()
             self._in_event_mode = True
+            if tr >= t1 - eps:
+                break  # an event at the step's end: iterated when the inputs at t1 are set
+            self._leave_event_mode()
+            solver.reset(tr)
+            self._need_reset = False
+        else:
+            raise FmuRuntimeError(f"{self._where(self.solver + ' step')}: more than 100000 events in one step "
+                                  f"at t={self._time:g} (chattering?)")
+        self._time = t1
 
 
 def _dec(b: Any) -> str:

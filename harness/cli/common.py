@@ -44,8 +44,37 @@ def parse_scenario_sets(items: list[str]) -> dict[str, Any]:
 
 
 def parse_sets(items: list[str]) -> dict[str, Any]:
-    """``["a.b=1.5", ...]`` -> ``{"a.b": 1.5}``; malformed items raise :class:`CliError`."""
-    return parse_assignments(items, "--set", "BLOCK.PARAM=VALUE")
+    """``["a.b=1.5", ...]`` -> ``{"a.b": 1.5}``; malformed items raise :class:`CliError`.
+
+    Besides numbers, a value may be an array -- ``[1,2;3,4]`` (a matrix, rows separated by ``;``),
+    ``[1,2,3]`` or ``1,2,3`` (a vector; arrays are given row-major) -- or a string in quotes
+    (``label="left leg"``), for the array and String parameters of FMUs."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise CliError(f"--set expects BLOCK.PARAM=VALUE, got {item!r}")
+        out[key.strip()] = parse_value(value.strip(), f"--set {key.strip()}")
+    return out
+
+
+def parse_value(text: str, where: str) -> Any:
+    """A ``--set`` value: a number, an array (``[1,2;3,4]``, ``[1,2]``, ``1,2``) or a quoted string."""
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
+        return text[1:-1]
+    body = text[1:-1] if text.startswith("[") and text.endswith("]") else text
+    if body is text and "," not in text:
+        try:
+            return float(text)
+        except ValueError:
+            raise CliError(f"{where}: value {text!r} is not a number (arrays: [1,2;3,4], strings: \"text\")") from None
+    try:
+        rows = [[float(v) for v in row.split(",")] for row in body.split(";")]
+    except ValueError:
+        raise CliError(f"{where}: {text!r} is not an array of numbers (e.g. [1,2;3,4] or 1,2,3)") from None
+    if len({len(r) for r in rows}) != 1:
+        raise CliError(f"{where}: the rows of {text!r} have different lengths")
+    return rows if ";" in body else rows[0]
 
 
 def parse_assignments(items: list[str], flag: str, form: str = "NAME=VALUE") -> dict[str, float]:

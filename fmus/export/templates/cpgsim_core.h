@@ -39,6 +39,8 @@ enum { CAT_TIME = 0, CAT_INPUT, CAT_OUTPUT, CAT_PARAM, CAT_STATE, CAT_DER, CAT_D
 enum { LOG_EVENTS = 1, LOG_WARNING = 2, LOG_ERROR = 4 };
 
 #define CPG_VR_STRIDE 1000000u
+/* a value reference (dense, see modelDescription) -> category * CPG_VR_STRIDE + index */
+#define CPG_CODE(vr) ((vr) < CPG_NVR ? CPG_VR_CODE[(vr)] : 0xFFFFFFFFu)
 #define CPG_TOL (1e-6 * CPG_DT)       /* event times, multiples of dt */
 #define CPG_TOL_T (1e-3 * CPG_DT)     /* a master's communication point vs the FMU's time (accumulated sums) */
 #define CPG_STATE_LEN (8 + CPG_NX + CPG_NZ + CPG_NU + CPG_NP)
@@ -117,7 +119,7 @@ static int cpg_set_debug_logging(cpg_instance *inst, int on, size_t n, const cha
 
 /* name of variable vr, for messages */
 static void cpg_var_name(unsigned vr, char *out, size_t n) {
-    unsigned cat = vr / CPG_VR_STRIDE, i = vr % CPG_VR_STRIDE;
+    unsigned code = CPG_CODE(vr), cat = code / CPG_VR_STRIDE, i = code % CPG_VR_STRIDE;
     const char *s = NULL;
     switch (cat) {
     case CAT_TIME: if (i == 0) s = "time"; break;
@@ -283,7 +285,7 @@ static int cpg_set_start_time(cpg_instance *inst, double t0) {
 /* ---- get / set by value reference ------------------------------------------------------------ */
 
 static char cpg_kind_of(unsigned vr, int *ok) {
-    unsigned cat = vr / CPG_VR_STRIDE, i = vr % CPG_VR_STRIDE;
+    unsigned code = CPG_CODE(vr), cat = code / CPG_VR_STRIDE, i = code % CPG_VR_STRIDE;
     *ok = 1;
     switch (cat) {
     case CAT_TIME: if (i == 0) return 'r'; break;
@@ -317,7 +319,7 @@ static int cpg_check_vr(cpg_instance *inst, unsigned vr, char want, const char *
 }
 
 static int cpg_get(cpg_instance *inst, unsigned vr, char want, double *out, const char *api) {
-    unsigned cat = vr / CPG_VR_STRIDE, i = vr % CPG_VR_STRIDE;
+    unsigned code = CPG_CODE(vr), cat = code / CPG_VR_STRIDE, i = code % CPG_VR_STRIDE;
     if (cpg_check_vr(inst, vr, want, api)) return CPG_ERROR;
     switch (cat) {
     case CAT_TIME: *out = inst->t; break;
@@ -349,7 +351,7 @@ static int cpg_get(cpg_instance *inst, unsigned vr, char want, double *out, cons
 }
 
 static int cpg_set(cpg_instance *inst, unsigned vr, char have, double v, const char *api) {
-    unsigned cat = vr / CPG_VR_STRIDE, i = vr % CPG_VR_STRIDE;
+    unsigned code = CPG_CODE(vr), cat = code / CPG_VR_STRIDE, i = code % CPG_VR_STRIDE;
     char name[256];
     int before_init = inst->phase == PH_INSTANTIATED || inst->phase == PH_INIT;
     if (cpg_check_vr(inst, vr, have, api)) return CPG_ERROR;

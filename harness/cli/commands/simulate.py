@@ -20,8 +20,12 @@ HELP = "simulate a graph and write results"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("graph", nargs="?", help="built-in graph name, path/to/module.py:function, FILE.fmu or FILE.ssp")
-    p.add_argument("--t-end", type=positive_float, default=10.0, help="end time in s (default 10)")
-    p.add_argument("--dt", type=positive_float, default=1e-3, help="macro step in s (default 0.001)")
+    p.add_argument("--t-end", type=positive_float, default=None,
+                   help="end time in s (default: an SSP's DefaultExperiment stopTime, else 10)")
+    p.add_argument("--t0", type=float, default=None,
+                   help="start time in s (default: an SSP's DefaultExperiment startTime, else 0)")
+    p.add_argument("--dt", type=positive_float, default=None,
+                   help="macro step in s (default: the step an SSP exported by cpgsim records, else 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
     p.add_argument("-o", "--output", default="results.csv", help="results file: .csv or .npz")
     p.add_argument("--record", action="append", default=None, metavar="PATTERN",
@@ -30,6 +34,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--isolate", action="store_true",
                    help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
+    p.add_argument("--solver", choices=("rk4", "cvode"), default=None,
+                   help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
+                        "or cvode (adaptive BDF for stiff models); events are located inside the step either way. "
+                        "FMUs that offer both interfaces then run as model exchange")
+    p.add_argument("--rtol", type=positive_float, default=None, help="CVODE relative tolerance (default 1e-6)")
+    p.add_argument("--atol", type=positive_float, default=None,
+                   help="CVODE absolute tolerance (default: rtol times each state's nominal value)")
     add_set_argument(p)
 
 
@@ -48,13 +59,25 @@ def run(args: argparse.Namespace) -> int:
         from fmus.importer.block import set_isolation
 
         set_isolation(graph)
+    if args.solver is not None or args.rtol is not None or args.atol is not None:
+        from fmus.importer.block import set_solver
+
+        if (args.rtol is not None or args.atol is not None) and args.solver != "cvode":
+            raise CliError("--rtol/--atol apply to --solver cvode")
+        if not set_solver(graph, args.solver or "rk4", args.rtol, args.atol, switch_to_me=True):
+            raise CliError(f"--solver: {args.graph} has no model-exchange FMU")
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):
         graph.set(**params)
         params = {}
-    sim = Simulator(graph, dt=args.dt, substeps=args.substeps, params=params, record=args.record)
+    t0 = args.t0 if args.t0 is not None else (getattr(graph, "ssp_start_time", None) or 0.0)
+    t_end = args.t_end if args.t_end is not None else (getattr(graph, "ssp_stop_time", None) or 10.0)
+    dt = args.dt if args.dt is not None else (getattr(graph, "ssp_step", None) or 1e-3)
+    if not t_end > t0:
+        raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
+    sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
     try:
-        results = sim.run(args.t_end, progress=args.progress)
+        results = sim.run(t_end, t0=t0, progress=args.progress)
     except SimulationError as exc:
         if exc.results is not None:
             written = exc.results.save(out)
@@ -62,5 +85,7 @@ def run(args: argparse.Namespace) -> int:
                   + ", ".join(map(str, written)))
         raise CliError(str(exc), code=1) from exc
     written = results.save(out)
+    if results.meta.get("stopped_by"):
+        print(results.message)
     print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to " + ", ".join(map(str, written)))
     return 0

@@ -2,6 +2,13 @@
 
 GRAPH is a built-in name (see `cpgsim simulate --list`), path/to/module.py:function returning a
 Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.csv
+
+The results are written while the run goes on (marked "complete": false in the metadata until it
+ends), so a run that is killed keeps what it recorded. An existing results file is refused unless
+--force is given, which replaces it (and its sidecar files) as a whole. --t-end must be a whole number
+of --dt steps. With --isolate, each FMU runs in a child process under a watchdog: a call that takes
+longer than --fmu-timeout seconds, or a child that is stopped, ends the run with an error naming the FMU
+and the call (the results recorded so far are kept).
 """
 
 from __future__ import annotations
@@ -13,6 +20,9 @@ from components.graph import Graph
 from harness.cli import catalog
 from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
 from harness.simulate import SimulationError, Simulator
+
+DEFAULT_CALL_TIMEOUT = 10.0  # mirrors fmus.importer.isolation (imported lazily: the CLI starts fast)
+DEFAULT_SETUP_TIMEOUT = 60.0
 
 NAME = "simulate"
 HELP = "simulate a graph and write results"
@@ -30,6 +40,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--isolate", action="store_true",
                    help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
+    p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
+                   help="with --isolate: the longest one FMU call may take (default "
+                        f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {DEFAULT_SETUP_TIMEOUT:g} s "
+                        "or this, whichever is longer)")
+    p.add_argument("--force", action="store_true", help="replace an existing results file")
     add_set_argument(p)
 
 
@@ -43,24 +58,36 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
+    from harness.results import result_files
+
+    existing = [f for f in result_files(out) if f.exists()]
+    if existing and not args.force:
+        raise CliError(f"output {existing[0]} exists: use --force to replace it (and its sidecar files)")
+    if args.fmu_timeout is not None and not args.isolate:
+        raise CliError("--fmu-timeout needs --isolate (in-process FMU calls cannot be interrupted)")
     graph = catalog.load_graph(args.graph)
     if args.isolate:
         from fmus.importer.block import set_isolation
 
-        set_isolation(graph)
+        set_isolation(graph, timeout=args.fmu_timeout)
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):
         graph.set(**params)
         params = {}
     sim = Simulator(graph, dt=args.dt, substeps=args.substeps, params=params, record=args.record)
+    from harness.exit_guard import guard_run
+
     try:
-        results = sim.run(args.t_end, progress=args.progress)
+        with guard_run("cpgsim simulate", args.graph, out):
+            results = sim.run(args.t_end, progress=args.progress, stream=out)
     except SimulationError as exc:
-        if exc.results is not None:
-            written = exc.results.save(out)
-            print(f"partial results (up to t={exc.results.time[-1]:.6g} s) written to "
-                  + ", ".join(map(str, written)))
+        res = exc.results
+        if res is not None and len(res.time):
+            print(f"partial results (up to t={res.time[-1]:.6g} s, {len(res.time)} rows) written to "
+                  + ", ".join(map(str, getattr(sim, "written", None) or [out])))
+        else:
+            print("no results: the run failed before its first step")
         raise CliError(str(exc), code=1) from exc
-    written = results.save(out)
-    print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to " + ", ".join(map(str, written)))
+    print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to "
+          + ", ".join(map(str, sim.written or [out])))
     return 0

@@ -22,7 +22,7 @@ from harness.cli.common import CliError, add_set_argument, parse_sets, positive_
 from harness.simulate import SimulationError, Simulator
 
 DEFAULT_CALL_TIMEOUT = 10.0  # mirrors fmus.importer.isolation (imported lazily: the CLI starts fast)
-DEFAULT_SETUP_TIMEOUT = 60.0
+MIN_SETUP_TIMEOUT = 10.0
 
 NAME = "simulate"
 HELP = "simulate a graph and write results"
@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
     p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
                    help="with --isolate: the longest one FMU call may take (default "
-                        f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {DEFAULT_SETUP_TIMEOUT:g} s "
+                        f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {MIN_SETUP_TIMEOUT:g} s "
                         "or this, whichever is longer)")
     p.add_argument("--force", action="store_true", help="replace an existing results file")
     add_set_argument(p)

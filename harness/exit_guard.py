@@ -5,8 +5,10 @@ ends the process: Python's exception handling, ``finally`` blocks and ``atexit``
 exit status would be 0. :func:`guard_run` arms a C exit handler (``on_exit``, from a few lines of C
 compiled once into the cache, see :mod:`harness.native`) for the duration of a run: if the process
 exits while it is armed, the handler prints one line naming the run (and where its partial results
-are, marked incomplete) and ends the process with status 1 instead. Leaving the ``with`` block
-normally or by an exception (including ``SystemExit``) disarms it.
+are, marked incomplete) and ends the process with status 1 instead. While armed, the fatal signals
+of a crash in native code (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) are reported the same way
+(one line, status 1) instead of a core dump without a word. Leaving the ``with`` block normally or
+by an exception (including ``SystemExit``) disarms it and restores the previous signal handlers.
 
 Limits, stated: ``_exit()`` and ``kill(getpid(), SIGKILL)`` skip every exit handler and cannot be
 detected from inside the process (run such FMUs with ``--isolate``, where the parent sees the child
@@ -27,6 +29,7 @@ from pathlib import Path
 
 _SOURCE = r"""
 #define _GNU_SOURCE
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -34,6 +37,19 @@ _SOURCE = r"""
 
 static volatile int cpgsim_armed = 0;
 static char cpgsim_msg[2048];
+static char cpgsim_crash[2048];
+static const int cpgsim_signals[5] = {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT};
+static struct sigaction cpgsim_old[5];
+
+static void cpgsim_on_signal(int sig) {
+    const char *name = sig == SIGSEGV ? "SIGSEGV" : sig == SIGBUS ? "SIGBUS" : sig == SIGFPE ? "SIGFPE"
+        : sig == SIGILL ? "SIGILL" : "SIGABRT";
+    ssize_t w = write(2, cpgsim_crash, strlen(cpgsim_crash));
+    w = write(2, name, strlen(name));
+    w = write(2, ")\n", 2);
+    (void)w;
+    _exit(1);
+}
 
 static void cpgsim_on_exit(int status, void *arg) {
     (void)arg;
@@ -46,12 +62,23 @@ static void cpgsim_on_exit(int status, void *arg) {
 }
 
 int cpgsim_guard_install(void) { return on_exit(cpgsim_on_exit, NULL); }
-void cpgsim_guard_arm(const char *msg) {
+void cpgsim_guard_arm(const char *msg, const char *crash) {
     strncpy(cpgsim_msg, msg, sizeof cpgsim_msg - 1);
     cpgsim_msg[sizeof cpgsim_msg - 1] = 0;
+    strncpy(cpgsim_crash, crash, sizeof cpgsim_crash - 1);
+    cpgsim_crash[sizeof cpgsim_crash - 1] = 0;
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = cpgsim_on_signal;
+    sigemptyset(&sa.sa_mask);
+    for (int i = 0; i < 5; i++) sigaction(cpgsim_signals[i], &sa, &cpgsim_old[i]);
     cpgsim_armed = 1;
 }
-void cpgsim_guard_disarm(void) { cpgsim_armed = 0; }
+void cpgsim_guard_disarm(void) {
+    if (cpgsim_armed)
+        for (int i = 0; i < 5; i++) sigaction(cpgsim_signals[i], &cpgsim_old[i], NULL);
+    cpgsim_armed = 0;
+}
 int cpgsim_guard_armed(void) { return cpgsim_armed; }
 """
 
@@ -86,7 +113,7 @@ def _load() -> ctypes.CDLL | None:
         handle = ctypes.CDLL(str(lib))
     except OSError:
         return None
-    handle.cpgsim_guard_arm.argtypes = [ctypes.c_char_p]
+    handle.cpgsim_guard_arm.argtypes = [ctypes.c_char_p, ctypes.c_char_p]
     if handle.cpgsim_guard_install() != 0:
         return None
     _lib = handle
@@ -112,7 +139,9 @@ def guard_run(what: str, subject: str, results: str | os.PathLike | None = None)
     where = f"; partial results (marked incomplete) in {os.fspath(results)}" if results is not None else ""
     msg = (f"{what}: error: native code (an FMU) ended the process during the run instead of returning "
            f"an error, running {subject}{where}")
-    lib.cpgsim_guard_arm(msg.encode("utf-8", "replace"))
+    crash = (f"{what}: error: native code (an FMU, or the compiled model) crashed the process, running {subject}"
+             f"{where}; run FMUs with --isolate to survive this (signal ")
+    lib.cpgsim_guard_arm(msg.encode("utf-8", "replace"), crash.encode("utf-8", "replace"))
     try:
         yield True
     finally:

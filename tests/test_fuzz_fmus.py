@@ -36,7 +36,7 @@ typedef int st;  /* fmi2Status */
 
 static void hostile(void) {
 #if defined(H_SEGV)
-    volatile int *p = 0; *p = 1;
+    raise(SIGSEGV);
 #elif defined(H_ABORT)
     abort();
 #elif defined(H_EXIT)
@@ -133,7 +133,7 @@ def model_description(n_outputs: int = 1, guid: str = GUID, identifier: str = "f
                     f'variability="continuous"><Real/></ScalarVariable>\n' for i in range(n_outputs - 1))
     outs = "".join(f'      <Unknown index="{i}" dependencies=""/>\n' for i in [2] + list(range(4, 3 + n_outputs)))
     return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{identifier}" guid="{guid}" generationTool="cpgsim fuzz test"
+<fmiModelDescription fmiVersion="2.0" modelName="{identifier}" guid="{guid}" generationTool="fuzz test C FMU"
     variableNamingConvention="structured" numberOfEventIndicators="0">
   <CoSimulation modelIdentifier="{identifier}" canHandleVariableCommunicationStepSize="true"/>
   <DefaultExperiment startTime="0" stopTime="0.1" stepSize="0.01"/>

@@ -6,9 +6,13 @@ Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0
 The results are written while the run goes on (marked "complete": false in the metadata until it
 ends), so a run that is killed keeps what it recorded. An existing results file is refused unless
 --force is given, which replaces it (and its sidecar files) as a whole. --t-end must be a whole number
-of --dt steps. With --isolate, each FMU runs in a child process under a watchdog: a call that takes
-longer than --fmu-timeout seconds, or a child that is stopped, ends the run with an error naming the FMU
-and the call (the results recorded so far are kept).
+of --dt steps.
+
+FMUs that cpgsim did not build (their generationTool is not cpgsim) run in a child process by
+default; --isolate runs every FMU so, --no-isolate none. An isolated FMU runs under a watchdog: a call
+that takes longer than --fmu-timeout seconds, or a child that is stopped, ends the run with an error
+naming the FMU and the call (the results recorded so far are kept). An FMU run in-process that ends
+the process (exit) or crashes it (SIGSEGV, SIGABRT ...) is reported on one line with exit status 1.
 """
 
 from __future__ import annotations
@@ -38,14 +42,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
-    p.add_argument("--isolate", action="store_true",
-                   help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
+    iso = p.add_mutually_exclusive_group()
+    iso.add_argument("--isolate", dest="isolate", action="store_const", const=True, default=None,
+                     help="run every FMU in a child process (a crashing FMU ends the run with partial results; "
+                          "default: only FMUs that cpgsim did not build)")
+    iso.add_argument("--no-isolate", dest="isolate", action="store_const", const=False,
+                     help="run every FMU in this process (faster; a hanging FMU hangs cpgsim)")
     p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
                    help="with --isolate: the longest one FMU call may take (default "
                         f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {MIN_SETUP_TIMEOUT:g} s "
                         "or this, whichever is longer)")
     p.add_argument("--force", action="store_true", help="replace an existing results file")
     add_set_argument(p)
+
+
+def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> int:
+    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) those whose
+    modelDescription does not name cpgsim as the generation tool. Returns how many are isolated."""
+    from fmus.importer.block import fmu_blocks
+
+    n = 0
+    for blk in fmu_blocks(graph):
+        built_here = blk.info.generation_tool.startswith("cpgsim ")
+        blk.isolate = bool(isolate) if isolate is not None else not built_here
+        if blk.isolate and timeout is not None:
+            blk.timeout = timeout
+        n += blk.isolate
+    return n
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,13 +86,10 @@ def run(args: argparse.Namespace) -> int:
     existing = [f for f in result_files(out) if f.exists()]
     if existing and not args.force:
         raise CliError(f"output {existing[0]} exists: use --force to replace it (and its sidecar files)")
-    if args.fmu_timeout is not None and not args.isolate:
-        raise CliError("--fmu-timeout needs --isolate (in-process FMU calls cannot be interrupted)")
+    if args.fmu_timeout is not None and args.isolate is False:
+        raise CliError("--fmu-timeout does not apply with --no-isolate (in-process FMU calls cannot be interrupted)")
     graph = catalog.load_graph(args.graph)
-    if args.isolate:
-        from fmus.importer.block import set_isolation
-
-        set_isolation(graph, timeout=args.fmu_timeout)
+    isolate_fmus(graph, args.isolate, args.fmu_timeout)
     params = parse_sets(args.sets)
     if not isinstance(graph, Graph):
         graph.set(**params)

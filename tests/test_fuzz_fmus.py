@@ -209,7 +209,7 @@ def rezip(src: Path, dst: Path, replace: dict[str, bytes] | None = None, add: di
                 continue
             zout.writestr(info, (replace or {}).get(info.filename, zin.read(info)))
         for name, data in (add or {}).items():
-            zout.writestr(zipfile.ZipInfo(name), data)
+            zout.writestr(name, data)  # deflated
         for name, mode in (special or {}).items():
             info = zipfile.ZipInfo(name)
             info.external_attr = (mode | 0o644) << 16

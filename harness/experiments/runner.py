@@ -100,15 +100,14 @@ def run_scenario(name: str, out_dir: str | Path, t_end: float | None = None, set
     error: SimulationError | None = None
     wall0 = time.perf_counter()
     try:
-        res = sim.run(t_end, progress=progress)
+        res = sim.run(t_end, progress=progress, stream=out / "results.csv", meta={"scenario": name, **setup.info})
     except SimulationError as exc:
         error = exc
         if exc.results is None or len(exc.results.time) == 0:
             raise
         res = exc.results
     wall = time.perf_counter() - wall0
-    res.meta.update({"scenario": name, **setup.info})
-    res.save(out / "results.csv")
+    res.meta.update({"scenario": name, **setup.info})  # results.csv was streamed during the run
     res.save(out / "results.npz")
     summary = summarize(name, setup, res, wall)
     summary["setup_time_s"] = setup_wall

@@ -38,12 +38,16 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario not in SCENARIOS:
         raise CliError(f"unknown scenario {args.scenario!r} (known: {', '.join(SCENARIOS)})")
     out = Path(args.output or Path("runs") / args.scenario)
+    from harness.results import prepare_run_directory
+
+    prepare_run_directory(out)  # a previous run there is replaced as a whole
     kw = {"seed": args.seed} if args.seed is not None else {}
     try:
         summary = run_scenario(args.scenario, out, t_end=args.t_end, sets=parse_sets(args.sets),
                                progress=not args.no_progress, **kw)
     except SimulationError as exc:
-        print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
+        if (out / "summary.json").exists():
+            print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
         raise CliError(str(exc), code=1) from exc
     print_summary(summary, out)
     return 0

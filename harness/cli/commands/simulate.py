@@ -104,10 +104,10 @@ def run(args: argparse.Namespace) -> int:
         res = exc.results
         if res is not None and len(res.time):
             print(f"partial results (up to t={res.time[-1]:.6g} s, {len(res.time)} rows) written to "
-                  + ", ".join(map(str, getattr(sim, "written", None) or [out])))
+                  + ", ".join(str(out.parent / f.name) for f in sim.written or [out]))
         else:
             print("no results: the run failed before its first step")
         raise CliError(str(exc), code=1) from exc
     print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to "
-          + ", ".join(map(str, sim.written or [out])))
+          + ", ".join(str(out.parent / f.name) for f in sim.written or [out]))
     return 0

@@ -34,16 +34,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``cpgsim`` parser. With ``argv`` naming a command, only that command's module is imported
+    (``cpgsim inspect`` does not pay for the plotting imports of ``cpgsim run``); otherwise all are."""
     parser = _Parser(
         prog="cpgsim", description="Compose, verify, export and co-simulate CPG legged-robot controllers.")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of an error (also: environment variable CPGSIM_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
+    infos = [m for m in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name)
+             if not m.name.startswith("_")]
+    wanted = next((a for a in (argv or []) if not a.startswith("-")), None)
+    if argv is not None and wanted in {m.name for m in infos}:
+        infos = [m for m in infos if m.name == wanted]
+    for info in infos:
         mod = importlib.import_module(f"harness.cli.commands.{info.name}")
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.__doc__ or mod.HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -63,7 +68,8 @@ def debug_enabled(args: argparse.Namespace | None = None) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``cpgsim`` command; returns the exit status (see the module docstring for the policy)."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     command = getattr(args, "command", None) or "cpgsim"
     try:

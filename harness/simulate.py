@@ -116,12 +116,13 @@ class Simulator:
         """
         m = self.model
         n = horizon_steps(t0, t_end, m.dt)
+        columns, units, picks = self._record_layout()
+        n_free = sum(port.size for port in m.free_inputs.values())
+        check_memory(n + 1, len(columns) + n_free + 1)  # recorded table, free inputs and the time grid
         times = t0 + m.dt * np.arange(n + 1)
         x, z = self._initial_states(x0)
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
-        columns, units, picks = self._record_layout()
-        check_memory(len(times), len(columns) + max(len(u_free), 0))
         rec = _Recorder(times, columns, units)
         leaves = {c.split("[")[0] for c in columns}
         rec.aliases = {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}

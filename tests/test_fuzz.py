@@ -206,7 +206,7 @@ def test_fuzz_fast_subset(tmp_path, fmu_tmp):
 @pytest.mark.slow
 def test_fuzz_full_suite(tmp_path, request, fmu_tmp):
     if request.config.getoption("markexpr", "").strip() != "slow" and not os.environ.get("CPGSIM_FUZZ_FULL"):
-        pytest.skip("the full fuzz suite (about 40 min) runs with -m slow or CPGSIM_FUZZ_FULL=1")
+        pytest.skip("the full fuzz suite (about 20 min) runs with -m slow or CPGSIM_FUZZ_FULL=1")
     table, findings = run_suite(tmp_path, scale=1.0, workers=2)
     text = format_table(table)
     if os.environ.get("CPGSIM_FUZZ_TABLE"):

@@ -58,7 +58,19 @@ class Layout:
 
     @property
     def size(self) -> int:
+        if self._contiguous():
+            return self.slots[-1].start + self.slots[-1].size if self.slots else 0
         return sum(s.size for s in self.slots)
+
+    def _contiguous(self) -> bool:
+        """Slots added by :meth:`add` follow each other (checked once per new slot, so sizes are O(1))."""
+        n = self.__dict__.get("_checked", 0)
+        ok = self.__dict__.get("_ok", True)
+        for i in range(n, len(self.slots)):
+            prev_end = self.slots[i - 1].start + self.slots[i - 1].size if i else 0
+            ok = ok and self.slots[i].start == prev_end
+        self.__dict__["_checked"], self.__dict__["_ok"] = len(self.slots), ok
+        return ok
 
     def names(self) -> list[str]:
         return [n for s in self.slots for n in s.element_names()]
@@ -66,14 +78,24 @@ class Layout:
     def units(self) -> list[str]:
         return [s.unit for s in self.slots for _ in range(s.size)]
 
+    def _by_name(self) -> dict[str, Slot]:
+        cache = self.__dict__.get("_names")
+        if cache is None or cache[0] != len(self.slots):
+            by: dict[str, Slot] = {}
+            for s in self.slots:
+                by.setdefault(s.name, s)
+            cache = (len(self.slots), by)
+            self.__dict__["_names"] = cache
+        return cache[1]
+
     def index(self, name: str) -> Slot:
-        for s in self.slots:
-            if s.name == name:
-                return s
-        raise KeyError(name)
+        try:
+            return self._by_name()[name]
+        except KeyError:
+            raise KeyError(name) from None
 
     def __contains__(self, name: str) -> bool:
-        return any(s.name == name for s in self.slots)
+        return name in self._by_name()
 
 
 @dataclass

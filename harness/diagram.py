@@ -258,7 +258,8 @@ def _color(graph: Graph, name: str) -> str:
 def _svg(graph: Graph, lay: Layout, title: str) -> str:
     s = 60.0  # px per unit
     W, H = lay.width * s + 40, lay.height * s + 60
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{W:.0f}" height="{H:.0f}" '
+    out = ['<?xml version="1.0" encoding="utf-8"?>',
+           f'<svg xmlns="http://www.w3.org/2000/svg" width="{W:.0f}" height="{H:.0f}" '
            f'viewBox="0 0 {W:.0f} {H:.0f}" font-family="DejaVu Sans, Arial, sans-serif">',
            f'<rect width="{W:.0f}" height="{H:.0f}" fill="white"/>',
            f'<text x="20" y="24" font-size="15" font-weight="bold">{html.escape(title)}</text>',

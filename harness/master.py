@@ -244,6 +244,7 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                 z[:] = z_next
             if k % 100 == 0:
                 progress_bar.update(min(100, n - k))
+                rec.tick()  # streaming: the recorder writes new rows every simulated second / few seconds
         return stop
     except Exception as exc:
         if stage is None or _is_simulation_error(exc):

@@ -3,13 +3,25 @@
 CSV header: ``time,<block>.<port>[<index>]`` (the index only for vector ports). The npz holds
 ``time``, ``data``, ``columns``, ``units``, ``complete`` and ``message``; a CSV ``FILE.csv`` gets a
 sidecar ``FILE.meta.json`` with the same metadata, so a partial run is marked as such.
+
+:class:`ResultsWriter` streams a run to disk while it runs (the simulator flushes it at least every
+simulated second or every ``flush_seconds`` of wall time): the CSV grows in whole rows and its
+``.meta.json`` says ``"complete": false`` until the run ends, so a run killed with SIGKILL leaves
+readable partial results marked incomplete. An ``.npz`` target is streamed as ``FILE.partial.csv``
+and written (atomically) at the end.
+
+Files are created with the user's umask (``0644`` typically). Temporary files are named
+``.cpgsim-tmp.<pid>.<name>.*`` in the folder of the file they become; every write into a folder first
+removes those left there by processes that no longer run (:func:`remove_stale_temporaries`).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
+import time as _time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -117,9 +129,19 @@ class Results:
                 header = f.readline().strip().split(",")
             if not header or header[0] != "time":
                 raise ResultsError(f"{path}: first column must be 'time'")
-            table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
             meta_path = path.with_suffix(".meta.json")
             meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+            text = path.read_text()
+            if not text.endswith("\n"):  # a stream stopped in the middle of a row: keep whole rows
+                text = text[:text.rfind("\n") + 1]
+            lines = text.splitlines()[1:]
+            try:
+                table = (np.loadtxt(lines, delimiter=",", ndmin=2) if lines
+                         else np.zeros((0, len(header))))
+            except ValueError as exc:
+                raise ResultsError(f"{path}: malformed results table ({' '.join(str(exc).split())})") from None
+            if table.shape[1] != len(header):
+                raise ResultsError(f"{path}: {table.shape[1]} values per row for {len(header)} columns")
             units = meta.pop("units", ["1"] * (len(header) - 1))
             meta.pop("columns", None)
             meta.pop("rows", None)
@@ -128,12 +150,62 @@ class Results:
         raise ResultsError(f"unknown results format {path.suffix!r} for {path}")
 
 
-def atomic_write(path: Path, writer, text: bool) -> None:
-    """Write a file via a temporary file in the same directory and an atomic rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+_TMP_PREFIX = ".cpgsim-tmp."
+_TMP_RE = re.compile(r"^\.cpgsim-tmp\.(\d+)\.")
+
+
+def file_mode() -> int:
+    """The mode an ordinary new file gets under the current umask (``0o644`` for umask 022)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
     try:
-        with os.fdopen(fd, "w" if text else "wb") as f:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Remove ``.cpgsim-tmp.<pid>.*`` files in ``folder`` whose process no longer runs; returns them."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _TMP_RE.match(entry.name)
+        if m and not _pid_alive(int(m.group(1))):
+            try:
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+            except OSError:
+                pass
+    return removed
+
+
+def temporary_file(path: Path, text: bool):
+    """A new temporary file next to ``path``, named ``.cpgsim-tmp.<pid>.<name>.*``: ``(file, tmp path)``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f"{_TMP_PREFIX}{os.getpid()}.{path.name}.", dir=path.parent)
+    os.fchmod(fd, file_mode())
+    return os.fdopen(fd, "w" if text else "wb"), tmp
+
+
+def atomic_write(path: Path, writer, text: bool) -> None:
+    """Write a file via a temporary file in the same directory and an atomic rename (umask modes)."""
+    path = Path(path)
+    f, tmp = temporary_file(path, text)
+    try:
+        with f:
             writer(f)
             f.flush()
             os.fsync(f.fileno())
@@ -142,3 +214,144 @@ def atomic_write(path: Path, writer, text: bool) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+RUN_MARKER = ".cpgsim-run"
+
+
+def prepare_run_directory(path: str | Path) -> Path:
+    """Make ``path`` an empty run directory, replacing a previous run there as a whole.
+
+    A missing or empty directory is used as it is; one that holds a previous run (its ``.cpgsim-run``
+    marker, or ``summary.json`` / ``results.meta.json`` of an older run) is emptied first, so old and
+    new files never mix; any other non-empty directory is refused with a :class:`ResultsError`.
+    """
+    import shutil
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ResultsError(f"output {path} exists and is not a directory")
+    if path.is_dir() and any(path.iterdir()):
+        if not any((path / n).exists() for n in (RUN_MARKER, "summary.json", "results.meta.json")):
+            raise ResultsError(f"output directory {path} is not empty and holds no cpgsim run: "
+                               f"choose another -o or empty it")
+        for entry in list(path.iterdir()):
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+    path.mkdir(parents=True, exist_ok=True)
+    (path / RUN_MARKER).write_text("a cpgsim run directory: the next run into it replaces its contents\n")
+    return path
+
+
+def result_files(path: str | Path) -> list[Path]:
+    """Every file a results target ``FILE.csv`` / ``FILE.npz`` consists of (existing or not)."""
+    path = Path(path)
+    stem = path.with_suffix("")
+    if path.suffix == ".csv":
+        return [path, Path(f"{stem}.meta.json")]
+    return [path, Path(f"{stem}.partial.csv"), Path(f"{stem}.partial.meta.json")]
+
+
+class ResultsWriter:
+    """Stream results to ``path`` (``.csv`` or ``.npz``) while a run goes on (see the module docstring).
+
+    ``open(columns, units, meta)`` replaces the target as a whole (an old file of the same name and its
+    sidecars are removed first), ``append(time, rows)`` adds rows (written at ``flush()``, or by
+    ``maybe_flush()`` when ``flush_seconds`` of wall time have passed), ``close(results)`` writes the
+    final files (``complete`` and ``message`` from ``results``) and returns them. A run that recorded no
+    row leaves no file.
+    """
+
+    def __init__(self, path: str | Path, flush_seconds: float = 2.0) -> None:
+        self.path = Path(path).absolute()  # a library that changes the working directory cannot misdirect it
+        if self.path.suffix not in (".csv", ".npz"):
+            raise ResultsError(f"unknown results format {self.path.suffix!r} for {self.path} (use .csv or .npz)")
+        self.stream_path = self.path if self.path.suffix == ".csv" else self.path.with_suffix(".partial.csv")
+        self.flush_seconds = float(flush_seconds)
+        self._file = None
+        self._pending: list[np.ndarray] = []
+        self._rows = 0
+        self._last = _time.monotonic()
+        self.columns: list[str] = []
+        self.units: list[str] = []
+        self.meta: dict = {}
+
+    @property
+    def rows_written(self) -> int:
+        return self._rows
+
+    def open(self, columns: Sequence[str], units: Sequence[str], meta: dict | None = None) -> ResultsWriter:
+        self.columns, self.units, self.meta = list(columns), list(units), dict(meta or {})
+        for f in result_files(self.path):
+            if f.exists():
+                f.unlink()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(self.path.parent)
+        self._write_meta(False, "incomplete: the run had not finished when this file was last written", None)
+        fd = os.open(self.stream_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
+        self._file = os.fdopen(fd, "w")
+        self._file.write(",".join(["time", *self.columns]) + "\n")
+        self._file.flush()
+        self._last = _time.monotonic()
+        return self
+
+    def _write_meta(self, complete: bool, message: str, rows: int | None) -> None:
+        doc = {"columns": self.columns, "units": self.units, "complete": complete, "message": message,
+               "rows": rows, **self.meta}
+        atomic_write(self.stream_path.with_suffix(".meta.json"), lambda f: json.dump(doc, f, indent=2), text=True)
+
+    def append(self, time: np.ndarray, rows: np.ndarray) -> None:
+        if len(time):
+            self._pending.append(np.column_stack([np.asarray(time, dtype=float), rows]))
+
+    def due(self) -> bool:
+        """``flush_seconds`` of wall time have passed since the last flush."""
+        return _time.monotonic() - self._last >= self.flush_seconds
+
+    def flush(self) -> None:
+        """Write the pending rows as whole lines and push them to the disk."""
+        self._last = _time.monotonic()
+        if self._file is None or not self._pending:
+            return
+        table = np.vstack(self._pending)
+        self._pending = []
+        import io
+
+        buf = io.StringIO()
+        np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+        self._file.write(buf.getvalue())
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._rows += len(table)
+
+    def close(self, results: Results) -> list[Path]:
+        """Finish the stream with the run's ``results`` (their rows are those appended); returns the files."""
+        self.flush()
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        self.meta = {**self.meta, **results.meta}
+        if self._rows == 0:
+            for f in result_files(self.path):
+                if f.exists():
+                    f.unlink()
+            return []
+        if self.path.suffix == ".npz":
+            written = [results.to_npz(self.path)]
+            for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+                if f.exists():
+                    f.unlink()
+            return written
+        self._write_meta(results.complete, results.message, self._rows)
+        return [self.path, self.path.with_suffix(".meta.json")]
+
+    def abandon(self) -> None:
+        """Stop streaming without finishing (the files stay, marked incomplete)."""
+        try:
+            self.flush()
+        finally:
+            if self._file is not None:
+                self._file.close()
+                self._file = None

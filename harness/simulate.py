@@ -15,6 +15,7 @@ import fnmatch
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, Literal
 
 import casadi as ca
@@ -31,6 +32,12 @@ NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
 """Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM (a six-leg
 Yu controller step is ~11k instructions: its C took gcc 16 s at -O3 on the loaded 2-core machine, while
 the CasADi VM runs it at tens of us per step)."""
+
+MAX_STEPS = 200_000_000
+"""The most macro steps one run may have (55 hours at 1 ms); more is refused before anything is allocated."""
+
+STREAM_FLUSH_SECONDS = 2.0
+"""A streamed run (``Simulator.run(stream=...)``) writes what it recorded at least this often (wall time)."""
 
 __all__ = ["CoSimulationError", "SimulationDiverged", "SimulationError", "Simulator", "simulate"]
 
@@ -80,6 +87,7 @@ class Simulator:
         self.jit = jit
         self.chunk = max(1, int(chunk))
         self.step_thread = step_thread
+        self.written: list[Path] = []  # the files the last streamed run wrote
         self._record_patterns = list(record) if record else None
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
@@ -98,31 +106,59 @@ class Simulator:
         return self
 
     def run(self, t_end: float, inputs: Mapping[str, InputValue] | None = None, t0: float = 0.0,
-            x0: Mapping[str, Any] | None = None, progress: bool = False) -> Results:
-        """Simulate from ``t0`` to ``t_end``; returns results at every macro step, ``t0..t_end``."""
+            x0: Mapping[str, Any] | None = None, progress: bool = False, stream: str | Path | None = None,
+            meta: Mapping[str, Any] | None = None) -> Results:
+        """Simulate from ``t0`` to ``t_end``; returns results at every macro step, ``t0..t_end``.
+
+        ``t_end - t0`` must be a whole number of macro steps (a horizon that is not is an error naming
+        both numbers). ``stream``: a ``.csv`` or ``.npz`` file the results are written to while the run
+        goes on (:class:`harness.results.ResultsWriter`: at least every simulated second or
+        ``STREAM_FLUSH_SECONDS`` of wall time), marked incomplete until the run ends; a run that stops
+        early keeps what was recorded there too. ``meta`` is added to the results' metadata.
+        """
         m = self.model
-        if not (math.isfinite(t_end) and t_end > t0):
-            raise ModelError(f"t_end must be a finite time after t0={t0}, got {t_end!r}")
-        n = int(round((t_end - t0) / m.dt))
+        n = horizon_steps(t0, t_end, m.dt)
+        columns, units, picks = self._record_layout()
+        n_free = sum(port.size for port in m.free_inputs.values())
+        check_memory(n + 1, len(columns) + n_free + 1)  # recorded table, free inputs and the time grid
         times = t0 + m.dt * np.arange(n + 1)
         x, z = self._initial_states(x0)
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
-        columns, units, picks = self._record_layout()
         rec = _Recorder(times, columns, units)
-        rec.aliases = {a: leaf for a, leaf in self.aliases.items()
-                       if any(c == leaf or c.startswith(leaf + "[") for c in columns)}
+        leaves = {c.split("[")[0] for c in columns}
+        rec.aliases = {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}
+        rec.meta = dict(meta or {})
+        if stream is not None:
+            from harness.results import ResultsWriter
+
+            rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
+            rec.flush_rows = max(1, int(round(1.0 / m.dt)))
         cs = m.flat.cosim_blocks()
         stop = None
-        if cs:
-            stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
-        else:
-            self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
+        try:
+            if cs:
+                stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
+            else:
+                self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
+        except SimulationError as exc:
+            if rec.writer is not None:
+                rec.finish(exc.results if exc.results is not None else rec.results(False, str(exc)))
+                self.written = getattr(rec, "files", [])
+            raise
+        except BaseException as exc:
+            if rec.writer is not None:
+                rec.finish(rec.results(False, f"stopped: {type(exc).__name__}: {exc}"))
+            raise
         if stop is None:
-            return rec.results(complete=True, message="")
-        res = rec.results(complete=True, message=f"stopped at t={rec.last_time():.9g} s: block {stop.path!r} "
-                                                 f"asked to end the run ({stop.message})")
-        res.meta["stopped_by"] = stop.as_meta()
+            res = rec.results(complete=True, message="")
+        else:
+            res = rec.results(complete=True, message=f"stopped at t={rec.last_time():.9g} s: block {stop.path!r} "
+                                                     f"asked to end the run ({stop.message})")
+            res.meta["stopped_by"] = stop.as_meta()
+        if rec.writer is not None:
+            rec.finish(res)
+        self.written = getattr(rec, "files", [])
         return res
 
     # -- setup helpers ---------------------------------------------------------------------------
@@ -268,7 +304,7 @@ class Simulator:
         k = 0
         try:
             while k < n:
-                c = min(self.chunk, n - k)
+                c = min(self.chunk, n - k, rec.flush_rows if rec.writer is not None else n)
                 x_new, z_new, Y, bad = self._run_chunk(k, c, times, x, z, p, u_free)
                 if bad >= 0:
                     rec.add_block(Y[:bad + 1, y_idx])
@@ -384,6 +420,10 @@ class _Recorder:
         self.units = units
         self.aliases: dict[str, str] = {}
         self.exact: dict[str, list[np.ndarray]] = {}  # "block.port" -> exact 64-bit integer rows
+        self.meta: dict[str, Any] = {}
+        self.writer: Any = None  # a harness.results.ResultsWriter when the run is streamed
+        self.flush_rows = 1000  # hand rows to the writer at least every this many (one simulated second)
+        self.streamed = 0  # rows handed to the writer
 
     def add_row(self, row: np.ndarray) -> None:
         self.data[self.n] = row
@@ -392,12 +432,37 @@ class _Recorder:
     def add_block(self, rows: np.ndarray) -> None:
         self.data[self.n:self.n + len(rows)] = rows
         self.n += len(rows)
+        if self.writer is not None:
+            self.tick()
+
+    def tick(self) -> None:
+        """Streaming hook: pass new rows to the writer once a simulated second (or the wall-time period)
+        has been recorded since the last time."""
+        w = self.writer
+        if w is not None and self.n > self.streamed and (self.n - self.streamed >= self.flush_rows or w.due()):
+            self._hand_over()
+            w.flush()
+
+    def _hand_over(self) -> None:
+        self.writer.append(self.times[self.streamed:self.n], self.data[self.streamed:self.n])
+        self.streamed = self.n
+
+    def finish(self, results: Results) -> None:
+        """Close the stream with the final ``results`` (rows recorded since the last hand-over go too)."""
+        w, self.writer = self.writer, None
+        if w is None:
+            return
+        n = len(results.time)
+        if n > self.streamed:
+            w.append(results.time[self.streamed:n], results.data[self.streamed:n])
+            self.streamed = n
+        self.files = w.close(results)
 
     def last_time(self) -> float:
         return float(self.times[self.n - 1]) if self.n else float(self.times[0])
 
     def results(self, complete: bool, message: str) -> Results:
-        meta: dict[str, Any] = {"aliases": dict(self.aliases)}
+        meta: dict[str, Any] = {**self.meta, "aliases": dict(self.aliases)}
         if self.exact:
             meta["exact_integers"] = self._exact_columns()
         return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
@@ -438,3 +503,35 @@ def simulate(graph: Graph | Block, t_end: float, dt: float = 1e-3, inputs: Mappi
     progress = kw.pop("progress", False)
     x0 = kw.pop("x0", None)
     return Simulator(graph, dt=dt, params=params, **kw).run(t_end, inputs=inputs, x0=x0, progress=progress)
+
+
+def horizon_steps(t0: float, t_end: float, dt: float) -> int:
+    """The number of macro steps from ``t0`` to ``t_end``; refuses a horizon that is not a whole number of
+    steps of ``dt`` (relative tolerance 1e-9), an empty one, or one over :data:`MAX_STEPS`."""
+    if not (math.isfinite(t_end) and math.isfinite(t0) and t_end > t0):
+        raise ModelError(f"t_end must be a finite time after t0={t0:g}, got {t_end!r}")
+    if not (math.isfinite(dt) and dt > 0):
+        raise ModelError(f"the macro step dt must be a positive finite number, got {dt!r}")
+    steps = (t_end - t0) / dt
+    if not math.isfinite(steps) or steps > MAX_STEPS:
+        raise ModelError(f"horizon {t_end - t0:g} s at dt={dt:g} s is {steps:.3g} steps, more than the limit "
+                         f"of {MAX_STEPS} (use a larger --dt or a shorter --t-end)")
+    n = int(round(steps))
+    if n < 1 or abs(steps - n) > 1e-9 * max(1.0, steps):
+        raise ModelError(f"t_end={t_end:g} s is not a whole number of macro steps dt={dt:g} s from t0={t0:g} s "
+                         f"({steps:.6g} steps): choose t_end = t0 + k*dt")
+    return n
+
+
+def check_memory(rows: int, columns: int, fraction: float = 0.5) -> None:
+    """Refuse a run whose recorded table (``rows`` x ``columns`` float64) would not fit in ``fraction`` of
+    the machine's memory."""
+    need = 8.0 * rows * max(columns + 1, 1)
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return
+    if need > fraction * total:
+        raise ModelError(f"recording {rows} rows x {columns} columns needs {need / 2**30:.1f} GiB, more than "
+                         f"{fraction:.0%} of this machine's {total / 2**30:.1f} GiB (record fewer columns with "
+                         f"--record, use a larger dt or a shorter horizon)")

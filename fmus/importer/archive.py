@@ -5,9 +5,14 @@ a file that is not a zip archive; members with absolute paths, drive letters, ba
 ``..`` components; symbolic links; encrypted members; a name given twice with different contents
 (a member zipped twice with the same bytes, as some build systems do, is accepted once); more than
 ``MAX_MEMBERS`` members; a member over ``MAX_MEMBER_BYTES`` or a total over ``MAX_TOTAL_BYTES``
-(uncompressed); a compression ratio over ``MAX_RATIO`` (zip bombs). :func:`safe_extract`
-checks the same and then streams each member into a fresh directory, counting bytes as it
-writes (a lying header cannot make it write more than the limits), with ordinary file modes.
+(uncompressed); a compression method other than stored, deflate, bzip2 or lzma; zip bombs: a
+member that expands more than ``MAX_RATIO`` times its compressed size (plus ``RATIO_SLACK`` bytes,
+so that a tiny file of zeros is not refused; there is no size below which a member is exempt), or
+an archive whose members together expand more than ``MAX_RATIO`` times their compressed sizes
+(plus ``TOTAL_RATIO_SLACK``). :func:`safe_extract` checks the same and then streams each member
+into a fresh directory, counting bytes as it writes (a lying header cannot make it write more than
+the limits), with ordinary file modes. Corrupt data behind a valid directory (bad CRC, bad deflate
+stream, truncated member) is an :class:`~fmus.errors.FmuFileError` naming the member.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import shutil
 import stat
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path, PurePosixPath
 
 from fmus.errors import FmuFileError, UnsafeArchiveError
@@ -24,8 +30,13 @@ from fmus.errors import FmuFileError, UnsafeArchiveError
 MAX_MEMBERS = 20_000
 MAX_MEMBER_BYTES = 1 << 30  # 1 GiB
 MAX_TOTAL_BYTES = 2 << 30  # 2 GiB
-MAX_RATIO = 200.0  # uncompressed / compressed, for members over 1 MiB
-MAX_XML_BYTES = 64 << 20
+MAX_RATIO = 200.0  # uncompressed / compressed
+RATIO_SLACK = 4096  # bytes a member may expand beyond MAX_RATIO x its compressed size
+TOTAL_RATIO_SLACK = 1 << 20  # bytes all members together may expand beyond MAX_RATIO x their compressed sizes
+MAX_XML_BYTES = 16 << 20
+_METHODS = {zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED, zipfile.ZIP_BZIP2, zipfile.ZIP_LZMA}
+CORRUPT = (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError, ValueError)
+"""What reading a corrupt member can raise (bad CRC, bad deflate/bzip2/lzma data, truncated data)."""
 
 
 def open_zip(path: str | os.PathLike, what: str = "FMU") -> zipfile.ZipFile:
@@ -41,6 +52,9 @@ def open_zip(path: str | os.PathLike, what: str = "FMU") -> zipfile.ZipFile:
         raise FmuFileError(f"{what} file {p} is not a zip archive ({exc})") from None
     except OSError as exc:
         raise FmuFileError(f"{what} file {p} cannot be read: {exc.strerror or exc}") from None
+    except Exception as exc:  # noqa: BLE001 - a damaged central directory raises many kinds of errors
+        raise FmuFileError(f"{what} file {p} is not a readable zip archive "
+                           f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
 
 
 def _member_problem(info: zipfile.ZipInfo) -> str | None:
@@ -63,7 +77,9 @@ def _member_problem(info: zipfile.ZipInfo) -> str | None:
         return "is encrypted"
     if info.file_size > MAX_MEMBER_BYTES:
         return f"is too large ({info.file_size} bytes uncompressed, limit {MAX_MEMBER_BYTES})"
-    if info.file_size > (1 << 20) and info.file_size > MAX_RATIO * max(info.compress_size, 1):
+    if info.compress_type not in _METHODS:
+        return f"uses an unsupported compression method ({info.compress_type})"
+    if info.file_size > MAX_RATIO * info.compress_size + RATIO_SLACK:
         return f"has a suspicious compression ratio ({info.file_size} / {info.compress_size} bytes)"
     return None
 
@@ -75,6 +91,7 @@ def check_archive(zf: zipfile.ZipFile, path: str | os.PathLike, what: str = "FMU
         raise UnsafeArchiveError(f"{what} {path}: too many archive members ({len(infos)}, limit {MAX_MEMBERS})")
     seen: set[str] = set()
     total = 0
+    compressed = 0
     for info in infos:
         problem = _member_problem(info)
         if problem:
@@ -84,8 +101,12 @@ def check_archive(zf: zipfile.ZipFile, path: str | os.PathLike, what: str = "FMU
             continue  # checked (identical or refused) by _without_duplicates
         seen.add(key)
         total += info.file_size
+        compressed += info.compress_size
         if total > MAX_TOTAL_BYTES:
             raise UnsafeArchiveError(f"{what} {path}: archive expands to more than {MAX_TOTAL_BYTES} bytes")
+    if total > MAX_RATIO * compressed + TOTAL_RATIO_SLACK:
+        raise UnsafeArchiveError(f"{what} {path}: archive members expand {total} bytes from {compressed} compressed "
+                                 f"(more than {MAX_RATIO:g} times: a zip bomb?)")
     return _without_duplicates(zf, infos, path, what)
 
 
@@ -128,8 +149,11 @@ def read_member(zf: zipfile.ZipFile, name: str, limit: int = MAX_XML_BYTES) -> b
         return None
     if info.file_size > limit:
         raise UnsafeArchiveError(f"{zf.filename}: member {name} is too large ({info.file_size} bytes)")
-    with zf.open(info) as f:
-        data = f.read(limit + 1)
+    try:
+        with zf.open(info) as f:
+            data = f.read(limit + 1)
+    except CORRUPT as exc:
+        raise FmuFileError(f"{zf.filename}: archive member {name} is corrupt ({' '.join(str(exc).split())})") from None
     if len(data) > limit:
         raise UnsafeArchiveError(f"{zf.filename}: member {name} is larger than its header says")
     return data
@@ -168,9 +192,9 @@ def safe_extract(path: str | os.PathLike, workdir: str | os.PathLike | None = No
                                 f"{what} {path}: member {info.filename!r} is larger than its header says")
                         dst.write(chunk)
                 os.chmod(target, 0o644)
-        except zipfile.BadZipFile as exc:  # corrupt data (bad CRC) behind a valid directory
+        except CORRUPT as exc:  # corrupt data (bad CRC, bad deflate data) behind a valid directory
             remove_tree(dest)
-            raise FmuFileError(f"{what} {path}: corrupt archive ({exc})") from None
+            raise FmuFileError(f"{what} {path}: corrupt archive ({' '.join(str(exc).split())})") from None
         except BaseException:
             remove_tree(dest)
             raise

@@ -16,6 +16,14 @@
   (``damper_d``, ``der_x``, ``a_2``); ``fmi_names`` keeps the mapping;
 - direct feedthrough per output from ``ModelStructure/Outputs`` dependencies (an output without
   a ``dependencies`` attribute depends on every input, as the standard says).
+
+Limits (each exceeded one is a :class:`~fmus.errors.ModelDescriptionError` naming the file, the
+limit and the value): the XML is at most ``archive.MAX_XML_BYTES``; any DOCTYPE or ENTITY declaration,
+anywhere and in any encoding, is refused (the document is decoded as the XML rules say and scanned,
+then parsed with a parser that loads no DTD and resolves no entity, which must find no DOCTYPE
+either); elements nest at most ``MAX_XML_DEPTH`` deep; at most ``MAX_VARIABLES`` model variables;
+an array port has at most ``MAX_ARRAY_ELEMENTS`` elements and all ports together at most
+``MAX_PORT_ELEMENTS``.
 """
 
 from __future__ import annotations
@@ -36,6 +44,10 @@ from fmus.importer.archive import check_archive, open_zip, read_member
 REAL_TYPES = {"Real", "Float64", "Float32"}
 INT_TYPES = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration"}
 BOOL_TYPES = {"Boolean"}
+MAX_XML_DEPTH = 64
+MAX_VARIABLES = 100_000
+MAX_ARRAY_ELEMENTS = 100_000
+MAX_PORT_ELEMENTS = 1_000_000
 _NAME_BAD = re.compile(r"[^A-Za-z0-9_]+")
 _INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
 
@@ -297,18 +309,75 @@ def _dims(var: Any, by_vr: dict[int, Any]) -> tuple[int, ...] | None:
     shape = []
     for d in dims:
         if d.start is not None:
-            shape.append(int(d.start))
+            raw = d.start
         elif d.valueReference is not None and d.valueReference in by_vr and by_vr[d.valueReference].start is not None:
-            shape.append(int(by_vr[d.valueReference].start))
+            raw = by_vr[d.valueReference].start
         else:
             return None
+        try:
+            size = int(str(raw).strip())
+        except ValueError:
+            raise ModelDescriptionError(f"variable {var.name!r}: dimension {raw!r} is not an integer") from None
+        if not 1 <= size <= MAX_ARRAY_ELEMENTS:
+            raise ModelDescriptionError(f"variable {var.name!r}: dimension {size} is outside 1..{MAX_ARRAY_ELEMENTS}")
+        shape.append(size)
+    if math.prod(shape) > MAX_ARRAY_ELEMENTS:
+        raise ModelDescriptionError(f"variable {var.name!r}: array of shape {tuple(shape)} has more than "
+                                    f"{MAX_ARRAY_ELEMENTS} elements")
     return tuple(shape)
 
 
+def _decode_xml(data: bytes, path: Path) -> str:
+    """The document as text, decoded as the XML specification says (BOM, then the declared encoding)."""
+    boms = ((b"\x00\x00\xfe\xff", "utf-32-be"), (b"\xff\xfe\x00\x00", "utf-32-le"), (b"\xef\xbb\xbf", "utf-8-sig"),
+            (b"\xfe\xff", "utf-16-be"), (b"\xff\xfe", "utf-16-le"))
+    enc = next((name for bom, name in boms if data.startswith(bom)), None)
+    if enc is None:
+        if data[:4] in (b"\x00\x00\x00<", b"<\x00\x00\x00"):
+            enc = "utf-32-be" if data[0] == 0 else "utf-32-le"
+        elif data[:2] in (b"\x00<", b"<\x00"):
+            enc = "utf-16-be" if data[0] == 0 else "utf-16-le"
+        else:
+            m = re.match(rb"\s*<\?xml[^>]*?encoding\s*=\s*[\"']([A-Za-z0-9._-]+)[\"']", data[:1024])
+            enc = m.group(1).decode("ascii") if m else "utf-8"
+    try:
+        return data.decode(enc)
+    except LookupError:
+        raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares an unknown encoding {enc!r}") from None
+    except UnicodeDecodeError as exc:
+        raise ModelDescriptionError(f"FMU {path}: modelDescription.xml is not valid {enc} "
+                                    f"(byte {exc.start})") from None
+
+
 def _check_xml(data: bytes, path: Path) -> None:
-    head = data[:4096].lower()
-    if b"<!doctype" in head or b"<!entity" in data.lower():
+    """Refuse DTDs and entities anywhere (any encoding), too deep nesting and too many variables."""
+    from lxml import etree
+
+    text = _decode_xml(data, path).upper()
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:
         raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares a DTD or entities (refused)")
+    parser = etree.XMLParser(resolve_entities=False, load_dtd=False, no_network=True, huge_tree=False,
+                             dtd_validation=False, remove_comments=True)
+    try:
+        root = etree.fromstring(data, parser)
+    except etree.XMLSyntaxError as exc:
+        raise ModelDescriptionError(f"FMU {path}: invalid modelDescription.xml: {one_line(exc)}") from None
+    tree = root.getroottree()
+    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
+        raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares a DTD or entities (refused)")
+    depth, stack = 0, [(root, 1)]
+    while stack:
+        el, d = stack.pop()
+        depth = max(depth, d)
+        if depth > MAX_XML_DEPTH:
+            raise ModelDescriptionError(f"FMU {path}: modelDescription.xml nests elements more than "
+                                        f"{MAX_XML_DEPTH} deep (refused)")
+        stack.extend((c, d + 1) for c in el)
+    mv = root.find("ModelVariables")
+    n = 0 if mv is None else len(mv)
+    if n > MAX_VARIABLES:
+        raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares {n} model variables, more than "
+                                    f"the limit of {MAX_VARIABLES}")
 
 
 def describe_fmu(path: str | Path, strict: bool = False) -> FmuDescription:
@@ -397,6 +466,7 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
     outputs: dict[str, PortSpec] = {}
     params: dict[str, ParamSpec] = {}
     var_port: dict[int, str] = {}  # id(variable) -> port name
+    port_elements = 0
 
     # --- ports: group FMI 2 indexed scalars, keep FMI 3 arrays ---------------------------------
     port_vars = [v for v in md.modelVariables if v.causality in ("input", "output")]
@@ -443,6 +513,9 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
                 continue
             shape = shape or (1,)
         count = int(math.prod(shape))
+        port_elements += count
+        if port_elements > MAX_PORT_ELEMENTS:
+            raise ModelDescriptionError(f"the ports have more than {MAX_PORT_ELEMENTS} elements in all")
         if len(g) > 1:
             starts = [_parse_start(x, x.type, 1) for x in g]
             start = None if any(s is None for s in starts) else tuple(s[0] for s in starts)  # type: ignore[index]

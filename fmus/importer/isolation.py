@@ -8,11 +8,14 @@ decides). One round trip per macro step: ``set_inputs`` is buffered and sent wit
 whose reply carries the outputs after the step; ``get_outputs`` asks the child only when inputs
 changed since the last answer (direct feedthrough).
 
-If the child dies (segmentation fault, abort, out of memory, killed) the call raises
-:class:`~fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal; with
-``timeout`` a call that takes longer kills the child and raises
-:class:`~fmus.errors.FmuTimeoutError`. The master turns both into a ``CoSimulationError``
-with the results recorded so far.
+If the child dies (segmentation fault, abort, out of memory, killed, exit from inside the FMU) the
+call raises :class:`~fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal.
+A watchdog bounds every call: ``timeout`` seconds (default :data:`DEFAULT_CALL_TIMEOUT`) for a call,
+at least :data:`MIN_SETUP_TIMEOUT` for ``setup`` (extraction, instantiation, initialisation) and
+:data:`STARTUP_TIMEOUT` for the child's interpreter to start; a call that takes longer kills the
+child and raises :class:`~fmus.errors.FmuTimeoutError`. A child that is stopped (SIGSTOP, SIGTSTP) is
+detected while waiting, killed, and reported as a crash. The master turns these errors into a
+``CoSimulationError`` with the results recorded so far.
 """
 
 from __future__ import annotations
@@ -36,7 +39,13 @@ from fmus.importer.archive import remove_tree
 from harness.errors import StopRequested
 
 _ERRORS = {cls.__name__: cls for cls in (FmuRuntimeError, FmuCrashedError, FmuTimeoutError)}
-_STARTUP_TIMEOUT = 120.0
+DEFAULT_CALL_TIMEOUT = 10.0
+"""Seconds one call (``doStep`` with its input and output exchange) may take by default: 10^4 times a
+1 ms macro step in real time, far beyond any FMU meant for such steps."""
+MIN_SETUP_TIMEOUT = 10.0
+"""``setup`` (extract, load, instantiate, initialise) may take the call timeout or this, whichever is longer."""
+STARTUP_TIMEOUT = 60.0
+"""Seconds the child's interpreter may take to start and import numpy and fmpy (a loaded machine)."""
 
 
 def _signal_name(returncode: int | None) -> str:
@@ -55,12 +64,18 @@ class IsolatedRuntime:
 
     def __init__(self, args: Mapping[str, Any], timeout: float | None = None) -> None:
         self.args = dict(args)
+        # the child works in its scratch directory: every path it gets must be absolute
+        self.args["path"] = str(Path(self.args["path"]).resolve())
         # the child extracts and works in a scratch directory the parent removes, even after a crash
-        self.scratch = Path(tempfile.mkdtemp(prefix="cpgsim_fmu_", dir=self.args.get("workdir") or None))
+        workdir = self.args.get("workdir")
+        self.scratch = Path(tempfile.mkdtemp(prefix="cpgsim_fmu_", dir=str(Path(workdir).resolve()) if workdir
+                                             else None)).resolve()
         self.args["workdir"] = str(self.scratch)
         self.path = Path(self.args["path"])
         self.name = self.args["instance_name"]
-        self.timeout = timeout
+        self.timeout = DEFAULT_CALL_TIMEOUT if timeout is None else float(timeout)
+        self.setup_timeout = max(self.timeout, MIN_SETUP_TIMEOUT)
+        self._ready = False
         self._pending: dict[str, np.ndarray] = {}
         self._sent: dict[str, np.ndarray] = {}
         self._outputs: dict[str, np.ndarray] | None = None
@@ -90,13 +105,20 @@ class IsolatedRuntime:
         except (BrokenPipeError, ConnectionError, OSError):
             self._raise_dead(where, what)
         deadline = None if timeout is None else time.monotonic() + timeout
-        while not self.conn.poll(0.2):
+        wait = 0.001
+        while not self.conn.poll(wait):
+            wait = min(0.2, wait * 2)  # quick answers are seen at once, a slow call is polled 5 times a second
             if self.proc.poll() is not None and not self.conn.poll(0):
                 self._raise_dead(where, what)
+            if _stopped(self.proc.pid):
+                self.kill()
+                self._close_conn()
+                raise FmuCrashedError(f"{where} was stopped (SIGSTOP or SIGTSTP) during {what} at t={self._time:g} s; "
+                                      f"the process was killed")
             if deadline is not None and time.monotonic() > deadline:
                 self.kill()
-                raise FmuTimeoutError(f"{where}: {what} at t={self._time:g} took longer than {timeout:g} s; "
-                                      f"the process was killed")
+                raise FmuTimeoutError(f"{where}: {what} at t={self._time:g} s took longer than {timeout:g} s "
+                                      f"(--fmu-timeout); the process was killed")
         try:
             reply = self.conn.recv()
         except (EOFError, ConnectionError, OSError):
@@ -127,9 +149,11 @@ class IsolatedRuntime:
     def setup(self, t0: float, params: Mapping[str, float] | None = None,
               inputs: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
         self._time = float(t0)
-        limit = _STARTUP_TIMEOUT if self.timeout is None else max(self.timeout, _STARTUP_TIMEOUT)
+        if not self._ready:
+            self._call("ready", timeout=STARTUP_TIMEOUT)
+            self._ready = True
         self._outputs = self._call("setup", self.args, float(t0), dict(params or {}), dict(inputs or {}),
-                                   timeout=limit)
+                                   timeout=self.setup_timeout)
         return self._outputs
 
     def get_outputs(self) -> dict[str, np.ndarray]:
@@ -182,6 +206,17 @@ class IsolatedRuntime:
             remove_tree(self.scratch)
 
 
+def _stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped by a signal or a tracer (Linux ``/proc``; False elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            stat = f.read()
+    except OSError:
+        return False
+    state = stat[stat.rfind(b")") + 2:stat.rfind(b")") + 3]
+    return state in (b"T", b"t")
+
+
 def _has_fileno(stream: Any) -> bool:
     try:
         stream.fileno()
@@ -204,10 +239,12 @@ def _serve(fd: int) -> None:
         except (EOFError, OSError):
             break
         try:
-            if what == "setup":
+            if what == "ready":  # the interpreter is up and the runtime imported
+                value: Any = None
+            elif what == "setup":
                 args, t0, params, inputs = payload
                 rt = FmuRuntime(**args)
-                value: Any = rt.setup(t0, params, inputs)
+                value = rt.setup(t0, params, inputs)
             elif what == "outputs":
                 assert rt is not None
                 if payload[0]:
@@ -223,19 +260,24 @@ def _serve(fd: int) -> None:
             elif what == "terminate":
                 if rt is not None:
                     rt.terminate()
+                    rt = None
                 conn.send(("ok", None))
                 break
             else:
                 raise FmuRuntimeError(f"unknown request {what!r}")
-            conn.send(("ok", value))
+            reply: tuple = ("ok", value)
         except StopRequested as exc:
-            conn.send(("stop", (str(exc), exc.time)))
+            reply = ("stop", (str(exc), exc.time))
         except FmuError as exc:
-            conn.send(("err", ("load", str(exc))))
+            reply = ("err", ("load", str(exc)))
         except Exception as exc:  # noqa: BLE001 - report every failure to the parent
             name = type(exc).__name__
-            conn.send(("err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS
-                               else f"{name}: {one_line(exc)}")))
+            reply = ("err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS
+                             else f"{name}: {one_line(exc)}"))
+        try:
+            conn.send(reply)
+        except OSError:  # the socket is gone (the FMU closed it): the parent sees the child end
+            os._exit(3)
     if rt is not None:
         rt.terminate()
     conn.close()
@@ -243,8 +285,11 @@ def _serve(fd: int) -> None:
 
 if __name__ == "__main__":
     os.dup2(2, 1)  # anything the FMU prints goes to stderr, never into the protocol
-    _serve(int(sys.argv[1]))
-    sys.stderr.flush()
+    try:
+        _serve(int(sys.argv[1]))
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001 - e.g. the FMU closed our socket or stderr: the parent reports it
+        os._exit(3)
     # the FMU is terminated and freed: skip interpreter finalisation, where libraries that embed
     # Python (PythonFMU) were seen to corrupt the heap
     os._exit(0)

@@ -76,7 +76,34 @@ def load_graph(spec: str) -> Graph | Block:
         builder = getattr(module, func)
     else:
         raise GraphNotFound(f"unknown graph {spec!r}: use one of {', '.join(names())} or path/to/module.py:function")
-    graph = builder()
+    return call_builder(builder, spec)
+
+
+def call_builder(builder: Any, spec: str) -> Graph | Block:
+    """Call a graph builder without arguments; whatever goes wrong in user code is one-line :class:`GraphNotFound`
+    (a :class:`~components.core.ModelError` the builder raises keeps its own message)."""
+    if not callable(builder):
+        raise GraphNotFound(f"{spec}: {type(builder).__name__} object is not callable (need a function returning "
+                            f"a Graph or Block)")
+    import inspect
+
+    try:
+        sig = inspect.signature(builder)
+    except (TypeError, ValueError):
+        sig = None
+    if sig is not None:
+        required = [n for n, q in sig.parameters.items() if q.default is inspect.Parameter.empty
+                    and q.kind in (q.POSITIONAL_ONLY, q.POSITIONAL_OR_KEYWORD, q.KEYWORD_ONLY)]
+        if required:
+            raise GraphNotFound(f"{spec}: the builder needs argument(s) {', '.join(required)}; "
+                                f"it must be callable without arguments")
+    try:
+        graph = builder()
+    except ModelError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - user code: report, don't crash
+        raise GraphNotFound(f"{spec}: the builder raised {type(exc).__name__}: {' '.join(str(exc).split())}") \
+            from exc
     if not isinstance(graph, (Graph, Block)):
         raise GraphNotFound(f"{spec} returned {type(graph).__name__}, not a Graph or Block")
     return graph

@@ -7,11 +7,46 @@ from typing import Any
 
 
 class CliError(Exception):
-    """A user-facing error: printed as one line, exit status ``code`` (2 = bad input)."""
+    """A user-facing error: printed as one line, exit status ``code`` (2 = bad input, 1 = failed run)."""
 
     def __init__(self, message: str, code: int = 2) -> None:
         super().__init__(message)
         self.code = code
+
+
+def one_line(text: object, limit: int = 600) -> str:
+    """Collapse whitespace (multi-line library messages) and cut to ``limit`` characters."""
+    s = " ".join(str(text).split())
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
+    """The CLI's error policy for one exception: ``(exit status, one-line message)``.
+
+    2: bad input (:class:`CliError` with code 2, model, parameter, FMU-file and results-file errors,
+    files that cannot be read or written); 1: a run that failed (a simulation stopped early, an FMU
+    call failed, a resource limit was hit while running); ``None``: an unexpected internal error.
+    """
+    from components.core import ModelError
+    from harness.errors import SimulationError
+
+    msg = one_line(exc) or type(exc).__name__
+    if isinstance(exc, CliError):
+        return exc.code, msg
+    if isinstance(exc, SimulationError):
+        return 1, msg
+    if isinstance(exc, ModelError):  # includes FmuError (load-time), ResultsError is a ValueError below
+        return 2, msg
+    if type(exc).__name__ in ("FmuRuntimeError", "FmuCrashedError", "FmuTimeoutError"):
+        return 1, msg
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        return 2, one_line(f"{where}{exc.strerror or exc}")
+    if isinstance(exc, MemoryError):
+        return 1, "out of memory (record fewer columns with --record, or a shorter horizon)"
+    if isinstance(exc, ValueError) and type(exc).__module__.split(".")[0] in ("harness", "components", "fmus"):
+        return 2, msg
+    return None, msg
 
 
 def add_set_argument(parser: argparse.ArgumentParser) -> None:

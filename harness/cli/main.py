@@ -1,54 +1,120 @@
 """``cpgsim`` command line: one entry point, one module per subcommand in :mod:`harness.cli.commands`.
 
 Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``.
-Bad input exits with status 2 and a one-line message on stderr, never a traceback.
+
+The error policy of the whole CLI (:func:`main`): every failure ends with one line on stderr,
+``cpgsim <command>: error: <what failed>``, and exit status 2 for bad input (arguments, files, graphs,
+FMUs that cannot be used), 1 for a run that failed (a simulation or an FMU call stopped early), 130
+when interrupted. An exception nobody expected is reported as an internal error on one line too.
+``--debug`` (or the environment variable ``CPGSIM_DEBUG=1``) prints the traceback as well. A closed
+stdout (``cpgsim inspect X.fmu | head``) ends quietly.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
+import traceback
 from collections.abc import Sequence
+from typing import NoReturn
 
-from components.core import ModelError
 from harness.cli import commands
-from harness.cli.common import CliError
+from harness.cli.common import CliError, exit_code_of
 
 __all__ = ["CliError", "build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage block) with a pointer to ``--help``."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``cpgsim`` parser. With ``argv`` naming a command, only that command's module is imported
+    (``cpgsim inspect`` does not pay for the plotting imports of ``cpgsim run``); otherwise all are."""
+    parser = _Parser(
         prog="cpgsim", description="Compose, verify, export and co-simulate CPG legged-robot controllers.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser.add_argument("--debug", action="store_true",
+                        help="print the traceback of an error (also: environment variable CPGSIM_DEBUG=1)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
+    infos = [m for m in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name)
+             if not m.name.startswith("_")]
+    wanted = next((a for a in (argv or []) if not a.startswith("-")), None)
+    if argv is not None and wanted in {m.name for m in infos}:
+        infos = [m for m in infos if m.name == wanted]
+    for info in infos:
         mod = importlib.import_module(f"harness.cli.commands.{info.name}")
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.__doc__ or mod.HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="print the traceback of an error (also: CPGSIM_DEBUG=1)")
         p.set_defaults(_run=mod.run)
     return parser
 
 
+def debug_enabled(args: argparse.Namespace | None = None) -> bool:
+    """``--debug`` was given or ``CPGSIM_DEBUG`` is set to something other than ``0``/empty."""
+    if args is not None and getattr(args, "debug", False):
+        return True
+    return os.environ.get("CPGSIM_DEBUG", "").strip() not in ("", "0")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    """Run one ``cpgsim`` command; returns the exit status (see the module docstring for the policy)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
+    command = getattr(args, "command", None) or "cpgsim"
     try:
-        return int(args._run(args) or 0)
-    except CliError as exc:
-        print(f"cpgsim {args.command}: error: {exc}", file=sys.stderr)
-        return exc.code
-    except (ModelError, OSError, ValueError) as exc:
-        print(f"cpgsim {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        code = int(args._run(args) or 0)
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:
+        return _closed_stdout()
     except KeyboardInterrupt:
-        print(f"cpgsim {args.command}: interrupted", file=sys.stderr)
+        _report(args, f"cpgsim {command}: interrupted")
         return 130
+    except Exception as exc:  # noqa: BLE001 - the one place where every error becomes one line
+        code, message = exit_code_of(exc)
+        if code is None:
+            message = (f"internal error: {type(exc).__name__}: {message} (this is a bug in cpgsim; "
+                       f"run again with --debug or CPGSIM_DEBUG=1 for the traceback)")
+            code = 1
+        _report(args, f"cpgsim {command}: error: {message}", exc)
+        return code
+
+
+def _report(args: argparse.Namespace, line: str, exc: BaseException | None = None) -> None:
+    try:
+        sys.stdout.flush()
+    except (BrokenPipeError, OSError, ValueError):
+        _silence_stdout()
+    if exc is not None and debug_enabled(args):
+        traceback.print_exception(exc, file=sys.stderr)
+    print(line, file=sys.stderr)
+
+
+def _silence_stdout() -> None:
+    """Point fd 1 at /dev/null so the interpreter's final flush cannot fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _closed_stdout() -> int:
+    """The reader of stdout went away (``| head``): not an error of the command, end quietly."""
+    _silence_stdout()
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -73,16 +73,16 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     error: SimulationError | None = None
     wall0 = time.perf_counter()
     try:
-        res = sim.run(t_end, progress=progress)
+        res = sim.run(t_end, progress=progress, stream=out / "results.csv" if save_results else None,
+                      meta={"scenario": label, **setup.info})
     except SimulationError as exc:
         error = exc
         if exc.results is None or len(exc.results.time) == 0:
             raise
         res = exc.results
     wall = time.perf_counter() - wall0
-    res.meta.update({"scenario": label, **setup.info})
+    res.meta.update({"scenario": label, **setup.info})  # results.csv was streamed during the run
     if save_results:
-        res.save(out / "results.csv")
         res.save(out / "results.npz")
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall

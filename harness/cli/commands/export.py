@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import inspect
+import os
 import re
 from pathlib import Path
 
@@ -62,10 +63,7 @@ def load_item(spec: str, name: str | None = None) -> Graph | Block:
         except TypeError as exc:
             raise CliError(f"cannot instantiate {attr} with default arguments: {exc}") from None
     if callable(obj):
-        item = obj()
-        if isinstance(item, (Graph, Block)):
-            return item
-        raise CliError(f"{spec} returned {type(item).__name__}, not a Graph or Block")
+        return catalog.call_builder(obj, spec)
     raise CliError(f"{spec} is neither a Block class nor a function returning a Graph or Block")
 
 
@@ -81,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
     params = parse_sets(args.sets)
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
                         params=params, name=args.name, optimize=None if args.opt == "auto" else f"-O{args.opt}")
+    from harness.results import file_mode
+
+    os.chmod(result.path, file_mode())  # the user's umask, like every other file cpgsim writes
     variables = result.variables
     counts = {c: len(variables.of(c)) for c in ("input", "output", "parameter", "state", "dstate")}
     kinds = {"cs": "co-simulation", "me": "model exchange", "both": "co-simulation + model exchange"}[args.kind]

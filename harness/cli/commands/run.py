@@ -51,10 +51,14 @@ def run(args: argparse.Namespace) -> int:
         print(scenario.to_toml(), end="")
         return 0
     out = Path(args.output or Path("runs") / scenario.name)
+    from harness.results import prepare_run_directory
+
+    prepare_run_directory(out)  # a previous run there is replaced as a whole
     try:
         summary = run_scenario(scenario, out, t_end=args.t_end, progress=not args.no_progress)
     except SimulationError as exc:
-        print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
+        if (out / "summary.json").exists():
+            print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
         raise CliError(str(exc), code=1) from exc
     print_summary(summary, out)
     return 0

@@ -2,6 +2,17 @@
 
 GRAPH is a built-in name (see `cpgsim simulate --list`), path/to/module.py:function returning a
 Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.csv
+
+The results are written while the run goes on (marked "complete": false in the metadata until it
+ends), so a run that is killed keeps what it recorded. An existing results file is refused unless
+--force is given, which replaces it (and its sidecar files) as a whole. --t-end must be a whole number
+of --dt steps.
+
+FMUs that cpgsim did not build (their generationTool is not cpgsim) run in a child process by
+default; --isolate runs every FMU so, --no-isolate none. An isolated FMU runs under a watchdog: a call
+that takes longer than --fmu-timeout seconds, or a child that is stopped, ends the run with an error
+naming the FMU and the call (the results recorded so far are kept). An FMU run in-process that ends
+the process (exit) or crashes it (SIGSEGV, SIGABRT ...) is reported on one line with exit status 1.
 """
 
 from __future__ import annotations
@@ -13,6 +24,9 @@ from components.graph import Graph
 from harness.cli import catalog
 from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
 from harness.simulate import SimulationError, Simulator
+
+DEFAULT_CALL_TIMEOUT = 10.0  # mirrors fmus.importer.isolation (imported lazily: the CLI starts fast)
+MIN_SETUP_TIMEOUT = 10.0
 
 NAME = "simulate"
 HELP = "simulate a graph and write results"
@@ -32,8 +46,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
-    p.add_argument("--isolate", action="store_true",
-                   help="run each FMU in a child process (a crashing FMU ends the run with partial results)")
+    iso = p.add_mutually_exclusive_group()
+    iso.add_argument("--isolate", dest="isolate", action="store_const", const=True, default=None,
+                     help="run every FMU in a child process (a crashing FMU ends the run with partial results; "
+                          "default: only FMUs that cpgsim did not build)")
+    iso.add_argument("--no-isolate", dest="isolate", action="store_const", const=False,
+                     help="run every FMU in this process (faster; a hanging FMU hangs cpgsim)")
+    p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
+                   help="with --isolate: the longest one FMU call may take (default "
+                        f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {MIN_SETUP_TIMEOUT:g} s "
+                        "or this, whichever is longer)")
+    p.add_argument("--force", action="store_true", help="replace an existing results file")
     p.add_argument("--solver", choices=("rk4", "cvode"), default=None,
                    help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
                         "or cvode (adaptive BDF for stiff models); events are located inside the step either way. "
@@ -42,6 +65,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--atol", type=positive_float, default=None,
                    help="CVODE absolute tolerance (default: rtol times each state's nominal value)")
     add_set_argument(p)
+
+
+def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> int:
+    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) those whose
+    modelDescription does not name cpgsim as the generation tool. Returns how many are isolated."""
+    from fmus.importer.block import fmu_blocks
+
+    n = 0
+    for blk in fmu_blocks(graph):
+        built_here = blk.info.generation_tool.startswith("cpgsim ")
+        blk.isolate = bool(isolate) if isolate is not None else not built_here
+        if blk.isolate and timeout is not None:
+            blk.timeout = timeout
+        n += blk.isolate
+    return n
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,11 +92,15 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
-    graph = catalog.load_graph(args.graph)
-    if args.isolate:
-        from fmus.importer.block import set_isolation
+    from harness.results import result_files
 
-        set_isolation(graph)
+    existing = [f for f in result_files(out) if f.exists()]
+    if existing and not args.force:
+        raise CliError(f"output {existing[0]} exists: use --force to replace it (and its sidecar files)")
+    if args.fmu_timeout is not None and args.isolate is False:
+        raise CliError("--fmu-timeout does not apply with --no-isolate (in-process FMU calls cannot be interrupted)")
+    graph = catalog.load_graph(args.graph)
+    isolate_fmus(graph, args.isolate, args.fmu_timeout)
     if args.solver is not None or args.rtol is not None or args.atol is not None:
         from fmus.importer.block import set_solver
 
@@ -76,16 +118,21 @@ def run(args: argparse.Namespace) -> int:
     if not t_end > t0:
         raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
     sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
+    from harness.exit_guard import guard_run
+
     try:
-        results = sim.run(t_end, t0=t0, progress=args.progress)
+        with guard_run("cpgsim simulate", args.graph, out):
+            results = sim.run(t_end, t0=t0, progress=args.progress, stream=out)
     except SimulationError as exc:
-        if exc.results is not None:
-            written = exc.results.save(out)
-            print(f"partial results (up to t={exc.results.time[-1]:.6g} s) written to "
-                  + ", ".join(map(str, written)))
+        res = exc.results
+        if res is not None and len(res.time):
+            print(f"partial results (up to t={res.time[-1]:.6g} s, {len(res.time)} rows) written to "
+                  + ", ".join(str(out.parent / f.name) for f in sim.written or [out]))
+        else:
+            print("no results: the run failed before its first step")
         raise CliError(str(exc), code=1) from exc
-    written = results.save(out)
     if results.meta.get("stopped_by"):
         print(results.message)
-    print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to " + ", ".join(map(str, written)))
+    print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to "
+          + ", ".join(str(out.parent / f.name) for f in sim.written or [out]))
     return 0

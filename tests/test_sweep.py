@@ -164,3 +164,21 @@ def test_sweep_on_a_cluster_whose_worker_does_not_share_the_client_disk(tmp_path
         assert json.loads((__import__("pathlib").Path(t["dir"]) / "summary.json").read_text())["seed"] == t["seed"]
         assert "files" not in t
     assert (out / "client-only.txt").read_text() == "the client wrote this"
+
+
+def test_unreachable_scheduler_is_one_line_and_leaves_no_folder(tmp_path, capsys):
+    out = tmp_path / "never"
+    port = _free_port()  # nothing listens there
+    code = main(["sweep", "fukuhara-gaits", "--trials", "1", "--scheduler", f"tcp://127.0.0.1:{port}",
+                 "-o", str(out), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "cannot connect to the dask scheduler" in err[0]
+    assert not out.exists()
+
+
+def test_sweep_with_an_unknown_key_runs_no_trial_and_exits_2(tmp_path, capsys):
+    for args in (["--set", "nosuch=1"], ["--vary", "nosuch=1,2"]):
+        code = main(["sweep", "fukuhara-gap", "--trials", "2", "--serial", "-o", str(tmp_path / "s"), *args])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and "controller.nosuch" in err[0], err
+    assert not (tmp_path / "s").exists()

@@ -129,7 +129,6 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
         suite["seeds"] = int(seeds)
     check_cells(suite)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     seed_list = [int(suite["base_seed"]) + i for i in range(int(suite["seeds"]))]
     tasks = []
     for c in suite["controllers"]:
@@ -141,8 +140,9 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
     info: dict[str, Any] = {"executor": "serial"}
     own: list[Any] = []
     client = None
-    if not serial:
+    if not serial:  # before the output folder exists: an unreachable scheduler leaves nothing behind
         client, own = _connect(scheduler, workers, None, info)
+    out.mkdir(parents=True, exist_ok=True)
     bar = _bar(len(tasks), progress, f"bench {suite['name']}")
     records: dict[tuple, dict[str, Any]] = {}
     try:

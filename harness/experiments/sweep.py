@@ -197,14 +197,14 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
     groups = _groups(dict(sets or {}), vary)
     check_groups(scenario, groups, int(seed))
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     tasks = [(g, i, int(seed) + i) for g in groups for i in range(int(trials))]
     t0 = time.perf_counter()
     records: dict[tuple[str, int], dict[str, Any]] = {}
     info: dict[str, Any] = {"executor": "serial"}
     own: list[Any] = []
-    if not serial:
+    if not serial:  # before the output folder exists: an unreachable scheduler leaves nothing behind
         client, own = _connect(scheduler, workers, client, info)
+    out.mkdir(parents=True, exist_ok=True)
     bar = _bar(len(tasks), progress, scenario)
     try:
         if serial:

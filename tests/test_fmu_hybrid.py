@@ -354,7 +354,7 @@ def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
         FmuBlock("stop", fmu)
 
 
-def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path):
+def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path, capsys):
     """--solver on an FMU that offers both interfaces runs it as ME (here: the time event at 9 stops it)."""
     from harness.cli.main import main
 
@@ -363,4 +363,6 @@ def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path):
                  "-o", str(out)]) == 0
     meta = json.loads(out.with_suffix(".meta.json").read_text())
     assert meta["stopped_by"]["message"].startswith("FMU Stop9.fmu (instance 'Stop9') event update")
-    assert main(["simulate", str(stop_fmus[2]), "--rtol", "1e-6", "-o", str(out)]) == 2  # rtol needs cvode
+    capsys.readouterr()
+    assert main(["simulate", str(stop_fmus[2]), "--rtol", "1e-6", "-o", str(out), "--force"]) == 2
+    assert "--rtol/--atol apply to --solver cvode" in capsys.readouterr().err

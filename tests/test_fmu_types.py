@@ -177,9 +177,9 @@ def test_array_parameters_from_the_cli(types_fmu, tmp_path):
     data = np.genfromtxt(out, delimiter=",", names=True)
     assert data["Typesa01"][-1] == 2.0 and data["Typesa10"][-1] == 3.0 and data["Typeslabel_length"][-1] == 2.0
     assert main(["simulate", str(types_fmu), "--t-end", "0.2", "--dt", "0.1", "--set", "Types.A=1,2,3,4",
-                 "-o", str(out)]) == 0
+                 "-o", str(out), "--force"]) == 0
     assert np.genfromtxt(out, delimiter=",", names=True)["Typesa10"][-1] == 3.0
-    assert main(["simulate", str(types_fmu), "--set", "Types.A=1,2,3", "-o", str(out)]) == 2
+    assert main(["simulate", str(types_fmu), "--set", "Types.A=1,2,3", "-o", str(out), "--force"]) == 2
 
 
 def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):

@@ -203,7 +203,7 @@ def test_default_experiment_is_used_unless_the_cli_overrides_it(tmp_path, integr
     assert main(["simulate", str(ssp), "-o", str(out)]) == 0
     res = Results.load(out)
     assert res.time[-1] == pytest.approx(0.3) and res.time[1] - res.time[0] == pytest.approx(0.01)
-    assert main(["simulate", str(ssp), "--t-end", "0.2", "--dt", "0.05", "-o", str(out)]) == 0
+    assert main(["simulate", str(ssp), "--t-end", "0.2", "--dt", "0.05", "-o", str(out), "--force"]) == 0
     res = Results.load(out)
     assert res.time[-1] == pytest.approx(0.2) and len(res.time) == 5
     # a startTime other than 0
@@ -214,7 +214,7 @@ def test_default_experiment_is_used_unless_the_cli_overrides_it(tmp_path, integr
             if info.filename == "SystemStructure.ssd":
                 data = data.replace(b'startTime="0.0"', b'startTime="0.1"')
             zout.writestr(info.filename, data)
-    assert main(["simulate", str(shifted), "-o", str(out)]) == 0
+    assert main(["simulate", str(shifted), "-o", str(out), "--force"]) == 0
     res = Results.load(out)
     assert res.time[0] == pytest.approx(0.1) and res.time[-1] == pytest.approx(0.3)
 

@@ -36,6 +36,8 @@ from harness.cli import catalog
 from harness.cli.main import main as cli_main
 from harness.simulate import Simulator
 
+pytestmark = pytest.mark.slow  # FMU builds (gcc): the full suite only
+
 NETWORK_OUT = {"x1": "z1.x", "y1": "z1.y", "x2": "z2.x", "y2": "z2.y", "x3": "z3.x", "y3": "z3.y"}
 
 

@@ -15,6 +15,8 @@ from c_fmus import build_c_fmu
 from fmus.importer.block import FmuBlock
 from harness.simulate import SimulationError, simulate
 
+pytestmark = pytest.mark.slow  # FMU builds and ME integration: the full suite only
+
 G, E, H0 = 9.81, 0.8, 1.0
 T_END = 3.7  # ten bounces (the tenth at 3.578 s), Zeno point at 4.06 s
 

@@ -28,6 +28,8 @@ from fmus.importer.block import FmuBlock, fmu_graph
 from fmus.importer.description import FmuWarning, describe_fmu
 from harness.simulate import CoSimulationError, simulate
 
+pytestmark = pytest.mark.slow  # FMU builds and other tools' FMUs: the full suite only
+
 ROOT = Path(__file__).resolve().parent.parent
 
 # --------------------------------------------------------------------------------------------------

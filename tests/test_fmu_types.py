@@ -15,6 +15,8 @@ from fmus.importer.block import FmuBlock
 from fmus.importer.description import describe_fmu
 from harness.simulate import CoSimulationError, simulate
 
+pytestmark = pytest.mark.slow  # FMU builds (gcc): the full suite only
+
 I64_MAX, I64_MIN, U64_MAX = 2 ** 63 - 1, -2 ** 63, 2 ** 64 - 1
 
 TYPES_C = r"""

@@ -49,6 +49,8 @@ from test_fuzz_fmus import (
 
 from harness.cli.main import main
 
+pytestmark = pytest.mark.slow  # FMU mutants through the CLI in subprocesses: the full suite only
+
 SEED = 20261201
 SIM = ["--t-end", "0.1", "--dt", "0.01", "--fmu-timeout", "2", "--force"]
 COMMANDS = {"inspect": ["inspect"], "simulate": ["simulate", *SIM],

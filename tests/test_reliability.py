@@ -22,6 +22,8 @@ from test_fuzz_fmus import GUID, ROOT, c_fmu, compile_library, fmi3_array_xml, m
 from harness.cli.main import main
 from harness.results import Results, ResultsWriter, prepare_run_directory, remove_stale_temporaries
 
+pytestmark = pytest.mark.slow  # subprocess and FMU fault runs: the full suite only
+
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory) -> dict[str, Path]:

@@ -20,6 +20,8 @@ from fmus.importer.block import FmuBlock
 from fmus.ssp import SspError, export_ssp, import_ssp
 from harness.simulate import simulate
 
+pytestmark = pytest.mark.slow  # FMU and SSP builds: the full suite only
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

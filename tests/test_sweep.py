@@ -166,6 +166,7 @@ def test_sweep_on_a_cluster_whose_worker_does_not_share_the_client_disk(tmp_path
     assert (out / "client-only.txt").read_text() == "the client wrote this"
 
 
+@pytest.mark.slow  # the client waits 10 s for the scheduler
 def test_unreachable_scheduler_is_one_line_and_leaves_no_folder(tmp_path, capsys):
     out = tmp_path / "never"
     port = _free_port()  # nothing listens there

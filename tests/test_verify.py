@@ -25,6 +25,8 @@ from harness.compile import compile_graph
 from harness.verify.result import VerifyInputError, VerifyOptions
 from harness.verify.shooting import verify
 
+pytestmark = pytest.mark.slow  # periodic-orbit shooting: the full suite only
+
 FAST = VerifyOptions(compute_sync=False)
 
 

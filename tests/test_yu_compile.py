@@ -21,6 +21,8 @@ from harness.cli.main import main
 from harness.compile import compile_graph
 from harness.simulate import Simulator
 
+pytestmark = pytest.mark.slow  # large graph compilation and figures: the full suite only
+
 BLOCKS = {
     "converter": lambda: YuConverter("converter"),
     "sensors": lambda: YuSensoryNeurons("sensors"),

@@ -13,6 +13,8 @@ from components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLON
 from components.yu.leg import hexapod_controller
 from harness.simulate import Simulator
 
+pytestmark = pytest.mark.slow  # multi-second closed-loop FSM runs: the full suite only
+
 A, B = (0, 2, 4), (1, 3, 5)
 RECORD = ["fsm.*", "swing_mux.y*", "reflex_mux.y*", "x1_mux.y*", "lambda_td_mux.y*", "*.reflex.n_*"]
 

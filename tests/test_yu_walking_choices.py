@@ -20,6 +20,8 @@ from components.yu.sensors import YuSensoryNeurons
 from harness.experiments.yu.figures import elevator_force, hole_force
 from harness.simulate import Simulator, simulate
 
+pytestmark = pytest.mark.slow  # scripted leg runs: the full suite only
+
 MM = 1e-3
 H = YU_SIM.height
 AEP = nominal_targets(YU_SIM)["AEP"]

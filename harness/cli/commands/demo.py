@@ -30,5 +30,6 @@ def run(args: argparse.Namespace) -> int:
     except SimulationError as exc:
         raise CliError(f"{exc} (partial results in {out}/)", code=1) from exc
     print_summary(summary, out)
-    print(f"open {out}/gait.png, {out}/toe_forces.png and {out}/snapshots.png to see the walk and the reflexes")
+    print(f"open {out}/report.html in a browser to replay the walk in 3D with its plots (or {out}/gait.png, "
+          f"{out}/toe_forces.png, {out}/snapshots.png)")
     return 0

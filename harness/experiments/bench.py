@@ -40,7 +40,7 @@ import numpy as np
 
 from components.core import ModelError
 from harness.experiments.scenario import ScenarioError
-from harness.experiments.sweep import _bar, _connect, _json_default, run_trial, wilson_interval
+from harness.experiments.sweep import _bar, _connect, _json_default, run_on_dask, run_trial, wilson_interval
 from harness.results import atomic_write
 
 SUITES_PACKAGE = "harness.experiments.suites"
@@ -150,20 +150,9 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
             for key, args in tasks:
                 records[key] = run_trial(*args, save_results=False)
                 bar.update(1)
-        else:
-            from distributed import as_completed
-
-            futures = {client.submit(run_trial, *args, save_results=False, pure=False,
-                                     key=f"bench-{'-'.join(map(str, key))}-{time.time_ns()}"): key
-                       for key, args in tasks}
-            for fut in as_completed(list(futures)):
-                key = futures[fut]
-                try:
-                    records[key] = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker died: the trial counts as crashed
-                    records[key] = {"seed": key[2], "status": "failed", "error": f"{type(exc).__name__}: {exc}",
-                                    "outcome": {}}
-                bar.update(1)
+        else:  # the same Dask path as sweeps: the trials' files come back to this machine
+            records = run_on_dask(client, {key: (run_trial, args, {"save_results": False}) for key, args in tasks},
+                                  bar)
     finally:
         bar.close()
         for obj in own:

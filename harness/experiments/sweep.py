@@ -263,23 +263,32 @@ def _connect(scheduler: str | None, workers: int, client: Any, info: dict[str, A
 
 
 def _run_dask(client, scenario, tasks, groups, out, t_end, plots, trial_fn, bar) -> dict:
-    from distributed import as_completed
-
-    futures = {}
+    jobs = {}
     for g, i, s in tasks:
         d = str(_trial_dir(out, g, len(groups), i, s))
-        fut = client.submit(shipped_trial, trial_fn, scenario, s, g.sets, d, t_end, plots, pure=False,
-                            key=f"trial-{g.label}-{i}-{time.time_ns()}")
-        futures[fut] = (g, i, s, d)
+        jobs[(g.label, i)] = (trial_fn, (scenario, s, g.sets, d, t_end, plots), {})
+    return run_on_dask(client, jobs, bar)
+
+
+def run_on_dask(client: Any, jobs: dict[Any, tuple[Callable[..., dict[str, Any]], tuple, dict[str, Any]]],
+                bar: Any) -> dict[Any, dict[str, Any]]:
+    """Run ``{key: (trial_fn, (scenario, seed, sets, out_dir, ...), kwargs)}`` on the cluster, each through
+    :func:`shipped_trial` (its files come back and are written under ``out_dir`` here); a task whose worker
+    died or that could not run is recorded as failed. Returns ``{key: record}``."""
+    from distributed import as_completed
+
+    futures = {client.submit(shipped_trial, fn, *args, pure=False, key=f"trial-{key}-{time.time_ns()}", **kw): key
+               for key, (fn, args, kw) in jobs.items()}
     records = {}
     for fut in as_completed(list(futures)):
-        g, i, s, d = futures[fut]
+        key = futures[fut]
+        _, args, _ = jobs[key]
         try:
             rec = receive_files(fut.result())
         except Exception as exc:  # noqa: BLE001 - worker died or the task could not run
-            rec = {"seed": s, "dir": d, "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+            rec = {"seed": args[1], "dir": args[3], "status": "failed", "error": f"{type(exc).__name__}: {exc}",
                    "outcome": {}}
-        records[(g.label, i)] = rec
+        records[key] = rec
         _tick(bar, rec)
     return records
 

@@ -344,15 +344,25 @@ class ThreadedStep(BoundStep):
         super().close()
 
 
+def step_library(step: ca.Function, driver: str, tag: str) -> Path:
+    """A shared library holding ``driver`` and the model's step as ``cpgsim_step_impl``.
+
+    ``cpgsim_step_impl(arg, res, iw, w, mem)`` has CasADi's calling convention (inputs ``t, x, z,
+    u, p``; outputs ``x_next, z_next, y``) and ``cpgsim_step_impl_work`` gives its work sizes, so a
+    driver written against them runs any compiled model. Cached by content hash.
+    """
+    args = step.mx_in() if step.is_a("MXFunction") else step.sx_in()
+    renamed = ca.Function("cpgsim_step_impl", args, step.call(args), step.name_in(), step.name_out())
+    return build_shared_library(renamed, driver, tag)
+
+
 class NativeHorizon:
     """A compiled loop over the model's ``step`` function (signature ``(t, x, z, u, p)``)."""
 
     def __init__(self, step: ca.Function) -> None:
-        args = step.sx_in()
-        renamed = ca.Function("cpgsim_step_impl", args, step.call(args), step.name_in(), step.name_out())
         self.nx, self.nz = step.size1_in(1), step.size1_in(2)
         self.nu, self.np_, self.ny = step.size1_in(3), step.size1_in(4), step.size1_out(2)
-        path = build_shared_library(renamed, DRIVER, "cpgsim_step")
+        path = step_library(step, DRIVER, "cpgsim_step")
         self._lib = ctypes.CDLL(str(path))
         f = self._lib.cpgsim_horizon
         dp = ctypes.POINTER(ctypes.c_double)

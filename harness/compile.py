@@ -18,12 +18,16 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
 
 import casadi as ca
 import numpy as np
 
 from components.core import Block, CoSimBlock, ModelError, Port
 from components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
+
+if TYPE_CHECKING:
+    from harness.grouped import Schedule
 
 
 @dataclass
@@ -121,10 +125,24 @@ class CompiledModel:
     graph_outputs: dict[str, str]  # graph output -> "block.port" source
     free_inputs: dict[str, Port]  # graph inputs (sources "$name")
     cosim_feeds: dict[str, str]  # cosim input "path.port" -> source ("$in", "eq.port" or "cs.port")
+    schedule: Schedule | None = None  # the grouped compile's kinds and loops (None: flat compile)
 
     @property
     def has_discrete(self) -> bool:
         return self.dstates.size > 0
+
+    @property
+    def grouping(self) -> str:
+        """``"flat"`` (every instance inlined) or ``"kinds"`` (identical instances looped)."""
+        return "flat" if self.schedule is None else "kinds"
+
+    def c_step_source(self) -> str | None:
+        """C source of the step for the native backend when it is not CasADi's own code generation."""
+        if self.schedule is None:
+            return None
+        from harness.grouped import c_step_source
+
+        return c_step_source(self.schedule, self.dt, self.substeps)
 
     def param_vector(self, overrides: dict[str, float] | None = None) -> np.ndarray:
         """Parameter vector with ``{"block.param": value}`` overrides (validated)."""
@@ -137,15 +155,34 @@ class CompiledModel:
         return p
 
 
-def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1) -> CompiledModel:
-    """Flatten and compile ``item`` (a graph, or a single block wrapped in one)."""
+GROUPED_MIN_BLOCKS = 64
+"""``grouping="auto"`` loops identical instances from this many equation blocks on (when there are at
+least four instances per block class on average); smaller graphs are inlined, which is as fast per step
+and keeps the step one expression (``benchmarks/bench_scale.py``)."""
+
+
+def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
+                  grouping: Literal["auto", "flat", "kinds"] = "auto") -> CompiledModel:
+    """Flatten and compile ``item`` (a graph, or a single block wrapped in one).
+
+    ``grouping``: ``"flat"`` inlines every block instance into one expression graph; ``"kinds"``
+    compiles each kind of identical instances once and loops over them (:mod:`harness.grouped`), so
+    code size and compile time no longer grow with the number of instances; ``"auto"`` picks
+    ``"kinds"`` for graphs of at least :data:`GROUPED_MIN_BLOCKS` equation blocks.
+    """
+    if grouping not in ("auto", "flat", "kinds"):
+        raise ModelError(f"grouping must be 'auto', 'flat' or 'kinds', got {grouping!r}")
     if not (dt > 0 and np.isfinite(dt)):
         raise ModelError(f"macro step dt must be a positive number, got {dt!r}")
     if int(substeps) != substeps or substeps < 1:
         raise ModelError(f"substeps must be a positive integer, got {substeps!r}")
     graph = as_graph(item)
     flat = graph.flatten()
-    return _Compiler(flat, dt, int(substeps)).build()
+    if grouping == "auto":
+        eq = flat.equation_blocks()
+        classes = {type(b) for b in eq.values()}
+        grouping = "kinds" if len(eq) >= GROUPED_MIN_BLOCKS and len(eq) >= 4 * len(classes) else "flat"
+    return _Compiler(flat, dt, int(substeps)).build(grouped=grouping == "kinds")
 
 
 class _Compiler:
@@ -157,6 +194,7 @@ class _Compiler:
         self.cs_blocks = flat.cosim_blocks()
         self.states, self.dstates, self.inputs, self.params, self.sig = (Layout() for _ in range(5))
         self.block_eqs: dict[str, tuple] = {}
+        self.feed: dict[str, dict[str, Any]] = {}  # eq block path -> output port -> inputs it reads directly
 
     # -- layouts --------------------------------------------------------------------------------
     def _layouts(self) -> None:
@@ -200,6 +238,7 @@ class _Compiler:
             zplus = _cat([eq.updates.get(k, v.z[k]) for k in blk.discrete_states])
             full = ca.Function(_fname(f"{path}_dyn"), args, [xdot, xplus, zplus])
             self.block_eqs[path] = (blk, port_fns, feed, full)
+            self.feed[path] = feed
 
     # -- symbolic signal resolution ------------------------------------------------------------------
     def _resolver(self, t: ca.SX, X: ca.SX, Z: ca.SX, U: ca.SX, P: ca.SX):
@@ -274,7 +313,7 @@ class _Compiler:
         if isinstance(blk, CoSimBlock):
             deps = blk.feedthrough.get(pname, set())
         else:
-            deps = self.block_eqs[path][2][pname]
+            deps = self.feed[path][pname]
         for d in deps:
             if self._reaches(f"{path}.{d}", target, trail, seen):
                 return True
@@ -283,24 +322,22 @@ class _Compiler:
         return False
 
     # -- build ------------------------------------------------------------------------------------
-    def build(self) -> CompiledModel:
+    def build(self, grouped: bool = False) -> CompiledModel:
         self._layouts()
+        if grouped:
+            from harness.grouped import build_schedule, casadi_functions
+
+            schedule = build_schedule(self)
+            self.feed = schedule.leaf_feed
+            fns = casadi_functions(schedule, self.dt, self.substeps)
+            return self._model(fns["ode"], fns["signals"], fns["discrete"], fns["step"], schedule)
         self._block_functions()
         t = ca.SX.sym("t")
         X, Z = ca.SX.sym("x", self.states.size), ca.SX.sym("z", self.dstates.size)
         U, P = ca.SX.sym("u", self.inputs.size), ca.SX.sym("p", self.params.size)
         signal, dynamics = self._resolver(t, X, Z, U, P)
         sig = _cat([signal(s.name) for s in self.sig.slots])
-        # also resolve what co-simulation inputs read, so loops through them are reported
-        cosim_feeds = {}
-        for cs_path, blk in self.cs_blocks.items():
-            for iname, port in blk.inputs.items():
-                key = f"{cs_path}.{iname}"
-                if key in self.flat.sources:
-                    cosim_feeds[key] = self.flat.sources[key]
-                elif port.default is None:
-                    raise ModelError(f"input {key} is not connected")
-        self._check_cosim_loops()
+        cosim_feeds = self._cosim_feeds()
         dyn = {path: dynamics(path) for path in self.eq_blocks}
         xdot = _cat([dyn[p][0] for p in self.eq_blocks])
         xplus = _cat([dyn[p][1] for p in self.eq_blocks])
@@ -310,14 +347,33 @@ class _Compiler:
         signals = ca.Function("signals", args, [_cse(sig)], names, ["y"])
         discrete = ca.Function("discrete", args, [_cse(xplus), _cse(zplus)], names, ["x_plus", "z_plus"])
         step = self._step(ode, signals, discrete, args, names)
+        return self._model(ode, signals, discrete, step, None, cosim_feeds)
+
+    def _model(self, ode: ca.Function, signals: ca.Function, discrete: ca.Function, step: ca.Function,
+               schedule: Schedule | None, cosim_feeds: dict[str, str] | None = None) -> CompiledModel:
+        if cosim_feeds is None:
+            cosim_feeds = self._cosim_feeds()
         return CompiledModel(
             name=self.flat.name, flat=self.flat, dt=self.dt, substeps=self.substeps,
             states=self.states, dstates=self.dstates, inputs=self.inputs, params=self.params,
             signals_layout=self.sig, x0=self.x0, z0=self.z0, p0=self.p0,
             ode=ode, signals=signals, discrete=discrete, step=step,
             graph_outputs=dict(self.flat.output_sources),
-            free_inputs=dict(self.flat.inputs), cosim_feeds=cosim_feeds,
+            free_inputs=dict(self.flat.inputs), cosim_feeds=cosim_feeds, schedule=schedule,
         )
+
+    def _cosim_feeds(self) -> dict[str, str]:
+        """What co-simulation inputs read; also reports algebraic loops through them."""
+        cosim_feeds = {}
+        for cs_path, blk in self.cs_blocks.items():
+            for iname, port in blk.inputs.items():
+                key = f"{cs_path}.{iname}"
+                if key in self.flat.sources:
+                    cosim_feeds[key] = self.flat.sources[key]
+                elif port.default is None:
+                    raise ModelError(f"input {key} is not connected")
+        self._check_cosim_loops()
+        return cosim_feeds
 
     def _step(self, ode: ca.Function, signals: ca.Function, discrete: ca.Function,
               args: list[ca.SX], names: list[str]) -> ca.Function:

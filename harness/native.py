@@ -25,15 +25,18 @@ DRIVER = r"""
 #include <sched.h>
 #include <stdatomic.h>
 #include <stdlib.h>
-/* Run n macro steps: x, z are updated in place; Y (n x ny, row-major) gets the signals at each step.
-   Returns -1 when all states stay finite, the step index at which a state became non-finite
-   (x, z then hold the last finite values), or -2 on an evaluation/allocation error. */
+/* Run n macro steps: x, z are updated in place; row k of R (n x npick, row-major) gets the signals
+   picks[0..npick-1] of step k (y: scratch for one step's ny signals). Returns -1 when all states stay
+   finite, the step index at which a state became non-finite (x, z then hold the last finite values),
+   or -2 on an evaluation/allocation error. */
 int cpgsim_horizon(int n, double t0, double dt, double *x, double *z, const double *U, int nu,
-                   const double *p, double *Y, int ny, int nx, int nz, double *xn, double *zn) {
+                   const double *p, double *y, int ny, const long long *picks, int npick, double *R,
+                   int nx, int nz, double *xn, double *zn) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   const double **arg; double **res; casadi_int *iw; double *w;
-  double t;
+  double t, *r;
   int k, i, rc = -1;
+  (void)ny;
   cpgsim_step_impl_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
   arg = malloc(sizeof(double *) * (sz_arg + 5));
   res = malloc(sizeof(double *) * (sz_res + 3));
@@ -43,8 +46,10 @@ int cpgsim_horizon(int n, double t0, double dt, double *x, double *z, const doub
   for (k = 0; k < n; ++k) {
     t = t0 + k * dt;
     arg[0] = &t; arg[1] = x; arg[2] = z; arg[3] = U + (long)k * nu; arg[4] = p;
-    res[0] = xn; res[1] = zn; res[2] = Y + (long)k * ny;
+    res[0] = xn; res[1] = zn; res[2] = y;
     if (cpgsim_step_impl(arg, res, iw, w, 0)) { rc = -2; goto done; }
+    r = R + (long)k * npick;
+    for (i = 0; i < npick; ++i) r[i] = y[picks[i]];
     for (i = 0; i < nx; ++i) if (!isfinite(xn[i])) { rc = k; goto done; }
     for (i = 0; i < nx; ++i) x[i] = xn[i];
     for (i = 0; i < nz; ++i) z[i] = zn[i];
@@ -239,9 +244,6 @@ def optimization_flags(source: str) -> tuple[str, ...]:
 
 def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
     """Generate C for ``fn`` (renamed ``step``-style by its own name), append ``driver``, compile."""
-    cc = compiler()
-    if cc is None:
-        raise NativeUnavailable("no C compiler found (set CC)")
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator(f"{tag}.c", {"with_header": False, "casadi_real": "double",
                                            "casadi_int": "long long int"})
@@ -252,22 +254,30 @@ def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[st
             cg.generate()
         finally:
             os.chdir(cwd)
-        source = (Path(tmp) / f"{tag}.c").read_text() + driver
-        flags = flags or optimization_flags(source)
-        digest = hashlib.sha256((source + " ".join(flags)).encode()).hexdigest()[:16]
-        lib = cache_dir() / f"{tag}_{digest}.so"
-        if lib.exists():
-            return lib
+        source = (Path(tmp) / f"{tag}.c").read_text()
+    return compile_source(source + driver, tag, flags)
+
+
+def compile_source(source: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
+    """Compile C ``source`` into a shared library in the cache (named by its content hash)."""
+    cc = compiler()
+    if cc is None:
+        raise NativeUnavailable("no C compiler found (set CC)")
+    flags = flags or optimization_flags(source)
+    options = ["-shared", "-fPIC", "-fno-semantic-interposition", "-pthread", "-Wl,-Bsymbolic", *flags]
+    digest = hashlib.sha256((source + " ".join(options)).encode()).hexdigest()[:16]
+    lib = cache_dir() / f"{tag}_{digest}.so"
+    if lib.exists():
+        return lib
+    with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / f"{tag}_full.c"
         src.write_text(source)
         out = Path(tmp) / lib.name
-        proc = subprocess.run([cc, "-shared", "-fPIC", "-pthread", "-Wl,-Bsymbolic", *flags, str(src), "-o", str(out),
-                               "-lm"],
-                              capture_output=True, text=True)
+        proc = subprocess.run([cc, *options, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
         if proc.returncode != 0:
             raise NativeUnavailable(f"C compiler failed: {proc.stderr.strip()[:500]}")
         shutil.move(str(out), lib)  # same filesystem in the common case; atomic enough for a cache
-        return lib
+    return lib
 
 
 class BoundStep:
@@ -344,13 +354,17 @@ class ThreadedStep(BoundStep):
         super().close()
 
 
-def step_library(step: ca.Function, driver: str, tag: str) -> Path:
+def step_library(step: ca.Function, driver: str, tag: str, source: str | None = None) -> Path:
     """A shared library holding ``driver`` and the model's step as ``cpgsim_step_impl``.
 
     ``cpgsim_step_impl(arg, res, iw, w, mem)`` has CasADi's calling convention (inputs ``t, x, z,
     u, p``; outputs ``x_next, z_next, y``) and ``cpgsim_step_impl_work`` gives its work sizes, so a
-    driver written against them runs any compiled model. Cached by content hash.
+    driver written against them runs any compiled model. ``source``: C that already defines both
+    (a grouped model's :meth:`~harness.compile.CompiledModel.c_step_source`) instead of CasADi's
+    generation of ``step``. Cached by content hash.
     """
+    if source is not None:
+        return compile_source(source + driver, tag)
     args = step.mx_in() if step.is_a("MXFunction") else step.sx_in()
     renamed = ca.Function("cpgsim_step_impl", args, step.call(args), step.name_in(), step.name_out())
     return build_shared_library(renamed, driver, tag)
@@ -359,15 +373,16 @@ def step_library(step: ca.Function, driver: str, tag: str) -> Path:
 class NativeHorizon:
     """A compiled loop over the model's ``step`` function (signature ``(t, x, z, u, p)``)."""
 
-    def __init__(self, step: ca.Function) -> None:
+    def __init__(self, step: ca.Function, source: str | None = None) -> None:
         self.nx, self.nz = step.size1_in(1), step.size1_in(2)
         self.nu, self.np_, self.ny = step.size1_in(3), step.size1_in(4), step.size1_out(2)
-        path = step_library(step, DRIVER, "cpgsim_step")
+        path = step_library(step, DRIVER, "cpgsim_step", source)
         self._lib = ctypes.CDLL(str(path))
         f = self._lib.cpgsim_horizon
         dp = ctypes.POINTER(ctypes.c_double)
+        ip = ctypes.POINTER(ctypes.c_longlong)
         f.argtypes = [ctypes.c_int, ctypes.c_double, ctypes.c_double, dp, dp, dp, ctypes.c_int, dp, dp,
-                      ctypes.c_int, ctypes.c_int, ctypes.c_int, dp, dp]
+                      ctypes.c_int, ip, ctypes.c_int, dp, ctypes.c_int, ctypes.c_int, dp, dp]
         f.restype = ctypes.c_int
         self._fn = f
         vp = ctypes.c_void_p
@@ -390,21 +405,34 @@ class NativeHorizon:
         return BoundStep(self._lib, ctx, arrays, x.size, z.size)
 
     def run(self, n: int, t0: float, dt: float, x: np.ndarray, z: np.ndarray, U: np.ndarray,
-            p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        """Run ``n`` steps from ``(x, z)``; returns ``(x_end, z_end, Y[n, ny], bad_step or -1)``."""
+            p: np.ndarray, picks: np.ndarray | None = None,
+            out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """Run ``n`` steps from ``(x, z)``; returns ``(x_end, z_end, R, bad_step or -1)``.
+
+        ``R[k]`` holds the signals ``picks`` (default: all) of step ``k``; ``out`` (C-contiguous
+        float64, ``n x len(picks)``, e.g. rows of the final results table) receives them in place.
+        """
         x = np.ascontiguousarray(x, dtype=float).copy()
         z = np.ascontiguousarray(z, dtype=float).copy()
         Uc = np.ascontiguousarray(U.T if U.size else np.zeros((n, 0)), dtype=float)
         p = np.ascontiguousarray(p, dtype=float)
-        Y = np.empty((n, self.ny))
+        picks = np.arange(self.ny, dtype=np.int64) if picks is None else np.ascontiguousarray(picks, dtype=np.int64)
+        if out is None:
+            out = np.empty((n, len(picks)))
+        if out.shape != (n, len(picks)) or out.dtype != np.float64 or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous float64 array of shape {(n, len(picks))}")
+        y = np.empty(max(self.ny, 1))
         xn, zn = np.empty(max(self.nx, 1)), np.empty(max(self.nz, 1))
         ptr = lambda a: a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))  # noqa: E731
         z_buf = z if z.size else np.zeros(1)
-        rc = self._fn(n, t0, dt, ptr(x), ptr(z_buf), ptr(Uc), self.nu, ptr(p), ptr(Y), self.ny, self.nx,
-                      self.nz, ptr(xn), ptr(zn))
+        picks_buf = picks if picks.size else np.zeros(1, dtype=np.int64)
+        out_buf = out if out.size else np.zeros(1)
+        rc = self._fn(n, t0, dt, ptr(x), ptr(z_buf), ptr(Uc), self.nu, ptr(p), ptr(y), self.ny,
+                      picks_buf.ctypes.data_as(ctypes.POINTER(ctypes.c_longlong)), len(picks), ptr(out_buf),
+                      self.nx, self.nz, ptr(xn), ptr(zn))
         if rc == -2:
             raise RuntimeError("compiled step function reported an evaluation error")
-        return x, (z_buf if z.size else z), Y, rc
+        return x, (z_buf if z.size else z), out, rc
 
 
 class NativeFunction:

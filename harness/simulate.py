@@ -275,7 +275,7 @@ class Simulator:
             from harness.native import NativeHorizon, NativeUnavailable
 
             try:
-                self._native_runner = NativeHorizon(self.model.step)
+                self._native_runner = NativeHorizon(self.model.step, self.model.c_step_source())
             except NativeUnavailable:
                 if self.backend == "native":
                     raise
@@ -283,34 +283,38 @@ class Simulator:
                 return None
         return self._native_runner
 
-    def _run_chunk(self, k: int, c: int, times, x, z, p, u_free):
-        """``c`` steps from step ``k``: ``(X_end, Z_end, Y[c, ny], bad)`` with ``bad`` = first bad step or -1."""
+    def _run_chunk(self, k: int, c: int, times, x, z, p, u_free, y_idx: np.ndarray, rows: np.ndarray):
+        """``c`` steps from step ``k``, the signals ``y_idx`` of each step written into ``rows`` (``c`` rows):
+        ``(X_end, Z_end, bad)`` with ``bad`` = first bad step or -1."""
         native = self._native()
         if native is not None:
-            return native.run(c, float(times[k]), self.model.dt, x, z, u_free[:, k:k + c], p)
+            x_end, z_end, _, bad = native.run(c, float(times[k]), self.model.dt, x, z, u_free[:, k:k + c], p,
+                                              picks=y_idx, out=rows)
+            return x_end, z_end, bad
         fn = self._chunk_fn(c)
         X, Z, Y = (np.asarray(a) for a in fn(times[k:k + c][None, :], x, z, u_free[:, k:k + c], p))
+        rows[:] = Y.T[:, y_idx]
         bad = ~np.all(np.isfinite(X), axis=0)
         if bad.any():
             j = int(np.argmax(bad))
-            return (X[:, j - 1] if j > 0 else x), (Z[:, j - 1] if j > 0 else z), Y.T, j
-        return X[:, -1].copy(), Z[:, -1].copy(), Y.T, -1
+            return (X[:, j - 1] if j > 0 else x), (Z[:, j - 1] if j > 0 else z), j
+        return X[:, -1].copy(), Z[:, -1].copy(), -1
 
     def _run_horizon(self, times, x, z, p, u_free, picks, rec: _Recorder, progress: bool) -> None:
         m = self.model
         n = len(times) - 1
-        y_idx = np.array([i for _, i, _ in picks], dtype=int)
+        y_idx = np.array([i for _, i, _ in picks], dtype=np.int64)
         bar = _progress(n, progress, m.name)
         k = 0
         try:
             while k < n:
                 c = min(self.chunk, n - k, rec.flush_rows if rec.writer is not None else n)
-                x_new, z_new, Y, bad = self._run_chunk(k, c, times, x, z, p, u_free)
+                x_new, z_new, bad = self._run_chunk(k, c, times, x, z, p, u_free, y_idx, rec.data[rec.n:rec.n + c])
                 if bad >= 0:
-                    rec.add_block(Y[:bad + 1, y_idx])
+                    rec.commit_rows(bad + 1)
                     x_bad = np.asarray(m.step(times[k + bad], x_new, z_new, u_free[:, k + bad], p)[0]).ravel()
                     self._diverged(x_bad, x_new, times[k + bad + 1], rec, picks)
-                rec.add_block(Y[:, y_idx])
+                rec.commit_rows(c)
                 x, z = x_new, z_new
                 k += c
                 bar.update(c)
@@ -413,7 +417,7 @@ class _Recorder:
     """Preallocated result rows, truncated to what was written."""
 
     def __init__(self, times: np.ndarray, columns: list[str], units: list[str]) -> None:
-        self.data = np.full((len(times), len(columns)), np.nan)
+        self.data = np.empty((len(times), len(columns)))  # rows past ``n`` are never read
         self.times = times
         self.n = 0
         self.columns = columns
@@ -431,7 +435,11 @@ class _Recorder:
 
     def add_block(self, rows: np.ndarray) -> None:
         self.data[self.n:self.n + len(rows)] = rows
-        self.n += len(rows)
+        self.commit_rows(len(rows))
+
+    def commit_rows(self, count: int) -> None:
+        """The next ``count`` rows of :attr:`data` have been written (in place)."""
+        self.n += count
         if self.writer is not None:
             self.tick()
 
@@ -465,8 +473,9 @@ class _Recorder:
         meta: dict[str, Any] = {**self.meta, "aliases": dict(self.aliases)}
         if self.exact:
             meta["exact_integers"] = self._exact_columns()
-        return Results(self.times[:self.n].copy(), list(self.columns), list(self.units),
-                       self.data[:self.n].copy(), complete, message, meta)
+        full = self.n == len(self.data)  # a finished run hands its table over instead of copying it
+        return Results(self.times if full else self.times[:self.n].copy(), list(self.columns), list(self.units),
+                       self.data if full else self.data[:self.n].copy(), complete, message, meta)
 
     def _exact_columns(self) -> dict[str, dict[str, Any]]:
         """Recorded 64-bit integer columns, exactly: ``{column: {"dtype": "int64", "values": [...]}}``

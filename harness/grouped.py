@@ -1,0 +1,764 @@
+"""Identical block instances compiled once, evaluated in loops (the grouped compile).
+
+The flat compile (:mod:`harness.compile`) inlines every block instance into one expression graph, so
+its generated step grows with the number of instances (2.4 MB of straight-line C for 600 Yu Y5
+networks). Here a graph's equation blocks are sorted into *kinds*: instances whose equations are
+the same expression once parameters, states and connected inputs are symbols and unconnected
+inputs are their (folded) defaults. Each kind's equations are compiled once, and the step loops over
+the instances of each kind with tables of offsets, so the code size depends on the number of kinds,
+not on the number of instances. The equations still come from each block's ``define`` (one source of
+truth); only the loop structure is generated here, in two forms from one :class:`Schedule`:
+
+- CasADi functions (``ode``, ``signals``, ``discrete``, ``step``) built from ``Function.map`` over
+  gathered arguments, for everything that works on CasADi functions (the CasADi VM backend, the last
+  row of a horizon, symbolic checks);
+- C source for the native backend (:func:`c_step_source`): one loop per group calling the kind's
+  CasADi-generated C function on pointers into the flat state, parameter and signal vectors (states,
+  parameters and outputs of a block are contiguous in the model's layouts, so only inputs are
+  gathered), then RK4 over the whole state vector. It defines ``cpgsim_step_impl`` with CasADi's
+  calling convention, so every driver of :mod:`harness.native` runs it unchanged.
+
+Evaluation order: an output port's *level* is 0 when it reads no other block's output through direct
+feedthrough, else one more than the highest level it reads; groups run level by level, which is the
+order the flat compile's recursive resolution implies, with the same algebraic-loop errors.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+
+from components.core import Block, Equations, Symbols
+from components.graph import AlgebraicLoopError
+
+if TYPE_CHECKING:
+    from harness.compile import _Compiler
+
+
+_DECLARED = {"name", "inputs", "outputs", "parameters", "values", "states", "discrete_states"}
+
+
+@dataclass
+class Member:
+    """One instance of a kind: a leaf block or a nested graph (``path``), placed in the model's vectors.
+
+    Its states, discrete states, parameters and signals are contiguous in the model's layouts and
+    start at ``x_off``, ``z_off``, ``p_off``, ``sig_off``; ``ext`` are the sources of its inputs
+    (graph inputs ``$name``, other blocks' outputs), in the order of the kind's ``u``.
+    """
+
+    path: str
+    x_off: int
+    z_off: int
+    p_off: int
+    sig_off: int
+    ext: list[str]
+
+
+@dataclass
+class Kind:
+    """The shared equations of identical instances (generic symbols ``t, x, z, u, p``).
+
+    ``outputs`` maps each signal of an instance (a port name for a leaf block, ``block.port``
+    inside a nested graph) to its expression; ``out_rel`` is its offset in the instance's signals;
+    ``feed`` the inputs (indices into ``ext``) each one reads directly.
+    """
+
+    index: int
+    label: str
+    args: list[ca.SX]
+    outputs: dict[str, ca.SX]
+    out_rel: dict[str, int]
+    xdot: ca.SX
+    xplus: ca.SX
+    zplus: ca.SX
+    feed: dict[str, set[int]]
+    has_reset: bool
+    has_update: bool
+    members: list[Member] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return f"k{self.index}_{re.sub(r'[^A-Za-z0-9]', '_', self.label)}"[:60]
+
+    @property
+    def sizes(self) -> tuple[int, int, int, int]:
+        """Sizes of ``x, z, u, p``."""
+        return tuple(a.numel() for a in self.args[1:])  # type: ignore[return-value]
+
+    def function(self, tag: str, outs: Sequence[ca.SX]) -> ca.Function:
+        return ca.Function(f"{self.name}_{tag}", self.args, list(outs), ["t", "x", "z", "u", "p"],
+                           [f"o{i}" for i in range(len(outs))])
+
+
+@dataclass
+class Group:
+    """One loop: ``fn(t, x, z, u, p)`` over instances; where each reads its arguments and writes its outputs.
+
+    ``x_off``/``z_off``/``p_off`` are each instance's first index in the model's flat vectors;
+    ``u_idx[i, j]`` the pool element (signals, then external inputs, then a zero) of input
+    element ``j``; ``out_off[k][i]`` where output ``k`` of instance ``i`` goes (the pool for
+    signals, the state vector for derivatives and resets, the discrete-state vector for updates).
+    """
+
+    kind: Kind
+    fn: ca.Function
+    x_off: np.ndarray
+    z_off: np.ndarray
+    p_off: np.ndarray
+    u_idx: np.ndarray
+    out_off: list[np.ndarray]
+    out_target: list[str]  # per output: "pool", "x" or "z"
+
+    @property
+    def n(self) -> int:
+        return len(self.x_off)
+
+
+@dataclass
+class Schedule:
+    """Groups in evaluation order: signal levels, then derivatives; resets/updates for the sampled step."""
+
+    n_sig: int
+    n_u: int
+    nx: int
+    nz: int
+    n_p: int
+    kinds: list[Kind]
+    signal_levels: list[list[Group]]
+    derivative_groups: list[Group]
+    discrete_groups: list[Group]
+    leaf_feed: dict[str, dict[str, set[str]]]  # block path -> output -> inputs it reads directly
+
+    @property
+    def pool_size(self) -> int:
+        return self.n_sig + self.n_u + 1  # + one zero
+
+    @property
+    def has_discrete(self) -> bool:
+        return bool(self.discrete_groups)
+
+    def groups_read_by_derivatives(self) -> set[int]:
+        """``id`` of the signal groups whose outputs derivatives read, directly or through other signals."""
+        needed = np.zeros(self.pool_size, dtype=bool)
+        for g in self.derivative_groups:
+            needed[g.u_idx.ravel()] = True
+        read: set[int] = set()
+        for level in reversed(self.signal_levels):  # a signal reads only lower levels
+            for g in level:
+                if any(needed[_group_rows(g, k)].any() for k in range(len(g.out_off))):
+                    read.add(id(g))
+                    needed[g.u_idx.ravel()] = True
+        return read
+
+    def describe(self) -> str:
+        """One line: how many kinds, instances and loops."""
+        n_groups = sum(len(lv) for lv in self.signal_levels) + len(self.derivative_groups) + len(self.discrete_groups)
+        inst = sum(len(k.members) for k in self.kinds)
+        return f"{len(self.kinds)} kinds, {inst} instances, {len(self.signal_levels)} signal levels, {n_groups} loops"
+
+
+# -- leaf signatures ---------------------------------------------------------------------------------
+def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
+    """What a block's equations can depend on besides its symbols: class, declarations, configuration.
+
+    Two blocks with equal signatures have the same equations (``define`` sees only its symbols and
+    the block's attributes); unconnected inputs enter with their defaults (folded constants).
+    """
+    attrs = tuple(sorted((k, repr(v)) for k, v in vars(blk).items() if k not in _DECLARED))
+    if any(" at 0x" in r for _, r in attrs):  # an attribute without a value repr: never share
+        attrs += (("__id__", str(id(blk))),)
+    decl = (tuple((k, s.size) for k, s in blk.states.items()),
+            tuple((k, s.size) for k, s in blk.discrete_states.items()),
+            tuple(blk.parameters),
+            tuple((k, p.size, p.kind, None if p.default is None else tuple(p.default_values()))
+                  for k, p in blk.inputs.items()),
+            tuple((k, p.size) for k, p in blk.outputs.items()))
+    return (f"{type(blk).__module__}.{type(blk).__qualname__}", attrs, decl, connected)
+
+
+def _generic_equations(blk: Block, connected: tuple[str, ...]) -> tuple[list[ca.SX], Equations, Symbols]:
+    def split(sym: ca.SX, items: Sequence[tuple[str, int]]) -> dict[str, ca.SX]:
+        out, k = {}, 0
+        for name, size in items:
+            out[name] = sym[k:k + size]
+            k += size
+        return out
+
+    states = [(k, s.size) for k, s in blk.states.items()]
+    dstates = [(k, s.size) for k, s in blk.discrete_states.items()]
+    conn = [(k, blk.inputs[k].size) for k in connected]
+    t = ca.SX.sym("t")
+    x = ca.SX.sym("x", sum(n for _, n in states))
+    z = ca.SX.sym("z", sum(n for _, n in dstates))
+    u = ca.SX.sym("u", sum(n for _, n in conn))
+    p = ca.SX.sym("p", len(blk.parameters))
+    u_all = split(u, conn)
+    for name, port in blk.inputs.items():
+        if name not in u_all:
+            u_all[name] = ca.SX(port.default_values().reshape(-1, 1))
+    v = Symbols(t=t, x=split(x, states), z=split(z, dstates), u={k: u_all[k] for k in blk.inputs},
+                p={k: p[i] for i, k in enumerate(blk.parameters)})
+    return [t, x, z, u, p], blk.checked_equations(v), v
+
+
+def _cat(items) -> ca.SX:
+    items = list(items)
+    return ca.vertcat(*items) if items else ca.SX(0, 1)
+
+
+def _is_identity(expr: ca.SX, sym: ca.SX) -> bool:
+    if expr.numel() == 0:
+        return True
+    return all(ca.is_equal(expr[i], sym[i]) for i in range(expr.numel()))
+
+
+def _leaf_kind(index: int, blk: Block, connected: tuple[str, ...]) -> Kind:
+    args, eq, v = _generic_equations(blk, connected)
+    outputs = {k: eq.outputs[k] for k in blk.outputs}
+    out_rel, k0 = {}, 0
+    for k, port in blk.outputs.items():
+        out_rel[k] = k0
+        k0 += port.size
+    u_parts, k0 = [], 0
+    for name in connected:
+        size = blk.inputs[name].size
+        u_parts.append(args[3][k0:k0 + size])
+        k0 += size
+    feed = {k: {i for i, us in enumerate(u_parts) if ca.depends_on(e, us)} for k, e in outputs.items()}
+    xplus = _cat(eq.resets.get(k, v.x[k]) for k in blk.states)
+    zplus = _cat(eq.updates.get(k, v.z[k]) for k in blk.discrete_states)
+    return Kind(index, type(blk).__name__, args, outputs, out_rel, _cat(eq.derivatives[k] for k in blk.states),
+                xplus, zplus, feed, not _is_identity(xplus, args[1]), not _is_identity(zplus, args[2]))
+
+
+# -- kinds of nested graphs --------------------------------------------------------------------------
+def _graph_kind(index: int, c: _Compiler, prefix: str, leaves: list[str], ext: list[str]) -> Kind:
+    """The equations of the nested graph ``prefix``, compiled flat with its external sources as inputs."""
+    from components.graph import FlatGraph
+
+    n = len(prefix) + 1
+    sub = FlatGraph(prefix)
+    for path in leaves:
+        sub.blocks[path[n:]] = c.flat.blocks[path]
+    ext_pos = {src: k for k, src in enumerate(ext)}
+    for path in leaves:
+        for iname in c.flat.blocks[path].inputs:
+            src = c.flat.sources.get(f"{path}.{iname}")
+            if src is None:
+                continue
+            sub.sources[f"{path[n:]}.{iname}"] = f"$e{ext_pos[src]}" if src in ext_pos else src[n:]
+    for k, src in enumerate(ext):
+        sub.inputs[f"e{k}"] = _source_port(c, src)
+    model = type(c)(sub, c.dt, c.substeps).build()  # the flat compile of this one instance
+    t = ca.SX.sym("t")
+    x, z = ca.SX.sym("x", model.states.size), ca.SX.sym("z", model.dstates.size)
+    u, p = ca.SX.sym("u", model.inputs.size), ca.SX.sym("p", model.params.size)
+    args = [t, x, z, u, p]
+    sig = model.signals(*args)
+    outputs = {slot.name: sig[slot.slice] for slot in model.signals_layout.slots}
+    out_rel = {slot.name: slot.start for slot in model.signals_layout.slots}
+    u_parts = [u[model.inputs.index(f"$e{k}").slice] for k in range(len(ext))]
+    feed = {k: {i for i, us in enumerate(u_parts) if ca.depends_on(e, us)} for k, e in outputs.items()}
+    xdot = model.ode(*args)
+    xplus, zplus = model.discrete(*args)
+    return Kind(index, f"graph_{prefix.rsplit('.', 1)[-1]}", args, outputs, out_rel, xdot, xplus, zplus, feed,
+                not _is_identity(xplus, x), not _is_identity(zplus, z))
+
+
+def _source_port(c: _Compiler, src: str):
+    if src.startswith("$"):
+        return c.flat.inputs[src[1:]]
+    return c.flat.port(src)
+
+
+def _external_sources(c: _Compiler, prefix: str, leaves: list[str]) -> tuple[list[str], tuple]:
+    """A nested graph's external sources in first-use order, and its wiring as a comparable signature."""
+    n = len(prefix) + 1
+    ext: list[str] = []
+    wiring = []
+    for path in leaves:
+        for iname in c.flat.blocks[path].inputs:
+            src = c.flat.sources.get(f"{path}.{iname}")
+            if src is None:
+                wiring.append(None)
+            elif not src.startswith("$") and src.startswith(prefix + "."):
+                wiring.append(("int", src[n:]))
+            else:
+                if src not in ext:
+                    ext.append(src)
+                wiring.append(("ext", ext.index(src), _source_port(c, src).size))
+    return ext, tuple(wiring)
+
+
+def find_kinds(c: _Compiler) -> tuple[list[Kind], dict[str, dict[str, set[str]]]]:
+    """Sort the equation blocks into kinds of leaf blocks and of identical nested graphs.
+
+    Nested graphs are taken as one instance, outermost first, when at least two of them have the
+    same leaves (by :func:`leaf_signature`, in the same order) and the same internal wiring; the
+    remaining blocks are grouped by their signatures. Also returns every block's direct feedthrough.
+    """
+    paths = list(c.eq_blocks)
+    connected = {p: tuple(k for k in c.eq_blocks[p].inputs if f"{p}.{k}" in c.flat.sources) for p in paths}
+    sig_of = {p: leaf_signature(c.eq_blocks[p], connected[p]) for p in paths}
+    leaf_kinds: dict[tuple, Kind] = {}
+    for p in paths:
+        if sig_of[p] not in leaf_kinds:
+            leaf_kinds[sig_of[p]] = _leaf_kind(-1, c.eq_blocks[p], connected[p])
+    leaf_feed = {p: {port: {connected[p][i] for i in ins} for port, ins in leaf_kinds[sig_of[p]].feed.items()}
+                 for p in paths}
+    # nested graphs: a prefix and its contiguous leaves (flat order is depth first)
+    members_of: dict[str, list[str]] = {}
+    for p in paths:
+        parts = p.split(".")
+        for d in range(1, len(parts)):
+            members_of.setdefault(".".join(parts[:d]), []).append(p)
+    # a nested graph with co-simulation blocks inside is not a unit
+    for p in c.cs_blocks:
+        parts = p.split(".")
+        for d in range(1, len(parts)):
+            members_of.pop(".".join(parts[:d]), None)
+    kinds: list[Kind] = []
+    taken: set[str] = set()
+    by_graph_sig: dict[tuple, list[tuple[str, list[str]]]] = {}
+    for depth in range(1, max((p.count(".") for p in paths), default=0) + 1):
+        by_graph_sig.clear()
+        for prefix, leaves in members_of.items():
+            if prefix.count(".") != depth - 1 or len(leaves) < 2 or any(q in taken for q in leaves):
+                continue
+            n = len(prefix) + 1
+            ext, wiring = _external_sources(c, prefix, leaves)
+            key = (tuple((q[n:], sig_of[q]) for q in leaves), wiring)
+            by_graph_sig.setdefault(key, []).append((prefix, leaves))
+        for group in by_graph_sig.values():
+            if len(group) < 2:
+                continue
+            prefix, leaves = group[0]
+            ext, _ = _external_sources(c, prefix, leaves)
+            kind = _graph_kind(len(kinds), c, prefix, leaves, ext)
+            members = []
+            for prefix_i, leaves_i in group:
+                member = _member(c, prefix_i, leaves_i, _external_sources(c, prefix_i, leaves_i)[0], kind)
+                if member is None:
+                    members = []
+                    break
+                members.append(member)
+            if not members:
+                continue
+            kind.members = members
+            kinds.append(kind)
+            for _, leaves_i in group:
+                taken.update(leaves_i)
+    leaf_groups: dict[tuple, Kind] = {}
+    for p in paths:
+        if p in taken:
+            continue
+        kind = leaf_groups.get(sig_of[p])
+        if kind is None:
+            kind = _leaf_kind(len(kinds), c.eq_blocks[p], connected[p])
+            leaf_groups[sig_of[p]] = kind
+            kinds.append(kind)
+        ext = [c.flat.sources[f"{p}.{k}"] for k in connected[p]]
+        member = _member(c, p, [p], ext, kind)
+        assert member is not None  # a single block is contiguous in every layout
+        kind.members.append(member)
+    return kinds, leaf_feed
+
+
+def _member(c: _Compiler, path: str, leaves: list[str], ext: list[str], kind: Kind) -> Member | None:
+    """Where instance ``path`` sits in the model's vectors; None if it is not contiguous there."""
+    def span(layout, items: list[str]) -> tuple[int, int] | None:
+        if not items:
+            return 0, 0
+        slots = [layout.index(i) for i in items]
+        start = slots[0].start
+        end = start
+        for s in slots:
+            if s.start != end:
+                return None
+            end += s.size
+        return start, end - start
+
+    leaf_blocks = [c.eq_blocks[q] for q in leaves]
+    spans = [span(c.states, [f"{q}.{k}" for q, b in zip(leaves, leaf_blocks, strict=True) for k in b.states]),
+             span(c.dstates, [f"{q}.{k}" for q, b in zip(leaves, leaf_blocks, strict=True) for k in b.discrete_states]),
+             span(c.params, [f"{q}.{k}" for q, b in zip(leaves, leaf_blocks, strict=True) for k in b.parameters]),
+             span(c.sig, [f"{q}.{k}" for q, b in zip(leaves, leaf_blocks, strict=True) for k in b.outputs])]
+    nx, nz, _, n_p = kind.sizes
+    n_sig = sum(int(e.numel()) for e in kind.outputs.values())
+    if any(s is None for s in spans) or [s[1] for s in spans] != [nx, nz, n_p, n_sig]:  # type: ignore[index]
+        return None
+    return Member(path, spans[0][0], spans[1][0], spans[2][0], spans[3][0], ext)  # type: ignore[index]
+
+
+# -- schedule ----------------------------------------------------------------------------------------
+def build_schedule(c: _Compiler) -> Schedule:
+    """Kinds, levels and offset tables for the graph in compiler ``c`` (layouts already built)."""
+    kinds, leaf_feed = find_kinds(c)
+    n_sig, n_u = c.sig.size, c.inputs.size
+    zero = n_sig + n_u
+    owner: dict[str, tuple[Kind, Member, str]] = {}  # signal ref -> (kind, member, output key)
+    for kind in kinds:
+        for m in kind.members:
+            for key in kind.outputs:
+                owner[f"{m.path}.{key}"] = (kind, m, key)
+    levels = _signal_levels(c, kinds, owner)
+
+    def pool_index(src: str, size: int) -> list[int]:
+        if src.startswith("$") or src in c.inputs:
+            start = n_sig + c.inputs.index(src).start
+        else:
+            start = c.sig.index(src).start
+        return list(range(start, start + size))
+
+    def group(kind: Kind, members: list[Member], fn: ca.Function, outs: list[tuple[str, str]],
+              feed: set[int] | None) -> Group:
+        xo = np.array([m.x_off for m in members], dtype=np.int64)
+        zo = np.array([m.z_off for m in members], dtype=np.int64)
+        po = np.array([m.p_off for m in members], dtype=np.int64)
+        rows = []
+        for m in members:
+            idx: list[int] = []
+            for k, src in enumerate(m.ext):
+                size = _source_port(c, src).size
+                idx += [zero] * size if feed is not None and k not in feed else pool_index(src, size)
+            rows.append(idx)
+        ui = np.array(rows, dtype=np.int64).reshape(len(members), -1)
+        out_off, target = [], []
+        for what, key in outs:
+            if what == "pool":
+                out_off.append(np.array([m.sig_off + kind.out_rel[key] for m in members], dtype=np.int64))
+            else:
+                out_off.append(xo if what == "x" else zo)
+            target.append(what)
+        return Group(kind, fn, xo, zo, po, ui, out_off, target)
+
+    by_level: dict[int, list[Group]] = {}
+    for kind in kinds:
+        buckets: dict[tuple[int, tuple[str, ...]], list[Member]] = {}
+        for m in kind.members:
+            per_level: dict[int, list[str]] = {}
+            for key in kind.outputs:
+                ref = f"{m.path}.{key}"
+                per_level.setdefault(levels[ref], []).append(key)
+            for lev, keys in per_level.items():
+                buckets.setdefault((lev, tuple(keys)), []).append(m)
+        for (lev, keys), members in buckets.items():
+            tag = f"L{lev}_" + ("_".join(keys) if len(keys) <= 3 else f"{len(keys)}signals")
+            if _contiguous_keys(kind, keys):  # one output: the instance's signals in one block of the pool
+                fn = kind.function(re.sub(r"[^A-Za-z0-9]", "_", tag), [_cat(kind.outputs[k] for k in keys)])
+                outs = [("pool", keys[0])]
+            else:
+                fn = kind.function(re.sub(r"[^A-Za-z0-9]", "_", tag), [kind.outputs[k] for k in keys])
+                outs = [("pool", k) for k in keys]
+            feed = set().union(*(kind.feed[k] for k in keys))
+            by_level.setdefault(lev, []).append(group(kind, members, fn, outs, feed))
+    derivative_groups, discrete_groups = [], []
+    for kind in kinds:
+        if kind.xdot.numel():
+            derivative_groups.append(group(kind, kind.members, kind.function("xdot", [kind.xdot]), [("x", "")], None))
+        outs, exprs = [], []
+        if kind.has_reset:
+            outs.append(("x", ""))
+            exprs.append(kind.xplus)
+        if kind.has_update:
+            outs.append(("z", ""))
+            exprs.append(kind.zplus)
+        if outs:
+            discrete_groups.append(group(kind, kind.members, kind.function("discrete", exprs), outs, None))
+    return Schedule(n_sig, n_u, c.states.size, c.dstates.size, c.params.size, kinds,
+                    [by_level[k] for k in sorted(by_level)], derivative_groups, discrete_groups, leaf_feed)
+
+
+def _group_rows(g: Group, k: int) -> np.ndarray:
+    """Pool elements output ``k`` of group ``g`` writes."""
+    size = g.fn.size1_out(k)
+    return (g.out_off[k][:, None] + np.arange(size)[None, :]).ravel()
+
+
+def _contiguous_keys(kind: Kind, keys: tuple[str, ...]) -> bool:
+    pos = kind.out_rel[keys[0]]
+    for k in keys:
+        if kind.out_rel[k] != pos:
+            return False
+        pos += int(kind.outputs[k].numel())
+    return True
+
+
+def _signal_levels(c: _Compiler, kinds: list[Kind], owner: dict) -> dict[str, int]:
+    """Level of every equation-block output (iterative depth-first search; loops raise)."""
+    def deps(ref: str) -> list[str]:
+        kind, m, key = owner[ref]
+        return [m.ext[i] for i in kind.feed[key] if m.ext[i] in owner]
+
+    level: dict[str, int] = {}
+    for start in owner:
+        if start in level:
+            continue
+        stack: list[tuple[str, list[str]]] = [(start, deps(start))]
+        on_path = {start: 0}
+        trail = [start]
+        while stack:
+            ref, pending = stack[-1]
+            while pending and pending[-1] in level:
+                pending.pop()
+            if not pending:
+                stack.pop()
+                trail.pop()
+                del on_path[ref]
+                level[ref] = 1 + max((level[d] for d in deps(ref)), default=-1)
+                continue
+            nxt = pending.pop()
+            if nxt in on_path:
+                raise AlgebraicLoopError(_loop_ports(c, trail[on_path[nxt]:] + [nxt]))
+            on_path[nxt] = len(trail)
+            trail.append(nxt)
+            stack.append((nxt, deps(nxt)))
+    return level
+
+
+def _loop_ports(c: _Compiler, outputs: list[str]) -> list[str]:
+    """Outputs along a loop, with the inputs between them (as the flat compile reports a loop)."""
+    ports = []
+    for a, b in zip(outputs, outputs[1:], strict=False):
+        ports.append(a)
+        reader = [d for d, s in c.flat.sources.items() if s == a]
+        path_b = b.rsplit(".", 1)[0]
+        via = next((d for d in reader if d.startswith(path_b.split(".")[0])), reader[0] if reader else b)
+        ports.append(via)
+    return ports + [outputs[-1]]
+
+
+# -- CasADi form -------------------------------------------------------------------------------------
+def casadi_functions(s: Schedule, dt: float, substeps: int) -> dict[str, ca.Function]:
+    """``ode``, ``signals``, ``discrete`` and ``step`` as MX functions mapping each group's function."""
+    t = ca.MX.sym("t")
+    X, Z = ca.MX.sym("x", s.nx), ca.MX.sym("z", s.nz)
+    U, P = ca.MX.sym("u", s.n_u), ca.MX.sym("p", s.n_p)
+
+    def call(g: Group, t_, X_, Z_, pool, P_):
+        nx, nz, _, npar = g.kind.sizes
+        gx = _strided(X_, g.x_off, nx)
+        gz = _strided(Z_, g.z_off, nz)
+        gp = _strided(P_, g.p_off, npar)
+        gu = ca.reshape(pool[g.u_idx.ravel().tolist()], g.u_idx.shape[1], g.n) if g.u_idx.shape[1] else ca.MX(0, g.n)
+        return g.fn.map(g.n)(ca.repmat(t_, 1, g.n), gx, gz, gu, gp)
+
+    def signals_pool(t_, X_, Z_, U_, P_):
+        pool = ca.vertcat(ca.MX.zeros(s.n_sig), U_, ca.MX(ca.DM.zeros(1)))
+        for groups in s.signal_levels:
+            for g in groups:
+                outs = call(g, t_, X_, Z_, pool, P_)
+                outs = outs if isinstance(outs, (list, tuple)) else [outs]
+                for o, off in zip(outs, g.out_off, strict=True):
+                    size = o.size1()
+                    pool[_rows(off, size)] = ca.vec(o)
+        return pool
+
+    def write(groups: list[Group], t_, X_, Z_, pool, P_, base_x, base_z):
+        x_out, z_out = base_x, base_z
+        for g in groups:
+            outs = call(g, t_, X_, Z_, pool, P_)
+            outs = outs if isinstance(outs, (list, tuple)) else [outs]
+            for o, off, what in zip(outs, g.out_off, g.out_target, strict=True):
+                rows = _rows(off, o.size1())
+                if what == "x":
+                    x_out[rows] = ca.vec(o)
+                else:
+                    z_out[rows] = ca.vec(o)
+        return x_out, z_out
+
+    pool = signals_pool(t, X, Z, U, P)
+    xdot, _ = write(s.derivative_groups, t, X, Z, pool, P, ca.MX.zeros(s.nx), ca.MX.zeros(s.nz))
+    xplus, zplus = write(s.discrete_groups, t, X, Z, pool, P, ca.MX(X), ca.MX(Z))
+    names = ["t", "x", "z", "u", "p"]
+    args = [t, X, Z, U, P]
+    ode = ca.Function("ode", args, [xdot], names, ["xdot"])
+    signals = ca.Function("signals", args, [pool[:s.n_sig]], names, ["y"])
+    discrete = ca.Function("discrete", args, [xplus, zplus], names, ["x_plus", "z_plus"])
+    stage = ca.Function("stage", args, [xdot, pool[:s.n_sig]], names, ["xdot", "y"])
+    xp, zp = discrete(t, X, Z, U, P) if s.has_discrete else (X, Z)
+    h = dt / substeps
+    x = xp
+    y = None
+    for i in range(substeps):
+        ti = t + i * h
+        if i == 0:
+            k1, y = stage(ti, x, zp, U, P)
+        else:
+            k1 = ode(ti, x, zp, U, P)
+        k2 = ode(ti + h / 2, x + h / 2 * k1, zp, U, P)
+        k3 = ode(ti + h / 2, x + h / 2 * k2, zp, U, P)
+        k4 = ode(ti + h, x + h * k3, zp, U, P)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    step = ca.Function("step", args, [x, zp, y], names, ["x_next", "z_next", "y"])
+    return {"ode": ode, "signals": signals, "discrete": discrete, "step": step}
+
+
+def _rows(off: np.ndarray, size: int) -> list[int]:
+    return (off[:, None] + np.arange(size)[None, :]).ravel().tolist()
+
+
+def _strided(V: ca.MX, off: np.ndarray, size: int) -> ca.MX:
+    if size == 0:
+        return ca.MX(0, len(off))
+    return ca.reshape(V[_rows(off, size)], size, len(off))
+
+
+# -- C form ------------------------------------------------------------------------------------------
+def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
+    """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc)."""
+    import os
+    import tempfile
+
+    groups = [g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
+    cg = ca.CodeGenerator("cpgsim_kinds.c", {"with_header": False, "casadi_real": "double",
+                                             "casadi_int": "long long int"})
+    for g in groups:
+        cg.add(g.fn)
+    with tempfile.TemporaryDirectory() as tmp:
+        cwd = os.getcwd()
+        os.chdir(tmp)
+        try:
+            cg.generate()
+        finally:
+            os.chdir(cwd)
+        source = open(os.path.join(tmp, "cpgsim_kinds.c")).read()
+    parts = [source, "\n/* ---- grouped step (harness/grouped.py) ---- */\n"]
+    names: dict[int, str] = {}
+    for gi, g in enumerate(groups):
+        names[id(g)] = f"cg{gi}"
+        parts.append(_c_tables(f"cg{gi}", g))
+        parts.append(_c_group_loop(f"cg{gi}", g))
+    n_pool = s.pool_size
+    level_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for lv in s.signal_levels for g in lv)
+    read = s.groups_read_by_derivatives()
+    inner_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);"
+                            for lv in s.signal_levels for g in lv if id(g) in read)
+    deriv_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in s.derivative_groups)
+    disc_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in s.discrete_groups)
+    h = dt / substeps
+    nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
+    parts.append(f"""
+/* every signal (for the recorded y and the sampled update) */
+static void cpgsim_signals(double t, const double *x, const double *z, const double *p, double *pool) {{
+  double *x_out = 0, *z_out = 0;
+{level_calls}
+}}
+
+/* only the signals that derivatives read, directly or through other signals (inner RK4 stages) */
+static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *pool) {{
+  double *x_out = 0, *z_out = 0;
+  (void)t; (void)x; (void)z; (void)p; (void)pool; (void)x_out; (void)z_out;
+{inner_calls}
+}}
+
+static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, const double *pool, double *x_out) {{
+  double *z_out = 0;
+{deriv_calls}
+}}
+
+static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, const double *pool,
+                            double *x_out, double *z_out) {{
+{disc_calls}
+}}
+
+#define CPGSIM_NX {max(nx, 1)}
+#define CPGSIM_NZ {max(nz, 1)}
+#define CPGSIM_POOL {n_pool}
+
+int cpgsim_step_impl_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {{
+  *sz_arg = 5; *sz_res = 3; *sz_iw = 0;
+  *sz_w = CPGSIM_POOL + 7 * CPGSIM_NX + CPGSIM_NZ;
+  return 0;
+}}
+
+int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {{
+  const double t0 = arg[0] ? arg[0][0] : 0.0;
+  const double *x = arg[1], *z = arg[2], *u = arg[3], *p = arg[4];
+  double *pool = w, *xp = pool + CPGSIM_POOL, *k1 = xp + CPGSIM_NX, *k2 = k1 + CPGSIM_NX, *k3 = k2 + CPGSIM_NX;
+  double *k4 = k3 + CPGSIM_NX, *xs = k4 + CPGSIM_NX, *xc = xs + CPGSIM_NX, *zp = xc + CPGSIM_NX;
+  long i;
+  int s;
+  (void)iw; (void)mem;
+  for (i = 0; i < {nu}; ++i) pool[{nsig} + i] = u[i];
+  pool[{nsig + nu}] = 0.0;
+  for (i = 0; i < {nx}; ++i) xp[i] = x[i];
+  for (i = 0; i < {nz}; ++i) zp[i] = z[i];
+  {"cpgsim_signals(t0, x, z, p, pool); cpgsim_discrete(t0, x, z, p, pool, xp, zp);" if s.has_discrete else ""}
+  for (s = 0; s < {substeps}; ++s) {{
+    const double ti = t0 + s * {h!r};
+    if (s == 0) cpgsim_signals(ti, xp, zp, p, pool); else cpgsim_signals_read(ti, xp, zp, p, pool);
+    if (s == 0 && res[2]) for (i = 0; i < {nsig}; ++i) res[2][i] = pool[i];
+    cpgsim_xdot(ti, xp, zp, p, pool, k1);
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, pool);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, pool, k2);
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k2[i];
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, pool);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, pool, k3);
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h!r} * k3[i];
+    cpgsim_signals_read(ti + {h!r}, xs, zp, p, pool);
+    cpgsim_xdot(ti + {h!r}, xs, zp, p, pool, k4);
+    for (i = 0; i < {nx}; ++i) xc[i] = xp[i] + {h / 6!r} * (((k1[i] + 2. * k2[i]) + 2. * k3[i]) + k4[i]);
+    for (i = 0; i < {nx}; ++i) xp[i] = xc[i];
+  }}
+  if (res[0]) for (i = 0; i < {nx}; ++i) res[0][i] = xp[i];
+  if (res[1]) for (i = 0; i < {nz}; ++i) res[1][i] = zp[i];
+  return 0;
+}}
+""")
+    return "".join(parts)
+
+
+def _c_array(name: str, values: np.ndarray) -> str:
+    vals = ",".join(str(int(v)) for v in np.asarray(values).ravel()) or "0"
+    return f"static const long long {name}[] = {{{vals}}};\n"
+
+
+def _c_tables(tag: str, g: Group) -> str:
+    out = [_c_array(f"{tag}_xo", g.x_off), _c_array(f"{tag}_zo", g.z_off), _c_array(f"{tag}_po", g.p_off),
+           _c_array(f"{tag}_ui", g.u_idx)]
+    for k, off in enumerate(g.out_off):
+        if g.out_target[k] == "pool":
+            out.append(_c_array(f"{tag}_o{k}", off))
+    return "".join(out)
+
+
+def _c_group_loop(tag: str, g: Group) -> str:
+    nu = g.u_idx.shape[1]
+    fname = g.fn.name()
+    res_lines = []
+    for k, what in enumerate(g.out_target):
+        if what == "pool":
+            res_lines.append(f"    res[{k}] = pool + {tag}_o{k}[i];")
+        elif what == "x":
+            res_lines.append(f"    res[{k}] = x_out + {tag}_xo[i];")
+        else:
+            res_lines.append(f"    res[{k}] = z_out + {tag}_zo[i];")
+    n_res = max(1, len(g.out_target))
+    return f"""
+static void {tag}_run(double t, const double *x, const double *z, const double *p, double *pool,
+                     double *x_out, double *z_out) {{
+  long i;
+  int j;
+  double ub[{max(nu, 1)}];
+  const double *arg[5];
+  double *res[{n_res}];
+  double w[{max(1, g.fn.sz_w())}];
+  long long iw[{max(1, g.fn.sz_iw())}];
+  (void)x_out; (void)z_out; (void)j;
+  arg[0] = &t; arg[3] = ub;
+  for (i = 0; i < {g.n}; ++i) {{
+    for (j = 0; j < {nu}; ++j) ub[j] = pool[{tag}_ui[i * {max(nu, 1)} + j]];
+    arg[1] = x + {tag}_xo[i]; arg[2] = z + {tag}_zo[i]; arg[4] = p + {tag}_po[i];
+{chr(10).join(res_lines)}
+    {fname}(arg, res, iw, w, 0);
+  }}
+}}
+"""

@@ -40,6 +40,18 @@ def hexapod_network() -> Graph:
     return g
 
 
+def network_array(n: int, expose_modes: bool = False) -> Graph:
+    """``n`` Yu Y5 networks side by side (``3 n`` neurons; leader starts alternate [-1, 0] and [1, 0]).
+
+    ``network_array(6)`` is :func:`hexapod_network`'s work; larger ``n`` are the scaling benchmark's sizes.
+    """
+    g = Graph(f"networks{n}", f"{n} leader-follower networks (Yu Y5)")
+    for i in range(n):
+        start = (-1.0, 0.0) if i % 2 == 0 else (1.0, 0.0)
+        g.add(leader_follower_network(f"n{i}", leader_start=start, expose_modes=expose_modes))
+    return g
+
+
 def damped_oscillator(zeta: float = 0.1, omega: float = 2.0) -> Graph:
     """``x'' + 2 zeta omega x' + omega^2 x = 0`` from integrators, gains and a sum (decays to 0)."""
     g = Graph("damped_oscillator", "damped linear oscillator from generic blocks")

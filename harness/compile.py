@@ -17,6 +17,7 @@ that feed equation blocks; ``p`` every parameter, so exported FMUs keep them tun
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -25,6 +26,7 @@ import numpy as np
 
 from components.core import Block, CoSimBlock, ModelError, Port
 from components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
+from harness import cache
 
 if TYPE_CHECKING:
     from harness.grouped import Schedule
@@ -125,7 +127,10 @@ class CompiledModel:
     graph_outputs: dict[str, str]  # graph output -> "block.port" source
     free_inputs: dict[str, Port]  # graph inputs (sources "$name")
     cosim_feeds: dict[str, str]  # cosim input "path.port" -> source ("$in", "eq.port" or "cs.port")
-    schedule: Schedule | None = None  # the grouped compile's kinds and loops (None: flat compile)
+    schedule: Schedule | None = None  # the grouped compile's kinds and loops (None: flat or loaded from the cache)
+    grouped: bool = False
+    from_cache: bool = False
+    _c_source: str | None = field(default=None, repr=False)
 
     @property
     def has_discrete(self) -> bool:
@@ -134,15 +139,15 @@ class CompiledModel:
     @property
     def grouping(self) -> str:
         """``"flat"`` (every instance inlined) or ``"kinds"`` (identical instances looped)."""
-        return "flat" if self.schedule is None else "kinds"
+        return "kinds" if self.grouped else "flat"
 
     def c_step_source(self) -> str | None:
         """C source of the step for the native backend when it is not CasADi's own code generation."""
-        if self.schedule is None:
-            return None
-        from harness.grouped import c_step_source
+        if self._c_source is None and self.schedule is not None:
+            from harness.grouped import c_step_source
 
-        return c_step_source(self.schedule, self.dt, self.substeps)
+            self._c_source = c_step_source(self.schedule, self.dt, self.substeps)
+        return self._c_source
 
     def param_vector(self, overrides: dict[str, float] | None = None) -> np.ndarray:
         """Parameter vector with ``{"block.param": value}`` overrides (validated)."""
@@ -182,7 +187,22 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
         eq = flat.equation_blocks()
         classes = {type(b) for b in eq.values()}
         grouping = "kinds" if len(eq) >= GROUPED_MIN_BLOCKS and len(eq) >= 4 * len(classes) else "flat"
-    return _Compiler(flat, dt, int(substeps)).build(grouped=grouping == "kinds")
+    compiler = _Compiler(flat, dt, int(substeps))
+    if not cache.enabled():
+        return compiler.build(grouped=grouping == "kinds")
+    from harness import grouped
+
+    code = [__file__, grouped.__file__, sys.modules[Block.__module__].__file__]
+    key = cache.model_key(flat, dt, int(substeps), grouping, grouped.leaf_signature, code)
+    entry = cache.load(key)
+    if entry is not None:
+        return compiler.from_cache(entry)
+    model = compiler.build(grouped=grouping == "kinds")
+    model._c_source = model.c_step_source()
+    fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
+    cache.store(key, fns, model._c_source, compiler.feed, model.grouping,
+                model.schedule.describe() if model.schedule else "")
+    return model
 
 
 class _Compiler:
@@ -360,7 +380,19 @@ class _Compiler:
             ode=ode, signals=signals, discrete=discrete, step=step,
             graph_outputs=dict(self.flat.output_sources),
             free_inputs=dict(self.flat.inputs), cosim_feeds=cosim_feeds, schedule=schedule,
+            grouped=schedule is not None,
         )
+
+    def from_cache(self, entry: dict[str, Any]) -> CompiledModel:
+        """The model from a cache entry: layouts and start values rebuilt, functions loaded."""
+        self._layouts()
+        self.feed = entry["feed"]
+        fns = entry["functions"]
+        model = self._model(fns["ode"], fns["signals"], fns["discrete"], fns["step"], None)
+        model.grouped = entry["grouping"] == "kinds"
+        model.from_cache = True
+        model._c_source = entry["c_source"]
+        return model
 
     def _cosim_feeds(self) -> dict[str, str]:
         """What co-simulation inputs read; also reports algebraic loops through them."""

@@ -636,12 +636,14 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
         parts.append(_c_tables(f"cg{gi}", g))
         parts.append(_c_group_loop(f"cg{gi}", g))
     n_pool = s.pool_size
-    level_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for lv in s.signal_levels for g in lv)
+    def calls(gs) -> str:
+        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in gs)
+
     read = s.groups_read_by_derivatives()
-    inner_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);"
-                            for lv in s.signal_levels for g in lv if id(g) in read)
-    deriv_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in s.derivative_groups)
-    disc_calls = "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in s.discrete_groups)
+    level_calls = calls(g for lv in s.signal_levels for g in lv)
+    inner_calls = calls(g for lv in s.signal_levels for g in lv if id(g) in read)
+    deriv_calls = calls(s.derivative_groups)
+    disc_calls = calls(s.discrete_groups)
     h = dt / substeps
     nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
     parts.append(f"""
@@ -658,12 +660,13 @@ static void cpgsim_signals_read(double t, const double *x, const double *z, cons
 {inner_calls}
 }}
 
-static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, const double *pool, double *x_out) {{
+static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, double *pool,
+                        double *x_out) {{
   double *z_out = 0;
 {deriv_calls}
 }}
 
-static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, const double *pool,
+static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, double *pool,
                             double *x_out, double *z_out) {{
 {disc_calls}
 }}

@@ -228,9 +228,10 @@ class NativeUnavailable(RuntimeError):
 
 
 def cache_dir() -> Path:
-    root = Path(os.environ.get("CPGSIM_CACHE", Path(tempfile.gettempdir()) / "cpgsim-cache"))
-    root.mkdir(parents=True, exist_ok=True)
-    return root
+    """Where compiled C libraries go: the per-user cache folder (:func:`harness.cache.cache_root`)."""
+    from harness.cache import cache_root
+
+    return cache_root()
 
 
 def compiler() -> str | None:

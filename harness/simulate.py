@@ -92,7 +92,8 @@ class Simulator:
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
         if jit:
-            args = self.model.step.sx_in()
+            step = self.model.step
+            args = step.mx_in() if step.is_a("MXFunction") else step.sx_in()
             self._step_fn = ca.Function("step_jit", args, self.model.step.call(args), jit_options())
 
     @property

@@ -133,6 +133,7 @@ reflex logic has committed it.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Sequence
@@ -143,6 +144,7 @@ import numpy as np
 
 from components.core import Block, Equations, ParameterError, Symbols
 from components.geometry import YU_SIM, RobotGeometry, leg_ik_plane
+from components.memo import disk_memo
 from components.networks import TABLE1_OMEGA
 
 NOMINAL, ELEV_RETRACT, ELEV_FORWARD, SEARCHING, RETURNING, WITHDRAW = 0, 1, 2, 3, 4, 5
@@ -183,10 +185,18 @@ def _network_rhs(eps: Sequence[float], b: Sequence[float], w: Sequence[float], k
     return rhs
 
 
-@functools.lru_cache(maxsize=32)
 def locked_orbit(eps: float = 0.1, b: float = 4.0, omega: tuple[float, float, float] = TABLE1_OMEGA,
                  k: float = 0.1) -> LockedOrbit:
-    """Shoot the Y5 network's periodic orbit (leader limit cycle + followers' fixed point)."""
+    """Shoot the Y5 network's periodic orbit (leader limit cycle + followers' fixed point).
+
+    About a second of numerical work: memoised in the process and on disk (:mod:`components.memo`).
+    """
+    return _locked_orbit_disk(float(eps), float(b), tuple(float(w) for w in omega), float(k))
+
+
+@functools.lru_cache(maxsize=32)
+@disk_memo(dataclasses.asdict, lambda d: LockedOrbit(**d))
+def _locked_orbit_disk(eps: float, b: float, omega: tuple[float, float, float], k: float) -> LockedOrbit:
     from scipy.integrate import solve_ivp
     from scipy.optimize import brentq, fsolve
 
@@ -229,6 +239,7 @@ def leg_height(geometry: RobotGeometry, beta: float | np.ndarray, gamma: float |
     return leg.thigh * np.sin(beta) + leg.shank * np.sin(np.asarray(beta) - gamma)
 
 
+@disk_memo(lambda ab: {"beta": float(ab[0]), "gamma": float(ab[1])}, lambda d: (d["beta"], d["gamma"]))
 def _apex_angles(geometry: RobotGeometry, end: tuple[float, float], r_apex: float, clearance: float
                  ) -> tuple[float, float]:
     """Apex angles at ``r_apex`` whose joint-space segment from ``end`` peaks at ``-H + clearance``."""

@@ -119,7 +119,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
                 item.set_param(key, value)
         else:  # a single block: "param" or "<block>.param"
             item.set(**{k[len(item.name) + 1:] if k.startswith(item.name + ".") else k: v for k, v in params.items()})
-    model = compile_graph(item, dt, substeps)
+    model = compile_graph(item, dt, substeps, grouping="flat")  # straight-line C, SX dependency analysis
     variables = collect_variables(model, fmi)
     identifier = model_identifier(name or model.name)
     kinds = KINDS[kind]
@@ -154,4 +154,4 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
 
 def describe(item: Graph | Block, dt: float = 1e-3, fmi: int = 2) -> Variables:
     """The FMU variables ``item`` would export to (names, value references, start values)."""
-    return collect_variables(compile_graph(item, dt), fmi)
+    return collect_variables(compile_graph(item, dt, grouping="flat"), fmi)

@@ -1,0 +1,126 @@
+"""Compiled models cached by content hash, so a graph compiled once starts in well under a second.
+
+The key is a SHA-256 of everything the compiled functions depend on: each equation block's class
+and configuration (:func:`harness.grouped.leaf_signature`: declarations, attributes, which inputs
+are wired), the source files of the block classes' modules, the wiring, the graph's inputs and
+co-simulation ports, ``dt``, ``substeps``, the grouping, the compiler's own source and the CasADi
+version. Parameter values and start values are not part of it: they are data (the parameter
+vector, the initial state), rebuilt from the graph on every load. An entry is one JSON file
+(CasADi's own serialization of the four functions, the grouped step's C source, each block's direct
+feedthrough), written atomically; an unreadable entry is recompiled and replaced. The C libraries
+built from a model are cached separately by the hash of their source (:mod:`harness.native`).
+
+``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
+``CPGSIM_COMPILE_CACHE=0`` turns the model cache off.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from components import memo
+from components.graph import FlatGraph
+
+FORMAT = 1
+
+
+def cache_root() -> Path:
+    """The per-user cache folder (created on first use)."""
+    return memo.cache_root()
+
+
+def enabled() -> bool:
+    return memo.caching_enabled()
+
+
+def _file_digest(path: str) -> str:
+    return memo.file_digest(path)
+
+
+def _class_source(cls: type) -> str:
+    module = sys.modules.get(cls.__module__)
+    path = getattr(module, "__file__", None) if module else None
+    if path is None:
+        try:
+            return hashlib.sha256(inspect.getsource(cls).encode()).hexdigest()
+        except (OSError, TypeError):
+            return f"unhashable:{id(cls)}"  # defined interactively: never shared across processes
+    return _file_digest(path)
+
+
+def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str,
+              leaf_signature: Callable[[Any, tuple[str, ...]], tuple], code_files: list[str]) -> str:
+    """Content hash of a flattened graph's compiled form (see module docstring).
+
+    ``leaf_signature(block, connected_inputs)`` describes an equation block; ``code_files`` are
+    the compiler's own sources.
+    """
+    h = hashlib.sha256()
+
+    def put(*items: Any) -> None:
+        h.update(repr(items).encode())
+        h.update(b"\0")
+
+    put(FORMAT, ca.__version__, repr(float(dt)), int(substeps), grouping, [_file_digest(f) for f in code_files])
+    classes: set[type] = set()
+    for path, blk in flat.blocks.items():
+        cls = type(blk)
+        classes.add(cls)
+        connected = tuple(k for k in blk.inputs if f"{path}.{k}" in flat.sources)
+        if hasattr(blk, "define"):
+            put(path, leaf_signature(blk, connected))  # type: ignore[arg-type]
+        else:  # a co-simulation block: only its ports shape the compiled part
+            put(path, "cosim", tuple((k, p.size, p.unit, p.kind) for k, p in blk.inputs.items()),
+                tuple((k, p.size, p.unit, p.kind) for k, p in blk.outputs.items()),
+                tuple(sorted((k, tuple(sorted(v))) for k, v in getattr(blk, "feedthrough", {}).items())))
+    put(sorted(flat.sources.items()))
+    put(sorted(flat.output_sources.items()))
+    put(tuple((k, p.size, p.unit, p.kind, p.description) for k, p in flat.inputs.items()))
+    for cls in sorted(classes, key=lambda c: (c.__module__, c.__qualname__)):
+        put(cls.__module__, cls.__qualname__, _class_source(cls))
+    return h.hexdigest()[:32]
+
+
+def load(key: str) -> dict[str, Any] | None:
+    """The cached entry for ``key`` (functions deserialized), or None."""
+    if not enabled():
+        return None
+    path = cache_root() / "models" / f"{key}.json"
+    try:
+        entry = json.loads(path.read_text())
+        if entry.get("format") != FORMAT:
+            return None
+        entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
+        entry["feed"] = {p: {o: set(ins) for o, ins in d.items()} for p, d in entry["feed"].items()}
+        return entry
+    except FileNotFoundError:
+        return None
+    except Exception:  # noqa: BLE001 -- a damaged entry is recompiled and overwritten
+        return None
+
+
+def store(key: str, functions: dict[str, ca.Function], c_source: str | None,
+          feed: dict[str, dict[str, set[str]]], grouping: str, describe: str) -> None:
+    """Write an entry atomically (a failure to write only costs the next start a compile)."""
+    if not enabled():
+        return
+    folder = cache_root() / "models"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        entry = {"format": FORMAT, "grouping": grouping, "describe": describe, "c_source": c_source,
+                 "functions": {k: f.serialize() for k, f in functions.items()},
+                 "feed": {p: {o: sorted(ins) for o, ins in d.items()} for p, d in feed.items()}}
+        tmp = folder / f".{key}.{os.getpid()}.tmp"
+        tmp.write_text(json.dumps(entry))
+        os.replace(tmp, folder / f"{key}.json")
+    except OSError:
+        pass

@@ -1,0 +1,114 @@
+"""The compiled-model cache: hits give the same model, misses follow every structural change.
+
+Each test uses its own cache folder (``CPGSIM_CACHE``), so it starts cold.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components.basic import Sum
+from components.library import hexapod_network
+from harness.compile import compile_graph
+from harness.simulate import Simulator
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("CPGSIM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("CPGSIM_COMPILE_CACHE", raising=False)
+    return tmp_path / "cache"
+
+
+def entries(folder) -> list:
+    return sorted((folder / "models").glob("*.json"))
+
+
+def test_second_compile_is_a_hit_with_identical_results(private_cache):
+    first = compile_graph(hexapod_network())
+    second = compile_graph(hexapod_network())
+    assert not first.from_cache and second.from_cache
+    assert len(entries(private_cache)) == 1
+    a = Simulator(hexapod_network(), backend="casadi").run(1.0)
+    b = Simulator(hexapod_network(), backend="casadi").run(1.0)
+    assert np.array_equal(a.data, b.data)
+    assert second.states.names() == first.states.names() and np.array_equal(second.p0, first.p0)
+
+
+def test_parameter_values_are_data_not_part_of_the_key(private_cache):
+    compile_graph(hexapod_network())
+    g = hexapod_network()
+    g.set_param("*.z1.omega", 1.0)
+    hit = compile_graph(g)
+    assert hit.from_cache and np.isclose(hit.p0[hit.params.index("leg1.z1.omega").start], 1.0)
+    cached = Simulator(g, backend="casadi").run(2.0)
+    default = Simulator(hexapod_network(), backend="casadi").run(2.0)
+    assert not np.allclose(cached["leg1.z1.x"], default["leg1.z1.x"])
+    import os
+
+    os.environ["CPGSIM_COMPILE_CACHE"] = "0"
+    try:
+        g2 = hexapod_network()
+        g2.set_param("*.z1.omega", 1.0)
+        fresh = Simulator(g2, backend="casadi")
+        assert not fresh.model.from_cache
+        assert np.array_equal(fresh.run(2.0).data, cached.data)
+    finally:
+        del os.environ["CPGSIM_COMPILE_CACHE"]
+
+
+def test_structural_changes_miss(private_cache):
+    def graph(signs=(1, 1), wire="x1"):
+        g = hexapod_network()
+        g.add(Sum("s", signs=signs))
+        g.connect(f"leg1.{wire}", "s.u1")
+        g.connect("leg2.x1", "s.u2")
+        return g
+
+    base = compile_graph(graph())
+    assert not base.from_cache
+    assert compile_graph(graph()).from_cache
+    assert not compile_graph(graph(signs=(1, -1))).from_cache  # a block's configuration
+    assert not compile_graph(graph(wire="x2")).from_cache  # the wiring
+    assert not compile_graph(graph(), dt=2e-3).from_cache  # the step
+    assert len(entries(private_cache)) == 4
+
+
+def test_damaged_entry_is_recompiled(private_cache):
+    compile_graph(hexapod_network())
+    (entry,) = entries(private_cache)
+    entry.write_text(entry.read_text()[:100])
+    again = compile_graph(hexapod_network())
+    assert not again.from_cache
+    assert compile_graph(hexapod_network()).from_cache
+
+
+def test_cache_can_be_turned_off(private_cache, monkeypatch):
+    monkeypatch.setenv("CPGSIM_COMPILE_CACHE", "0")
+    compile_graph(hexapod_network())
+    assert not compile_graph(hexapod_network()).from_cache
+    assert not (private_cache / "models").exists()
+
+
+def test_grouped_model_from_cache_runs_natively(private_cache):
+    from components.library import network_array
+
+    cold = Simulator(network_array(12), backend="native")
+    warm = Simulator(network_array(12), backend="native")
+    assert cold.model.grouping == warm.model.grouping == "kinds" and warm.model.from_cache
+    assert np.array_equal(cold.run(1.0).data, warm.run(1.0).data)
+
+
+def test_locked_orbit_memo_matches_the_computation(private_cache, monkeypatch):
+    from components.yu import converter
+
+    converter._locked_orbit_disk.cache_clear()
+    memo = converter.locked_orbit(0.1, 4.0, converter.TABLE1_OMEGA, 0.1)
+    assert list((private_cache / "memo").glob("*.json"))
+    converter._locked_orbit_disk.cache_clear()
+    monkeypatch.setenv("CPGSIM_COMPILE_CACHE", "0")
+    computed = converter.locked_orbit(0.1, 4.0, converter.TABLE1_OMEGA, 0.1)
+    converter._locked_orbit_disk.cache_clear()
+    assert memo == computed
+    assert abs(computed.half_period - 2.5) < 0.1  # half the leader's period 2 pi / (0.4 pi) = 5 s

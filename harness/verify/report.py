@@ -265,15 +265,56 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
 
 # -- sweep -----------------------------------------------------------------------------------------
 
+SWEEP_TRANSIENT = 400.0
+"""Simulated time of the sweep's batch transient (s): the amplitude relaxes at rate ``eps`` (Floquet
+multiplier ``exp(-eps T)``), so from x = 0.5 at the smallest eps (0.05)
+the end amplitude is within ``15 exp(-20) / 2 = 2e-8`` (relative) of the cycle's."""
+
+SWEEP_WINDOW_PERIODS = 3
+"""The batch's amplitude and period are measured over the last this many Y4 periods (at least two up-crossings)."""
+
+
+def sweep_transients(eps_values: Sequence[float], b_values: Sequence[float], omega: float,
+                     t_end: float = SWEEP_TRANSIENT) -> dict[tuple[float, float], dict[str, Any]]:
+    """Every ``eps`` x ``b`` neuron's transient in one batch run (:func:`harness.batch.simulate_batch`):
+    ``{(eps, b): {"amplitude", "period", "status", "x_end"}}`` of ``z.x`` over the last cycles, ``{}`` when
+    no C compiler works (the sweep then runs without them)."""
+    from components.library import single_vdp
+    from harness.batch import simulate_batch
+    from harness.native import NativeUnavailable
+
+    grid = [(float(e), float(b)) for e in eps_values for b in b_values]
+    dt = 1e-3
+    window = round(SWEEP_WINDOW_PERIODS * 2 * math.pi / omega / dt) * dt
+    try:
+        res = simulate_batch(single_vdp(omega=omega), {"z.eps": [e for e, _ in grid], "z.b": [b for _, b in grid]},
+                             t_end=t_end, dt=dt, record=["z.x"], reduce=["amplitude", "period"], window=window)
+    except NativeUnavailable:
+        return {}
+    return {key: {"amplitude": float(res["z.x:amplitude"][i]), "period": float(res["z.x:period"][i]),
+                  "status": str(res.status[i]), "x_end": res.final_state(i)}
+            for i, key in enumerate(grid)}
+
+
 def sweep(eps_values: Sequence[float] = SWEEP_EPS, b_values: Sequence[float] = SWEEP_B,
           omega: float = SWEEP_OMEGA) -> list[dict[str, Any]]:
-    """Single Van der Pol neuron (Yu Y2) for every ``eps`` x ``b``: numeric orbit vs Yu Y4."""
+    """Single Van der Pol neuron (Yu Y2) for every ``eps`` x ``b``: numeric orbit vs Yu Y4.
+
+    All transients run first as one batch (:func:`sweep_transients`); each shooting solve then starts
+    from its variant's end state (``x0``) with its simulated period as the period guess, and the
+    simulated amplitude and period are reported beside the shooting ones (``sim_amplitude``,
+    ``sim_period``, ``sim_status``; ``None`` without a C compiler).
+    """
     from components.library import single_vdp
 
+    sims = sweep_transients(eps_values, b_values, omega)
     rows = []
     for eps in eps_values:
         for b in b_values:
-            rep = verify(single_vdp(eps=eps, b=b, omega=omega), options=VerifyOptions(compute_sync=False))
+            sim = sims.get((float(eps), float(b)))
+            usable = sim is not None and sim["status"] == "ok"
+            opts = VerifyOptions(compute_sync=False, period_guess=sim["period"] if usable else None)
+            rep = verify(single_vdp(eps=eps, b=b, omega=omega), x0=sim["x_end"] if usable else None, options=opts)
             a = rep.analytic.get("z", {})
             rows.append({"eps": eps, "b": b, "omega": omega, "status": rep.status,
                          "amplitude": a.get("amplitude_numeric"), "amplitude_Y4": a.get("amplitude"),
@@ -283,14 +324,22 @@ def sweep(eps_values: Sequence[float] = SWEEP_EPS, b_values: Sequence[float] = S
                          "period_second_order": a.get("period_second_order"),
                          "period_rel_error": a.get("period_rel_error"),
                          "multiplier": a.get("multiplier_numeric"), "multiplier_first_order": a.get("multiplier"),
-                         "multiplier_rel_error": a.get("multiplier_rel_error")})
+                         "multiplier_rel_error": a.get("multiplier_rel_error"),
+                         "sim_amplitude": _finite(sim["amplitude"]) if sim else None,
+                         "sim_period": _finite(sim["period"]) if sim else None,
+                         "sim_status": sim["status"] if sim else None})
     return rows
+
+
+def _finite(v: float) -> float | None:
+    return v if math.isfinite(v) else None
 
 
 def sweep_markdown(rows: Sequence[dict[str, Any]]) -> str:
     head = ("| eps | b | amplitude | Y4 2/sqrt(b) | rel. err | rel. err 2nd order | period [s] | Y4 2pi/omega | "
-            "rel. err | rel. err 2nd order | multiplier | exp(-eps T) | rel. err | verdict |\n"
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+            "rel. err | rel. err 2nd order | multiplier | exp(-eps T) | rel. err | simulated amplitude | "
+            "simulated period [s] | verdict |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     lines = [head]
 
     def rel(a: float | None, b: float | None) -> float | None:
@@ -304,5 +353,6 @@ def sweep_markdown(rows: Sequence[dict[str, Any]]) -> str:
             f"{_fmt(r['period_Y4'], '.6f')} | {_fmt(r['period_rel_error'], '+.2e')} | "
             f"{_fmt(rel(r['period'], r['period_second_order']), '+.2e')} | {_fmt(r['multiplier'], '.6f')} | "
             f"{_fmt(r['multiplier_first_order'], '.6f')} | {_fmt(r['multiplier_rel_error'], '+.2e')} | "
+            f"{_fmt(r.get('sim_amplitude'), '.6f')} | {_fmt(r.get('sim_period'), '.6f')} | "
             f"{STATUS_TEXT[r['status']]} |")
     return "\n".join(lines)

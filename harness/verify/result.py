@@ -44,12 +44,16 @@ class VerifyOptions:
     reference: str | None = None  # reference state of the phase lags (default: first primary state)
     sync_pairs: list[tuple[str, str]] | None = None  # block pairs whose states must agree
     compute_sync: bool = True
+    period_guess: float | None = None  # start of the whole graph's shooting solve (default: the transient's)
 
     def validate(self) -> None:
         for name in ("t_max", "rtol", "atol", "margin", "ratio_tol", "sync_tol"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise VerifyInputError(f"option {name} must be a positive number, got {v!r}")
+        g = self.period_guess
+        if g is not None and not (isinstance(g, (int, float)) and math.isfinite(g) and g > 0):
+            raise VerifyInputError(f"option period_guess must be a positive number of seconds, got {g!r}")
         if self.margin >= 1 or self.sync_tol >= 1:
             raise VerifyInputError("options margin and sync_tol must be below 1")
         if self.max_denominator < 1 or self.sync_samples < 0:

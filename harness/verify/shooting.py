@@ -390,6 +390,8 @@ class _Verifier:
         for c in primary:
             idx = sorted(set(comps[c]).union(*[comps[a] for a in ancestors[c]]))
             T_guess = max(periods[i] for i in comps[c] if i in periods)
+            if opts.period_guess is not None and len(idx) == sysm.n:
+                T_guess = opts.period_guess  # the caller's guess of the whole graph's period
             cyc = self._shoot(idx, x_end, T_guess, role="primary: no oscillating driver")
             if cyc is None:
                 rep.status, rep.reason = "period-not-found", (
@@ -438,6 +440,7 @@ class _Verifier:
             cyc = subs[0]
             cyc.role = "whole graph"
         else:
+            T_full = opts.period_guess or T_full  # the caller's guess of the whole graph's period, if any
             cyc = self._shoot(list(range(sysm.n)), x_end, T_full, role="whole graph")
         if cyc is None:
             rep.status, rep.reason = "period-not-found", (

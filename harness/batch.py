@@ -1,0 +1,786 @@
+"""Batch runs for parameter studies: N parameter sets of one graph in one compiled loop, threads in C.
+
+:func:`simulate_batch` compiles the graph once (:func:`harness.compile.compile_graph`), builds one
+shared library from the model's step and :data:`BATCH_DRIVER` (:func:`harness.native.step_library`) and
+runs every variant -- its own parameter vector ``p`` and initial states -- from ``t0`` to ``t_end`` on
+POSIX threads. Variants are handed out one at a time by an atomic counter (a variant is thousands of
+steps, so the counter is touched rarely and nobody waits on it); each thread has its own CasADi work
+buffers. The call runs without the GIL, on a Python thread the caller's thread watches (progress,
+Ctrl-C stops the workers at their next check).
+
+Per variant the driver keeps, for the chosen signals (``record`` glob patterns, like ``Simulator``'s):
+
+- the signals every ``every`` steps (``data[N, n_samples, n_signals]``, sample ``i`` at ``t0 + i*every*dt``),
+- and/or reductions over the last ``window`` seconds, computed in C while it runs (no trajectory is
+  kept): ``final``, ``min``, ``max``, ``mean`` (of the samples), ``amplitude`` ((max - min) / 2),
+  ``period`` (mean interval between upward crossings of the window's midline (max + min) / 2, each
+  crossing located by linear interpolation between samples) and ``crossings`` (how many). A crossing
+  counts only after the signal went below ``midline - 0.1 (max - min)`` since the previous one (the
+  hysteresis of ``harness.verify.system.up_crossings``), so wiggles at the midline are not cycles.
+
+The midline needs the window's extremes before the first crossing can be counted. The driver keeps the
+window's samples of the reduced signals in a buffer per thread (``window_steps x n_signals`` doubles,
+reused from variant to variant) and counts crossings in it when the variant ends: one pass over the
+steps, no second simulation of the window (which would cost up to half of the run again).
+
+Sampling is the simulator's: the sample at ``t_k`` holds the signals after the sampled update at
+``t_k``; the last sample (``t_end``) evaluates the step once more and keeps only its signals. The same C
+step with the same parameter vector gives the same numbers as a native ``Simulator`` run, bit for bit
+(``tests/test_batch.py``); one difference: here ``t_k = t0 + k dt``, while the simulator's loop adds ``j dt``
+to the start of each chunk of steps, so a graph whose equations read ``t`` may differ in the last bits.
+
+A variant whose continuous state becomes non-finite stops there: its status says ``diverged at t=...``
+with the state, its samples after that time and all its reductions are NaN. A reduction that does not
+exist is NaN and named in the status too: ``period`` with fewer than two crossings in the window
+(``no cycle in window: z.x``), any reduction of a signal that is non-finite inside the window
+(``non-finite in window: z.x``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import difflib
+import fnmatch
+import json
+import math
+import os
+import threading
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from components.core import Block, ModelError, ParameterError
+from components.graph import Graph
+from harness.compile import CompiledModel, compile_graph
+from harness.simulate import horizon_steps
+
+REDUCTIONS = ("final", "min", "max", "mean", "amplitude", "period", "crossings")
+"""Reductions :func:`simulate_batch` computes, in the order of ``BATCH_DRIVER``'s result slots."""
+
+_STATUS_OK, _STATUS_DIVERGED, _STATUS_EVAL_ERROR, _STATUS_NOT_RUN = 0, 1, 2, 3
+_FLAG_NONFINITE, _FLAG_NO_CYCLE = 1, 2
+
+BATCH_DRIVER = r"""
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+/* Batch driver: n_var variants of one model, each its own p and initial state, on n_threads threads.
+   Field order and types must match harness/batch.py:_Job (all integers long long). */
+typedef struct {
+  long long n_var, n_steps; double t0, dt;
+  long long nx, nz, nu, np, ny;
+  const double *P, *X0, *Z0, *U;          /* n_var x np, n_var x nx, n_var x nz, nu */
+  long long n_rec, every, n_samp; const long long *rec_idx; double *REC;   /* REC: n_var x n_samp x n_rec */
+  long long n_red, k_win, want_cross; const long long *red_idx; double *RED; long long *SFLAG;
+                                           /* RED: n_var x n_red x 7; SFLAG: n_var x n_red */
+  long long *STATUS, *DIV_STEP, *DIV_STATE; double *XF, *ZF;
+  long long *progress;                     /* [0] variants finished, [1] stop request (set by the caller) */
+  long long next;                          /* the next variant to hand out (atomic) */
+  long long error;                         /* an allocation failed */
+} cpgsim_batch_job;
+
+typedef struct {
+  cpgsim_batch_job *job;
+  const double **arg; double **res; casadi_int *iw; double *w;
+  double *x, *z, *xn, *zn, *y, *lo, *hi, *sum, *fin, *win;
+  int *bad;
+} cpgsim_batch_ctx;
+
+static void cpgsim_batch_free(cpgsim_batch_ctx *c) {
+  free(c->arg); free(c->res); free(c->iw); free(c->w); free(c->x); free(c->z); free(c->xn); free(c->zn);
+  free(c->y); free(c->lo); free(c->hi); free(c->sum); free(c->fin); free(c->win); free(c->bad);
+}
+
+static int cpgsim_batch_alloc(cpgsim_batch_ctx *c, cpgsim_batch_job *j) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  long long nw = j->want_cross ? (j->n_steps - j->k_win + 1) * j->n_red : 0;
+  memset(c, 0, sizeof(*c));
+  c->job = j;
+  cpgsim_step_impl_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  c->arg = malloc(sizeof(double *) * (sz_arg + 5));
+  c->res = malloc(sizeof(double *) * (sz_res + 3));
+  c->iw = malloc(sizeof(casadi_int) * (sz_iw + 1));
+  c->w = malloc(sizeof(double) * (sz_w + 1));
+  c->x = malloc(sizeof(double) * (j->nx + 1)); c->xn = malloc(sizeof(double) * (j->nx + 1));
+  c->z = malloc(sizeof(double) * (j->nz + 1)); c->zn = malloc(sizeof(double) * (j->nz + 1));
+  c->y = malloc(sizeof(double) * (j->ny + 1));
+  c->lo = malloc(sizeof(double) * (j->n_red + 1)); c->hi = malloc(sizeof(double) * (j->n_red + 1));
+  c->sum = malloc(sizeof(double) * (j->n_red + 1)); c->fin = malloc(sizeof(double) * (j->n_red + 1));
+  c->bad = malloc(sizeof(int) * (j->n_red + 1));
+  c->win = malloc(sizeof(double) * (nw + 1));
+  if (!c->arg || !c->res || !c->iw || !c->w || !c->x || !c->xn || !c->z || !c->zn || !c->y || !c->lo
+      || !c->hi || !c->sum || !c->fin || !c->bad || !c->win) { cpgsim_batch_free(c); return -1; }
+  return 0;
+}
+
+/* Up-crossings of the midline in one signal's window samples (stride n_red): count, first and last time. */
+static long long cpgsim_batch_crossings(const double *s, long long n, long long stride, double lo, double hi,
+                                        double t_first, double dt, double *first, double *last) {
+  double level = 0.5 * (lo + hi), deep = level - 0.1 * (hi - lo);
+  long long i, count = 0;
+  int armed = 0;
+  for (i = 0; i + 1 < n; ++i) {
+    double s0 = s[i * stride], s1 = s[(i + 1) * stride];
+    if (s0 < deep) armed = 1;
+    if (armed && s0 < level && s1 >= level) {
+      double tc = t_first + ((double)i + (level - s0) / (s1 - s0)) * dt;
+      if (count == 0) *first = tc;
+      *last = tc;
+      ++count;
+      armed = 0;
+    }
+  }
+  return count;
+}
+
+static void cpgsim_batch_variant(cpgsim_batch_ctx *c, long long v) {
+  cpgsim_batch_job *j = c->job;
+  const long long nx = j->nx, nz = j->nz, n = j->n_steps, n_red = j->n_red;
+  const double *p = j->P + v * j->np;
+  double *rec = j->REC ? j->REC + v * j->n_samp * j->n_rec : 0;
+  double t;
+  long long k, i, status = 0;
+  memcpy(c->x, j->X0 + v * nx, sizeof(double) * nx);
+  memcpy(c->z, j->Z0 + v * nz, sizeof(double) * nz);
+  for (i = 0; i < n_red; ++i) { c->lo[i] = INFINITY; c->hi[i] = -INFINITY; c->sum[i] = 0; c->bad[i] = 0; }
+  c->arg[0] = &t; c->arg[1] = c->x; c->arg[2] = c->z; c->arg[3] = j->U; c->arg[4] = p;
+  c->res[0] = c->xn; c->res[1] = c->zn; c->res[2] = c->y;
+  for (k = 0; k <= n; ++k) {
+    t = j->t0 + (double)k * j->dt;
+    if (cpgsim_step_impl(c->arg, c->res, c->iw, c->w, 0)) { status = 2; break; }
+    if (rec && k % j->every == 0) {
+      double *r = rec + (k / j->every) * j->n_rec;
+      for (i = 0; i < j->n_rec; ++i) r[i] = c->y[j->rec_idx[i]];
+    }
+    if (k >= j->k_win) {
+      double *wrow = j->want_cross ? c->win + (k - j->k_win) * n_red : 0;
+      for (i = 0; i < n_red; ++i) {
+        double s = c->y[j->red_idx[i]];
+        if (!isfinite(s)) { c->bad[i] = 1; continue; }
+        if (s < c->lo[i]) c->lo[i] = s;
+        if (s > c->hi[i]) c->hi[i] = s;
+        c->sum[i] += s;
+        if (wrow) wrow[i] = s;
+      }
+    }
+    if (k == n) {
+      for (i = 0; i < n_red; ++i) c->fin[i] = c->y[j->red_idx[i]];
+      break;
+    }
+    for (i = 0; i < nx; ++i) if (!isfinite(c->xn[i])) break;
+    if (i < nx) { status = 1; j->DIV_STEP[v] = k + 1; j->DIV_STATE[v] = i; break; }
+    memcpy(c->x, c->xn, sizeof(double) * nx);
+    memcpy(c->z, c->zn, sizeof(double) * nz);
+    if ((k & 4095) == 4095 && __atomic_load_n(&j->progress[1], __ATOMIC_RELAXED)) { status = 3; break; }
+  }
+  j->STATUS[v] = status;
+  memcpy(j->XF + v * nx, c->x, sizeof(double) * nx);
+  memcpy(j->ZF + v * nz, c->z, sizeof(double) * nz);
+  if (status != 0) return;  /* reductions stay NaN (the caller fills them so) */
+  for (i = 0; i < n_red; ++i) {
+    double *r = j->RED + (v * n_red + i) * 7;
+    long long cnt = n - j->k_win + 1;
+    if (c->bad[i]) { j->SFLAG[v * n_red + i] |= 1; continue; }
+    r[0] = c->fin[i]; r[1] = c->lo[i]; r[2] = c->hi[i]; r[3] = c->sum[i] / (double)cnt;
+    r[4] = 0.5 * (c->hi[i] - c->lo[i]);
+    if (j->want_cross) {
+      double first = 0, last = 0;
+      long long m = cpgsim_batch_crossings(c->win + i, cnt, n_red, c->lo[i], c->hi[i],
+                                           j->t0 + (double)j->k_win * j->dt, j->dt, &first, &last);
+      r[6] = (double)m;
+      if (m >= 2) r[5] = (last - first) / (double)(m - 1);
+      else j->SFLAG[v * n_red + i] |= 2;
+    }
+  }
+}
+
+static void *cpgsim_batch_worker(void *arg) {
+  cpgsim_batch_job *j = (cpgsim_batch_job *)arg;
+  cpgsim_batch_ctx c;
+  long long v;
+  if (cpgsim_batch_alloc(&c, j)) { __atomic_store_n(&j->error, 1, __ATOMIC_RELAXED); return 0; }
+  for (;;) {
+    v = __atomic_fetch_add(&j->next, 1, __ATOMIC_RELAXED);
+    if (v >= j->n_var) break;
+    if (__atomic_load_n(&j->progress[1], __ATOMIC_RELAXED)) { j->STATUS[v] = 3; continue; }
+    cpgsim_batch_variant(&c, v);
+    __atomic_fetch_add(&j->progress[0], 1, __ATOMIC_RELAXED);
+  }
+  cpgsim_batch_free(&c);
+  return 0;
+}
+
+/* Run every variant on n_threads threads (the caller's thread is one of them); returns the number of
+   threads that ran (fewer when pthread_create fails), or -1 when a thread's buffers could not be allocated. */
+int cpgsim_batch_run(cpgsim_batch_job *j, int n_threads) {
+  pthread_t *tid;
+  int i, started = 0;
+  if (n_threads < 1) n_threads = 1;
+  tid = malloc(sizeof(pthread_t) * n_threads);
+  if (!tid) return -1;
+  for (i = 1; i < n_threads; ++i) {
+    if (pthread_create(&tid[started], 0, cpgsim_batch_worker, j)) break;
+    ++started;
+  }
+  cpgsim_batch_worker(j);
+  for (i = 0; i < started; ++i) pthread_join(tid[i], 0);
+  free(tid);
+  return j->error ? -1 : started + 1;
+}
+"""
+
+_ll = ctypes.c_longlong
+_dp = ctypes.POINTER(ctypes.c_double)
+_lp = ctypes.POINTER(ctypes.c_longlong)
+
+
+class _Job(ctypes.Structure):
+    _fields_ = [("n_var", _ll), ("n_steps", _ll), ("t0", ctypes.c_double), ("dt", ctypes.c_double),
+                ("nx", _ll), ("nz", _ll), ("nu", _ll), ("np", _ll), ("ny", _ll),
+                ("P", _dp), ("X0", _dp), ("Z0", _dp), ("U", _dp),
+                ("n_rec", _ll), ("every", _ll), ("n_samp", _ll), ("rec_idx", _lp), ("REC", _dp),
+                ("n_red", _ll), ("k_win", _ll), ("want_cross", _ll), ("red_idx", _lp), ("RED", _dp), ("SFLAG", _lp),
+                ("STATUS", _lp), ("DIV_STEP", _lp), ("DIV_STATE", _lp), ("XF", _dp), ("ZF", _dp),
+                ("progress", _lp), ("next", _ll), ("error", _ll)]
+
+
+ParamTable = Mapping[str, Any] | Sequence[Mapping[str, Any]]
+
+
+@dataclass
+class BatchResult:
+    """What :func:`simulate_batch` returns (N variants; see the module docstring for the conventions).
+
+    ``params`` and ``x0``: the resolved table (every parameter / state that was set, by its full name,
+    N values each; a glob column appears as each parameter it matched). ``reductions``:
+    ``{"z1.x:amplitude": (N,)}``. ``data``: ``(N, len(time), len(signals))`` when trajectories were
+    recorded, else ``None``. ``status``: one string per variant, ``"ok"`` or what went wrong.
+    ``final_x``/``final_z``: each variant's states at ``t_end`` (its last finite ones if it diverged).
+    """
+
+    params: dict[str, np.ndarray]
+    x0: dict[str, np.ndarray]
+    reductions: dict[str, np.ndarray]
+    signals: list[str]
+    time: np.ndarray | None
+    data: np.ndarray | None
+    status: np.ndarray
+    diverged_at: np.ndarray
+    final_x: np.ndarray
+    final_z: np.ndarray
+    state_names: list[str]
+    dstate_names: list[str]
+    wall_time: float
+    threads: int
+    steps: int
+    dt: float
+    t0: float
+    t_end: float
+    window: float | None
+    graph: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.status)
+
+    @property
+    def ok(self) -> np.ndarray:
+        """``True`` for the variants whose status is ``"ok"``."""
+        return self.status == "ok"
+
+    @property
+    def cost_per_variant_step(self) -> float:
+        """Wall time per simulated step of one variant, in seconds (all threads together)."""
+        return self.wall_time / max(1, self.n * (self.steps + 1))
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        for table in (self.reductions, self.params, self.x0):
+            if name in table:
+                return table[name]
+        if name == "status":
+            return self.status
+        raise KeyError(f"no column {name!r} (reductions: {', '.join(list(self.reductions)[:6])}...)")
+
+    def final_state(self, i: int) -> dict[str, float]:
+        """Variant ``i``'s continuous states at the end of its run, by name."""
+        return dict(zip(self.state_names, map(float, self.final_x[i]), strict=True))
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The result table, one entry per column (N values each): ``variant``, the parameters, the initial
+        states (``x0:<state>``), the reductions and ``status``."""
+        out: dict[str, np.ndarray] = {"variant": np.arange(self.n)}
+        out.update(self.params)
+        out.update({f"x0:{k}": v for k, v in self.x0.items()})
+        out.update(self.reductions)
+        out["status"] = self.status
+        return out
+
+    def meta(self) -> dict[str, Any]:
+        counts: dict[str, int] = {}
+        for s in self.status:
+            key = str(s).split(":")[0].split(" at ")[0]
+            counts[key] = counts.get(key, 0) + 1
+        return {"graph": self.graph, "variants": self.n, "steps": self.steps, "dt": self.dt, "t0": self.t0,
+                "t_end": self.t_end, "window": self.window, "signals": self.signals, "threads": self.threads,
+                "wall_time_s": self.wall_time, "cost_per_variant_step_s": self.cost_per_variant_step,
+                "status_counts": counts, "notes": self.notes,
+                "reduction_definitions": "amplitude = (max - min)/2; period = mean interval between up-crossings "
+                                         "of (max + min)/2 (linear interpolation, hysteresis 0.1 (max - min)); "
+                                         "mean = mean of the samples; over the last `window` seconds"}
+
+    def save(self, path: str | Path) -> list[Path]:
+        """Write atomically by suffix: ``.csv`` (the table, plus ``.meta.json``; recorded trajectories go to
+        ``<stem>.trajectories.npz`` beside it) or ``.npz`` (everything). Returns the files written."""
+        from harness.results import ResultsError, atomic_write
+
+        path = Path(path)
+        if path.suffix not in (".csv", ".npz"):
+            raise ResultsError(f"unknown batch results format {path.suffix!r} for {path} (use .csv or .npz)")
+        cols = self.columns()
+        meta = self.meta()
+        if path.suffix == ".npz":
+            def write_npz(f) -> None:
+                arrays: dict[str, Any] = {"columns": np.array(list(cols)), "status": self.status.astype(str),
+                                          "table": np.column_stack([np.asarray(v, dtype=float)
+                                                                    for k, v in cols.items() if k != "status"]),
+                                          "final_x": self.final_x, "state_names": np.array(self.state_names),
+                                          "meta": json.dumps(meta)}
+                if self.data is not None:
+                    arrays.update(time=self.time, data=self.data, signals=np.array(self.signals))
+                np.savez_compressed(f, **arrays)
+
+            atomic_write(path, write_npz, text=False)
+            return [path]
+        import csv
+
+        written = []
+
+        def write_csv(f) -> None:
+            w = csv.writer(f, lineterminator="\n")
+            w.writerow(list(cols))
+            numeric = [(k, np.asarray(v)) for k, v in cols.items()]
+            for i in range(self.n):
+                w.writerow([str(v[i]) if k == "status" else (int(v[i]) if k == "variant" else _num(v[i]))
+                            for k, v in numeric])
+
+        atomic_write(path, write_csv, text=True)
+        written.append(path)
+        if self.data is not None:
+            traj = path.with_name(path.stem + ".trajectories.npz")
+            atomic_write(traj, lambda f: np.savez_compressed(f, time=self.time, data=self.data,
+                                                             signals=np.array(self.signals)), text=False)
+            meta["trajectories"] = traj.name
+            written.append(traj)
+        meta_path = path.with_suffix(".meta.json")
+        atomic_write(meta_path, lambda f: json.dump(meta, f, indent=2), text=True)
+        written.append(meta_path)
+        return written
+
+
+def _num(v: float) -> str:
+    return repr(float(v)) if math.isfinite(v) else ("nan" if v != v else ("inf" if v > 0 else "-inf"))
+
+
+def available_threads() -> int:
+    """CPUs this process may run on (``os.sched_getaffinity``), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float, dt: float = 1e-3,
+                   record: Sequence[str] | None = None, every: int | None = None,
+                   reduce: Sequence[str] | str | None = None, window: float | None = None,
+                   threads: int | None = None, x0: ParamTable | None = None, t0: float = 0.0, substeps: int = 1,
+                   progress: Callable[[int, int], None] | None = None) -> BatchResult:
+    """Run N variants of ``graph`` (one per row of ``params``) from ``t0`` to ``t_end`` in one compiled loop.
+
+    ``params``: ``{"block.param": N values}`` (a scalar is used for every row) or a list of N dicts (a
+    key missing from a row keeps the graph's value); globs as in ``Graph.set_param`` (``"*.eps"``); every
+    value is validated against the parameter's range. ``x0``: initial states the same way
+    (``{"z1.x": N values}``; continuous or discrete states by name). ``record``: glob patterns over
+    signal names (and exposed graph outputs) choosing the signals (default: all). ``every``: keep the
+    chosen signals every ``every`` steps (default: every step when no ``reduce`` is asked, else no
+    trajectories). ``reduce``: names from :data:`REDUCTIONS` (a list or ``"amplitude,period"``),
+    computed over the last ``window`` seconds (default: the second half of the run). ``threads``:
+    default the CPUs available to the process. ``progress(done, n)`` is called from the caller's thread
+    about 5 times a second while the variants run. The graph is not modified.
+
+    Equation blocks only; free graph inputs are held at their declared defaults (one without a default
+    is an error). Raises :class:`~components.core.ModelError` for bad input before anything runs, and
+    :class:`harness.native.NativeUnavailable` when no C compiler works.
+    """
+    from harness.native import step_library
+
+    model = compile_graph(graph, dt, substeps)
+    cs = model.flat.cosim_blocks()
+    if cs:
+        raise ModelError(f"simulate_batch runs equation blocks only; graph {model.name!r} has co-simulation "
+                         f"block(s) {', '.join(cs)} (run them one by one with Simulator)")
+    u = _held_inputs(model)
+    n = horizon_steps(t0, t_end, dt)
+    p_in, n_p = _as_columns(params, "params")
+    x_in, n_x = _as_columns(x0, "x0")
+    N = _row_count(n_p, n_x)
+    p_table, p_cols, notes = _param_table(model, p_in, N)
+    x_table, z_table, x_cols = _state_table(model, x_in, N)
+    P = _broadcast(p_table, model.p0, N)
+    X0 = _broadcast(x_table, model.x0, N)
+    Z0 = _broadcast(z_table, model.z0, N)
+    signals, sig_idx = _select_signals(model, record)
+    reds = _reductions(reduce)
+    if every is None:
+        every = 0 if reds else 1
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 0:
+        raise ModelError(f"every must be a positive whole number of steps (0: no trajectories), got {every!r}")
+    every = int(every)
+    if not reds and every == 0:
+        raise ModelError("nothing to record: give reduce=[...] or every >= 1")
+    k_win, win_s = _window(window, n, dt) if reds else (n + 1, None)
+    want_cross = any(r in ("period", "crossings") for r in reds)
+    n_samp = n // every + 1 if every else 0
+    if threads is not None and (isinstance(threads, bool) or int(threads) != threads or threads < 1):
+        raise ModelError(f"threads must be a positive integer, got {threads!r}")
+    n_threads = max(1, min(int(threads) if threads is not None else available_threads(), N))
+    _check_memory(N, n_samp, len(signals) if every else 0, n_threads, (n - k_win + 1) * len(signals)
+                  if want_cross else 0)
+    lib = ctypes.CDLL(str(step_library(model.step, BATCH_DRIVER, "cpgsim_batch")))
+    run = lib.cpgsim_batch_run
+    run.argtypes = [ctypes.POINTER(_Job), ctypes.c_int]
+    run.restype = ctypes.c_int
+
+    nr = len(signals) if reds else 0
+    REC = np.full((N, n_samp, len(signals)), np.nan) if every else None
+    RED = np.full((N, nr, 7), np.nan)
+    SFLAG = np.zeros((N, nr), dtype=np.int64)
+    STATUS = np.full(N, _STATUS_NOT_RUN, dtype=np.int64)
+    DIV_STEP = np.full(N, -1, dtype=np.int64)
+    DIV_STATE = np.full(N, -1, dtype=np.int64)
+    XF, ZF = np.zeros((N, model.states.size)), np.zeros((N, model.dstates.size))
+    prog = np.zeros(2, dtype=np.int64)
+    idx = np.asarray(sig_idx, dtype=np.int64)
+
+    def ptr(a, kind=_dp):
+        return ctypes.cast(a.ctypes.data, kind) if a is not None and a.size else ctypes.cast(_spare.ctypes.data, kind)
+
+    _spare = np.zeros(1, dtype=np.float64)
+    job = _Job(N, n, float(t0), float(dt), model.states.size, model.dstates.size, u.size, model.params.size,
+               model.signals_layout.size, ptr(P), ptr(X0), ptr(Z0), ptr(u),
+               len(signals) if every else 0, max(every, 1), n_samp, ptr(idx, _lp), ptr(REC) if every else None,
+               nr, k_win, int(want_cross), ptr(idx, _lp), ptr(RED), ptr(SFLAG, _lp),
+               ptr(STATUS, _lp), ptr(DIV_STEP, _lp), ptr(DIV_STATE, _lp), ptr(XF), ptr(ZF),
+               ptr(prog, _lp), 0, 0)
+    out: dict[str, int] = {}
+
+    def target() -> None:
+        out["threads"] = run(ctypes.byref(job), n_threads)
+
+    start = time.perf_counter()
+    worker = threading.Thread(target=target, name="cpgsim-batch", daemon=True)
+    worker.start()
+    try:
+        while worker.is_alive():
+            worker.join(0.2)
+            if progress is not None:
+                progress(int(prog[0]), N)
+    except BaseException:
+        prog[1] = 1  # the workers stop at their next check (every 4096 steps)
+        worker.join()
+        raise
+    wall = time.perf_counter() - start
+    used = out.get("threads", -1)
+    if used < 0:
+        raise MemoryError(f"simulate_batch: could not allocate the work buffers of {n_threads} thread(s)")
+    status, div_t = _statuses(model, signals, reds, STATUS, DIV_STEP, DIV_STATE, SFLAG, t0, dt)
+    reductions = {}
+    for j, sig in enumerate(signals if reds else []):
+        for r in reds:
+            reductions[f"{sig}:{r}"] = RED[:, j, REDUCTIONS.index(r)].copy()
+    times = t0 + dt * (every * np.arange(n_samp)) if every else None  # = Simulator's times[::every]
+    return BatchResult(params=p_cols, x0=x_cols, reductions=reductions, signals=list(signals), time=times,
+                       data=REC, status=status, diverged_at=div_t, final_x=XF, final_z=ZF,
+                       state_names=model.states.names(), dstate_names=model.dstates.names(), wall_time=wall,
+                       threads=used, steps=n, dt=dt, t0=t0, t_end=t0 + n * dt, window=win_s, graph=model.name,
+                       notes=notes)
+
+
+# -- input checks and tables ---------------------------------------------------------------------------
+
+def _held_inputs(model: CompiledModel) -> np.ndarray:
+    u = np.zeros(model.inputs.size)
+    for name, port in model.free_inputs.items():
+        if port.default is None:
+            raise ModelError(f"graph input {name!r} is free: simulate_batch needs a graph whose inputs are "
+                             f"connected or declare a default")
+        u[model.inputs.index("$" + name).slice] = port.default_values()
+    return u
+
+
+def _as_columns(table: ParamTable | None, what: str) -> tuple[dict[str, Any], int | None]:
+    """A mapping of columns or a list of row dicts -> ``({key: list of values or a scalar}, rows)``.
+
+    In a mapping a scalar value is one value for every row; in a list of dicts a key missing from a row
+    is ``None`` there (the graph's value). ``rows`` is ``None`` when every column is a scalar.
+    """
+    if table is None:
+        return {}, None
+    if isinstance(table, Mapping):
+        cols: dict[str, Any] = {}
+        n = None
+        for key, values in table.items():
+            if isinstance(values, (str, bytes)) or np.ndim(values) == 0:
+                cols[str(key)] = values
+                continue
+            seq = list(values)
+            if n is not None and len(seq) != n:
+                raise ModelError(f"{what} column {key!r} has {len(seq)} values, the columns before it {n}")
+            n = len(seq)
+            cols[str(key)] = seq
+        return cols, n
+    if isinstance(table, (str, bytes)) or not isinstance(table, Sequence):
+        raise ModelError(f"{what} must be a mapping of columns or a list of dicts, got {type(table).__name__}")
+    rows = list(table)
+    keys: list[str] = []
+    for i, row in enumerate(rows):
+        if not isinstance(row, Mapping):
+            raise ModelError(f"{what} row {i} is {type(row).__name__}, not a dict")
+        keys += [str(k) for k in row if str(k) not in keys]
+    return {k: [row.get(k) for row in rows] for k in keys}, len(rows)
+
+
+def _row_count(n_p: int | None, n_x: int | None) -> int:
+    if n_p is not None and n_x is not None and n_p != n_x:
+        raise ModelError(f"the parameter table has {n_p} rows but the x0 table {n_x}")
+    n = n_p if n_p is not None else (n_x if n_x is not None else 1)
+    if n < 1:
+        raise ModelError("the parameter table has no rows")
+    return n
+
+
+def _column(values: Any, N: int) -> list[Any]:
+    return list(values) if isinstance(values, list) else [values] * N
+
+
+def _param_table(model: CompiledModel, cols: dict[str, Any], N: int
+                 ) -> tuple[dict[int, np.ndarray], dict[str, np.ndarray], list[str]]:
+    """Columns -> ``{p index: N values}``, the resolved named table and notes (later columns win)."""
+    names = model.params.names()
+    by_index: dict[int, list[Any]] = {}
+    notes: list[str] = []
+    for key, values in cols.items():
+        matches = [nm for nm in names if fnmatch.fnmatchcase(nm, key)]
+        if not matches:
+            near = difflib.get_close_matches(key, names, n=3, cutoff=0.6)
+            raise ParameterError(f"graph {model.name!r} has no parameter matching {key!r}"
+                                 + (f" (did you mean {', '.join(near)}?)" if near else
+                                    f" (parameters: {', '.join(names[:8])}{'...' if len(names) > 8 else ''})"))
+        for nm in matches:
+            by_index[model.params.index(nm).start] = _column(values, N)
+    used = _used_parameters(model, list(by_index))
+    out: dict[int, np.ndarray] = {}
+    named: dict[str, np.ndarray] = {}
+    for pi in sorted(by_index):
+        nm = names[pi]
+        block_path, pname = nm.rsplit(".", 1)
+        par = model.flat.blocks[block_path].parameters[pname]
+        arr = _numbers(by_index[pi], model.p0[pi], nm)
+        _validate(par, block_path, arr)
+        out[pi] = arr
+        named[nm] = arr
+        if not used[pi]:
+            msg = (f"parameter {nm} does not enter the compiled equations (unused, or simplified away for the "
+                   f"graph's constant inputs): varying it changes nothing")
+            notes.append(msg)
+            warnings.warn(msg, stacklevel=3)
+    return out, named, notes
+
+
+def _used_parameters(model: CompiledModel, indices: list[int]) -> dict[int, bool]:
+    """Whether the step depends on each of these parameters (structurally)."""
+    if not indices:
+        return {}
+    try:
+        dep = model.step.which_depends("p", ["x_next", "z_next", "y"], 1, False)
+    except Exception:  # noqa: BLE001 - an old CasADi: assume every parameter is used
+        return dict.fromkeys(indices, True)
+    return {i: bool(dep[i]) for i in indices}
+
+
+def _numbers(values: list[Any], default: float, name: str) -> np.ndarray:
+    """A column as floats, ``None`` -> ``default``; a value that is not a number names its row."""
+    try:
+        if not any(v is None or isinstance(v, (str, bytes)) for v in values):
+            return np.asarray(values, dtype=float).reshape(len(values))
+    except (TypeError, ValueError):
+        pass
+    return np.array([default if v is None else _number(v, name, i) for i, v in enumerate(values)])
+
+
+def _number(v: Any, name: str, row: int) -> float:
+    if isinstance(v, bool):
+        return float(v)
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        raise ParameterError(f"row {row}: {name} = {v!r} is not a number") from None
+
+
+def _validate(par, owner: str, arr: np.ndarray) -> None:
+    """Every value within the parameter's range (vectorised); the first bad one raises ``Parameter.validate``'s
+    message with its row."""
+    lo, hi = par.bounds
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(arr) & (((arr > lo) & (arr < hi)) if par.strict else ((arr >= lo) & (arr <= hi)))
+        if par.kind in ("integer", "boolean"):
+            ok &= arr == np.round(arr)
+    if not ok.all():
+        i = int(np.argmin(ok))
+        try:
+            par.validate(float(arr[i]), owner=owner)
+        except ParameterError as exc:
+            raise ParameterError(f"row {i}: {exc}") from None
+        raise ParameterError(f"row {i}: parameter {owner}.{par.name} = {arr[i]!r} is not valid")  # pragma: no cover
+
+
+def _state_table(model: CompiledModel, cols: dict[str, Any], N: int
+                 ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray], dict[str, np.ndarray]]:
+    xt: dict[int, np.ndarray] = {}
+    zt: dict[int, np.ndarray] = {}
+    named: dict[str, np.ndarray] = {}
+    for key, values in cols.items():
+        if key in model.states:
+            layout, table, start = model.states, xt, model.x0
+        elif key in model.dstates:
+            layout, table, start = model.dstates, zt, model.z0
+        else:
+            names = model.states.names() + model.dstates.names()
+            raise ParameterError(f"x0: graph {model.name!r} has no state {key!r} (states: {', '.join(names[:8])}"
+                                 f"{'...' if len(names) > 8 else ''})")
+        slot = layout.index(key)
+        rows = _column(values, N)
+        for e in range(slot.size):
+            arr = []
+            for i, v in enumerate(rows):
+                if v is None:
+                    arr.append(start[slot.start + e])
+                    continue
+                vv = np.atleast_1d(np.asarray(v, dtype=object)).ravel()
+                if vv.size != slot.size:
+                    raise ParameterError(f"x0 row {i}: {key} needs {slot.size} value(s), got {v!r}")
+                arr.append(_number(vv[e], key, i))
+            a = np.array(arr, dtype=float)
+            if not np.all(np.isfinite(a)):
+                i = int(np.argmin(np.isfinite(a)))
+                raise ParameterError(f"x0 row {i}: initial value of {key} must be finite, got {a[i]}")
+            table[slot.start + e] = a
+            named[slot.element_names()[e]] = a
+    return xt, zt, named
+
+
+def _broadcast(table: dict[int, np.ndarray], base: np.ndarray, N: int) -> np.ndarray:
+    out = np.tile(np.asarray(base, dtype=float), (N, 1)) if base.size else np.zeros((N, 0))
+    for i, values in table.items():
+        out[:, i] = values
+    return np.ascontiguousarray(out)
+
+
+def _select_signals(model: CompiledModel, record: Sequence[str] | None) -> tuple[list[str], list[int]]:
+    """Element names and indices in ``y`` of the chosen signals (all without patterns)."""
+    names, idx = [], []
+    for slot in model.signals_layout.slots:
+        for i, nm in enumerate(slot.element_names()):
+            names.append(nm)
+            idx.append(slot.start + i)
+    if not record:
+        return names, idx
+    if isinstance(record, str):
+        record = [record]
+    aliases = dict(model.graph_outputs)
+    wanted = {leaf for alias, leaf in aliases.items() if any(fnmatch.fnmatchcase(alias, pat) for pat in record)}
+    keep = [j for j, nm in enumerate(names)
+            if nm.split("[")[0] in wanted
+            or any(fnmatch.fnmatchcase(nm, pat) or fnmatch.fnmatchcase(nm.split("[")[0], pat) for pat in record)]
+    if not keep:
+        raise ModelError(f"record patterns {list(record)} match no signal of {model.name!r} "
+                         f"(signals: {', '.join(names[:8])}{'...' if len(names) > 8 else ''})")
+    return [names[j] for j in keep], [idx[j] for j in keep]
+
+
+def _reductions(reduce: Sequence[str] | str | None) -> list[str]:
+    if reduce is None:
+        return []
+    items = reduce.split(",") if isinstance(reduce, str) else list(reduce)
+    out = []
+    for r in (str(x).strip() for x in items):
+        if r not in REDUCTIONS:
+            raise ModelError(f"unknown reduction {r!r}; use any of {', '.join(REDUCTIONS)}")
+        if r not in out:
+            out.append(r)
+    if not out:
+        raise ModelError(f"reduce lists no reduction; use any of {', '.join(REDUCTIONS)}")
+    return out
+
+
+def _window(window: float | None, n: int, dt: float) -> tuple[int, float]:
+    """First sample index of the reduction window and its length in seconds."""
+    if window is None:
+        w = n // 2
+    else:
+        if not (isinstance(window, (int, float)) and math.isfinite(window) and window > 0):
+            raise ModelError(f"window must be a positive number of seconds, got {window!r}")
+        steps = window / dt
+        w = int(round(steps))
+        if abs(steps - w) > 1e-9 * max(1.0, steps):
+            raise ModelError(f"window={window:g} s is not a whole number of steps dt={dt:g} s")
+        if w > n:
+            raise ModelError(f"window={window:g} s is longer than the run ({n * dt:g} s)")
+    w = max(w, 1)
+    return n - w, w * dt
+
+
+def _check_memory(N: int, n_samp: int, n_sig: int, threads: int, window_values: int, fraction: float = 0.5) -> None:
+    need_rec = 8.0 * N * n_samp * n_sig
+    need = need_rec + 8.0 * threads * window_values
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return
+    if need > fraction * total:
+        raise ModelError(
+            f"recording {N} variants x {n_samp} samples x {n_sig} signals ({need_rec / 2**30:.1f} GiB) plus "
+            f"{threads} window buffer(s) of {window_values} values needs {need / 2**30:.1f} GiB, more than "
+            f"{fraction:.0%} of this machine's {total / 2**30:.1f} GiB (record fewer signals, a larger every, "
+            f"or use reductions only)")
+
+
+def _statuses(model: CompiledModel, signals: list[str], reds: list[str], STATUS, DIV_STEP, DIV_STATE, SFLAG,
+              t0: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    names = model.states.names()
+    out = []
+    div_t = np.full(len(STATUS), np.nan)
+    for v, code in enumerate(STATUS):
+        if code == _STATUS_DIVERGED:
+            div_t[v] = t0 + DIV_STEP[v] * dt
+            out.append(f"diverged at t={div_t[v]:.6g} s ({names[DIV_STATE[v]]} not finite)")
+        elif code == _STATUS_EVAL_ERROR:
+            out.append("evaluation error")
+        elif code == _STATUS_NOT_RUN:
+            out.append("not run (interrupted)")
+        else:
+            parts = []
+            bad = [signals[j] for j in np.nonzero(SFLAG[v] & _FLAG_NONFINITE)[0]] if reds else []
+            nocyc = [signals[j] for j in np.nonzero(SFLAG[v] & _FLAG_NO_CYCLE)[0]] if "period" in reds else []
+            if bad:
+                parts.append("non-finite in window: " + " ".join(bad))
+            if nocyc:
+                parts.append("no cycle in window: " + " ".join(nocyc))
+            out.append("; ".join(parts) if parts else "ok")
+    return np.array(out, dtype=object), div_t

@@ -452,7 +452,7 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     n_threads = max(1, min(int(threads) if threads is not None else available_threads(), N))
     _check_memory(N, n_samp, len(signals) if every else 0, n_threads, (n - k_win + 1) * len(signals)
                   if want_cross else 0)
-    lib = ctypes.CDLL(str(step_library(model.step, BATCH_DRIVER, "cpgsim_batch")))
+    lib = ctypes.CDLL(str(step_library(model.step, BATCH_DRIVER, "cpgsim_batch", model.c_step_source())))
     run = lib.cpgsim_batch_run
     run.argtypes = [ctypes.POINTER(_Job), ctypes.c_int]
     run.restype = ctypes.c_int

@@ -633,11 +633,10 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     names: dict[int, str] = {}
     for gi, g in enumerate(groups):
         names[id(g)] = f"cg{gi}"
-        parts.append(_c_tables(f"cg{gi}", g))
-        parts.append(_c_group_loop(f"cg{gi}", g))
-    n_pool = s.pool_size
+        parts.append(_c_tables(f"cg{gi}", g, s.n_sig))
+        parts.append(_c_group_loop(f"cg{gi}", g, s.n_sig))
     def calls(gs) -> str:
-        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, pool, x_out, z_out);" for g in gs)
+        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
 
     read = s.groups_read_by_derivatives()
     level_calls = calls(g for lv in s.signal_levels for g in lv)
@@ -646,72 +645,86 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     disc_calls = calls(s.discrete_groups)
     h = dt / substeps
     nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
+    if s.has_discrete:
+        start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
+                 "  cpgsim_signals(t0, x, z, p, Sw, E);\n  cpgsim_discrete(t0, x, z, p, Sw, E, xa, zb);\n"
+                 "  xp = xa; zp = zb;")
+    else:
+        start = "xp = x; zp = z;"
     parts.append(f"""
+/* S: the signals (model signal order); E: external inputs, then one zero (see the group tables) */
+
 /* every signal (for the recorded y and the sampled update) */
-static void cpgsim_signals(double t, const double *x, const double *z, const double *p, double *pool) {{
+static void cpgsim_signals(double t, const double *x, const double *z, const double *p, double *S, const double *E) {{
   double *x_out = 0, *z_out = 0;
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
 {level_calls}
 }}
 
 /* only the signals that derivatives read, directly or through other signals (inner RK4 stages) */
-static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *pool) {{
+static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *S,
+                                const double *E) {{
   double *x_out = 0, *z_out = 0;
-  (void)t; (void)x; (void)z; (void)p; (void)pool; (void)x_out; (void)z_out;
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
 {inner_calls}
 }}
 
-static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, double *pool,
+static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, double *S, const double *E,
                         double *x_out) {{
   double *z_out = 0;
+  (void)z_out;
 {deriv_calls}
 }}
 
-static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, double *pool,
-                            double *x_out, double *z_out) {{
+static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, double *S,
+                            const double *E, double *x_out, double *z_out) {{
 {disc_calls}
 }}
 
 #define CPGSIM_NX {max(nx, 1)}
 #define CPGSIM_NZ {max(nz, 1)}
-#define CPGSIM_POOL {n_pool}
+#define CPGSIM_NSIG {max(nsig, 1)}
+#define CPGSIM_NE {nu + 1}
 
 int cpgsim_step_impl_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {{
   *sz_arg = 5; *sz_res = 3; *sz_iw = 0;
-  *sz_w = CPGSIM_POOL + 7 * CPGSIM_NX + CPGSIM_NZ;
+  *sz_w = CPGSIM_NSIG + CPGSIM_NE + 7 * CPGSIM_NX + CPGSIM_NZ;
   return 0;
 }}
 
+/* One macro step (Yu/Fukuhara blocks or any other): sampled update, then {substeps} RK4 substep(s);
+   y = the signals after the update at t0. Same arithmetic, in the same order, as the flat compile. */
 int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {{
   const double t0 = arg[0] ? arg[0][0] : 0.0;
   const double *x = arg[1], *z = arg[2], *u = arg[3], *p = arg[4];
-  double *pool = w, *xp = pool + CPGSIM_POOL, *k1 = xp + CPGSIM_NX, *k2 = k1 + CPGSIM_NX, *k3 = k2 + CPGSIM_NX;
-  double *k4 = k3 + CPGSIM_NX, *xs = k4 + CPGSIM_NX, *xc = xs + CPGSIM_NX, *zp = xc + CPGSIM_NX;
+  double *Sw = w, *E = Sw + CPGSIM_NSIG, *xa = E + CPGSIM_NE, *xb = xa + CPGSIM_NX, *k1 = xb + CPGSIM_NX;
+  double *k2 = k1 + CPGSIM_NX, *k3 = k2 + CPGSIM_NX, *k4 = k3 + CPGSIM_NX, *xs = k4 + CPGSIM_NX, *zb = xs + CPGSIM_NX;
+  double *S = res[2] ? res[2] : Sw, *xn;
+  const double *xp, *zp;
   long i;
   int s;
-  (void)iw; (void)mem;
-  for (i = 0; i < {nu}; ++i) pool[{nsig} + i] = u[i];
-  pool[{nsig + nu}] = 0.0;
-  for (i = 0; i < {nx}; ++i) xp[i] = x[i];
-  for (i = 0; i < {nz}; ++i) zp[i] = z[i];
-  {"cpgsim_signals(t0, x, z, p, pool); cpgsim_discrete(t0, x, z, p, pool, xp, zp);" if s.has_discrete else ""}
+  (void)iw; (void)mem; (void)xb; (void)zb;
+  for (i = 0; i < {nu}; ++i) E[i] = u[i];
+  E[{nu}] = 0.0;
+  {start}
   for (s = 0; s < {substeps}; ++s) {{
     const double ti = t0 + s * {h!r};
-    if (s == 0) cpgsim_signals(ti, xp, zp, p, pool); else cpgsim_signals_read(ti, xp, zp, p, pool);
-    if (s == 0 && res[2]) for (i = 0; i < {nsig}; ++i) res[2][i] = pool[i];
-    cpgsim_xdot(ti, xp, zp, p, pool, k1);
+    xn = (s == {substeps - 1} && res[0]) ? res[0] : (s % 2 ? xa : xb);
+    if (s == 0) {{ cpgsim_signals(ti, xp, zp, p, S, E); cpgsim_xdot(ti, xp, zp, p, S, E, k1); }}
+    else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1); }}
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
-    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, pool);
-    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, pool, k2);
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k2);
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k2[i];
-    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, pool);
-    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, pool, k3);
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k3);
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h!r} * k3[i];
-    cpgsim_signals_read(ti + {h!r}, xs, zp, p, pool);
-    cpgsim_xdot(ti + {h!r}, xs, zp, p, pool, k4);
-    for (i = 0; i < {nx}; ++i) xc[i] = xp[i] + {h / 6!r} * (((k1[i] + 2. * k2[i]) + 2. * k3[i]) + k4[i]);
-    for (i = 0; i < {nx}; ++i) xp[i] = xc[i];
+    cpgsim_signals_read(ti + {h!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h!r}, xs, zp, p, Sw, E, k4);
+    for (i = 0; i < {nx}; ++i) xn[i] = xp[i] + {h / 6!r} * (((k1[i] + 2. * k2[i]) + 2. * k3[i]) + k4[i]);
+    xp = xn;
   }}
-  if (res[0]) for (i = 0; i < {nx}; ++i) res[0][i] = xp[i];
+  if (res[0] && xp != res[0]) for (i = 0; i < {nx}; ++i) res[0][i] = xp[i];
   if (res[1]) for (i = 0; i < {nz}; ++i) res[1][i] = zp[i];
   return 0;
 }}
@@ -724,43 +737,70 @@ def _c_array(name: str, values: np.ndarray) -> str:
     return f"static const long long {name}[] = {{{vals}}};\n"
 
 
-def _c_tables(tag: str, g: Group) -> str:
+def _input_columns(g: Group, n_sig: int) -> tuple[np.ndarray, list[str]]:
+    """Per input column: where it reads ("S" signals, "E" external, "SE" mixed) and the table to read it with."""
+    ui = g.u_idx.copy()
+    modes = []
+    for j in range(ui.shape[1]):
+        col = g.u_idx[:, j]
+        if np.all(col < n_sig):
+            modes.append("S")
+        elif np.all(col >= n_sig):
+            modes.append("E")
+            ui[:, j] = col - n_sig
+        else:
+            modes.append("SE")
+    return ui, modes
+
+
+def _c_tables(tag: str, g: Group, n_sig: int) -> str:
+    ui, _ = _input_columns(g, n_sig)
     out = [_c_array(f"{tag}_xo", g.x_off), _c_array(f"{tag}_zo", g.z_off), _c_array(f"{tag}_po", g.p_off),
-           _c_array(f"{tag}_ui", g.u_idx)]
+           _c_array(f"{tag}_ui", ui)]
     for k, off in enumerate(g.out_off):
         if g.out_target[k] == "pool":
             out.append(_c_array(f"{tag}_o{k}", off))
     return "".join(out)
 
 
-def _c_group_loop(tag: str, g: Group) -> str:
+def _c_group_loop(tag: str, g: Group, n_sig: int) -> str:
     nu = g.u_idx.shape[1]
+    _, modes = _input_columns(g, n_sig)
     fname = g.fn.name()
     res_lines = []
     for k, what in enumerate(g.out_target):
         if what == "pool":
-            res_lines.append(f"    res[{k}] = pool + {tag}_o{k}[i];")
+            res_lines.append(f"    res[{k}] = S + {tag}_o{k}[i];")
         elif what == "x":
             res_lines.append(f"    res[{k}] = x_out + {tag}_xo[i];")
         else:
             res_lines.append(f"    res[{k}] = z_out + {tag}_zo[i];")
+    gathers = []
+    for j, mode in enumerate(modes):
+        ref = f"{tag}_ui[i * {nu} + {j}]"
+        if mode == "S":
+            gathers.append(f"    ub[{j}] = S[{ref}];")
+        elif mode == "E":
+            gathers.append(f"    ub[{j}] = E[{ref}];")
+        else:
+            gathers.append(f"    {{ long long k = {ref}; ub[{j}] = k < {n_sig} ? S[k] : E[k - {n_sig}]; }}")
     n_res = max(1, len(g.out_target))
+    nl = "\n"
     return f"""
-static void {tag}_run(double t, const double *x, const double *z, const double *p, double *pool,
+static void {tag}_run(double t, const double *x, const double *z, const double *p, double *S, const double *E,
                      double *x_out, double *z_out) {{
   long i;
-  int j;
   double ub[{max(nu, 1)}];
   const double *arg[5];
   double *res[{n_res}];
   double w[{max(1, g.fn.sz_w())}];
   long long iw[{max(1, g.fn.sz_iw())}];
-  (void)x_out; (void)z_out; (void)j;
+  (void)x_out; (void)z_out; (void)S; (void)E;
   arg[0] = &t; arg[3] = ub;
   for (i = 0; i < {g.n}; ++i) {{
-    for (j = 0; j < {nu}; ++j) ub[j] = pool[{tag}_ui[i * {max(nu, 1)} + j]];
+{nl.join(gathers)}
     arg[1] = x + {tag}_xo[i]; arg[2] = z + {tag}_zo[i]; arg[4] = p + {tag}_po[i];
-{chr(10).join(res_lines)}
+{nl.join(res_lines)}
     {fname}(arg, res, iw, w, 0);
   }}
 }}

@@ -95,7 +95,7 @@ class Port:
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.shape))
+        return math.prod(self.shape)
 
     def default_values(self) -> np.ndarray | None:
         """The default as ``size`` numbers (None without a default)."""

@@ -58,8 +58,11 @@ class Layout:
     slots: list[Slot] = field(default_factory=list)
 
     def add(self, name: str, size: int, unit: str = "1", kind: str = "real", description: str = "") -> Slot:
-        slot = Slot(name, self.size, size, unit, kind, description)
+        cached = self.__dict__.get("_end")  # (slot count, end) after the last add: O(1) appends
+        end = cached[1] if cached is not None and cached[0] == len(self.slots) else self.size
+        slot = Slot(name, end, size, unit, kind, description)
         self.slots.append(slot)
+        self.__dict__["_end"] = (len(self.slots), end + size)
         return slot
 
     @property

@@ -176,7 +176,7 @@ def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
     decl = (tuple((k, s.size) for k, s in blk.states.items()),
             tuple((k, s.size) for k, s in blk.discrete_states.items()),
             tuple(blk.parameters),
-            tuple((k, p.size, p.kind, None if p.default is None else tuple(p.default_values()))
+            tuple((k, p.size, p.kind, p.default)
                   for k, p in blk.inputs.items()),
             tuple((k, p.size) for k, p in blk.outputs.items()))
     return (f"{type(blk).__module__}.{type(blk).__qualname__}", attrs, decl, connected)

@@ -306,10 +306,12 @@ class Simulator:
         n = len(times) - 1
         y_idx = np.array([i for _, i, _ in picks], dtype=np.int64)
         bar = _progress(n, progress, m.name)
+        # the C loop takes the whole horizon in one call unless a progress bar or a stream needs rows sooner
+        chunk = self.chunk if (progress or self._native() is None) else n
         k = 0
         try:
             while k < n:
-                c = min(self.chunk, n - k, rec.flush_rows if rec.writer is not None else n)
+                c = min(chunk, n - k, rec.flush_rows if rec.writer is not None else n)
                 x_new, z_new, bad = self._run_chunk(k, c, times, x, z, p, u_free, y_idx, rec.data[rec.n:rec.n + c])
                 if bad >= 0:
                     rec.commit_rows(bad + 1)

@@ -43,7 +43,8 @@ def _c_source(fn: ca.Function, tmp_path) -> str:
 
 @pytest.mark.parametrize("name", list(BLOCKS))
 def test_block_compiles_to_one_sx_step(name, tmp_path):
-    model = compile_graph(BLOCKS[name](), dt=1e-3)
+    """The flat compile (what the FMU exporter and the verifier use) is one SX function, no callbacks."""
+    model = compile_graph(BLOCKS[name](), dt=1e-3, grouping="flat")
     step = model.step
     assert step.is_a("SXFunction") and not step.has_free()
     src = _c_source(step, tmp_path)

@@ -57,8 +57,9 @@ class Simulator:
     only the columns matching these glob patterns; ``order`` is the co-simulation order;
     ``backend`` picks how an equation-only horizon runs: ``"native"`` (the step's C code from
     CasADi looped in C, :mod:`harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
-    when a C compiler works). ``jit`` compiles the per-step function used by the co-simulation
-    master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
+    when a C compiler works). ``grouping`` is :func:`~harness.compile.compile_graph`'s (``"auto"``:
+    identical instances looped from 64 equation blocks on). ``jit`` compiles the per-step function used by
+    the co-simulation master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
     worker thread (:class:`harness.native.ThreadedStep`); ``None`` (default) keeps it on the master's
     thread unless the environment sets ``CPGSIM_STEP_THREAD=1``. The worker pays on an idle machine
     (1.0-1.4x faster robot runs) but its hand-off busy-waits, which on a loaded machine takes the core the
@@ -70,7 +71,7 @@ class Simulator:
                  params: Mapping[str, Any] | None = None, record: Sequence[str] | None = None,
                  order: Literal["jacobi", "gauss-seidel"] = "jacobi", jit: bool = False,
                  backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000,
-                 step_thread: bool | None = None) -> None:
+                 step_thread: bool | None = None, grouping: Literal["auto", "flat", "kinds"] = "auto") -> None:
         if order not in ("jacobi", "gauss-seidel"):
             raise ModelError(f"co-simulation order must be 'jacobi' or 'gauss-seidel', got {order!r}")
         if isinstance(graph, Graph) and params:
@@ -78,7 +79,7 @@ class Simulator:
                 graph.set_param(path, value)
         elif params:
             graph.set(**params)
-        self.model: CompiledModel = compile_graph(graph, dt, substeps)
+        self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping)
         if backend not in ("auto", "native", "casadi"):
             raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")
         self.order = order

@@ -15,7 +15,10 @@ The harness time is split into the plant block's own Python around ``world.step(
 ("master+ctl": the master loop, waiting for the controller step, recording). ``--profile`` adds a
 cProfile breakdown of one more run.
 
-Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile]``.
+``--grouping`` instead compares the controller compiled grouped (the default, :mod:`harness.grouped`)
+and flat, both on the master thread.
+
+Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile] [--grouping]``.
 """
 
 from __future__ import annotations
@@ -86,10 +89,11 @@ def _timed(method, proxy: TimedWorld):
 
 
 def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
-          step_thread: bool = True) -> dict[str, float]:
+          step_thread: bool = True, grouping: str = "auto") -> dict[str, float]:
     t0 = time.perf_counter()
     setup = build_scenario(scenario, {})
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread).prepare()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread,
+                    grouping=grouping).prepare()  # type: ignore[arg-type]
     t_prepare = time.perf_counter() - t0
     proxies = _instrument(setup.graph)
     prof = cProfile.Profile() if profile else None
@@ -142,6 +146,16 @@ def measure(seconds: float, repeat: int) -> dict[str, list[dict[str, float]]]:
     return runs
 
 
+def measure_grouping(seconds: float, repeat: int) -> dict[str, list[dict[str, float]]]:
+    """The controller compiled grouped (the default for its 80 blocks) and flat, master thread, interleaved."""
+    modes = {"controller grouped (default)": "kinds", "controller flat": "flat"}
+    runs: dict[str, list[dict[str, float]]] = {m: [] for m in modes}
+    for _ in range(repeat):
+        for mode, grouping in modes.items():
+            runs[mode].append(bench(seconds, step_thread=False, grouping=grouping))
+    return runs
+
+
 def report(label: str, runs: dict[str, list[dict[str, float]]]) -> float:
     us = 1e6
     print(f"  {label}:")
@@ -157,7 +171,8 @@ def report(label: str, runs: dict[str, list[dict[str, float]]]) -> float:
         print(f"  {'':27s} real time per run: " + ", ".join(f"{r['rtf']:.2f}x" for r in rs)
               + "; share: " + ", ".join(f"{r['share']:.0%}" for r in rs))
     a, b = (float(np.median([r["rtf"] for r in rs])) for rs in runs.values())
-    print(f"  {label}: worker thread / master thread = {a / b:.2f} (above 1: the thread is faster)")
+    first, second = list(runs)
+    print(f"  {label}: {first} / {second} = {a / b:.2f} (real-time factors; above 1: the first is faster)")
     return a / b
 
 
@@ -167,7 +182,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--load", type=int, default=2, help="busy processes for the loaded configuration (0: skip it)")
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--grouping", action="store_true",
+                    help="only compare the controller's grouped and flat compiles (master thread, idle machine)")
     args = ap.parse_args(argv)
+    if args.grouping:
+        runs = measure_grouping(args.seconds, args.repeat)
+        ratio = report("grouped vs flat controller", runs)
+        print(f"RATIO grouped / flat real-time factor = {ratio:.2f} (above 1: the grouped step is faster)")
+        return
     idle = measure(args.seconds, args.repeat)
     first = idle["step on the master thread"][0]
     print(f"flat run, {args.seconds:g} s simulated at 1 ms (Yu controller + DART hexapod), {args.repeat} runs each")

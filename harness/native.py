@@ -34,8 +34,8 @@ int cpgsim_horizon(int n, double t0, double dt, double *x, double *z, const doub
                    int nx, int nz, double *xn, double *zn) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   const double **arg; double **res; casadi_int *iw; double *w;
-  double t, *r;
-  int k, i, rc = -1;
+  double t, *r, *cur = x, *nxt = xn, *swap;
+  int k, i, bad, rc = -1;
   (void)ny;
   cpgsim_step_impl_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
   arg = malloc(sizeof(double *) * (sz_arg + 5));
@@ -45,16 +45,19 @@ int cpgsim_horizon(int n, double t0, double dt, double *x, double *z, const doub
   if (!arg || !res || !iw || !w) { rc = -2; goto done; }
   for (k = 0; k < n; ++k) {
     t = t0 + k * dt;
-    arg[0] = &t; arg[1] = x; arg[2] = z; arg[3] = U + (long)k * nu; arg[4] = p;
-    res[0] = xn; res[1] = zn; res[2] = y;
+    arg[0] = &t; arg[1] = cur; arg[2] = z; arg[3] = U + (long)k * nu; arg[4] = p;
+    res[0] = nxt; res[1] = zn; res[2] = y;
     if (cpgsim_step_impl(arg, res, iw, w, 0)) { rc = -2; goto done; }
     r = R + (long)k * npick;
     for (i = 0; i < npick; ++i) r[i] = y[picks[i]];
-    for (i = 0; i < nx; ++i) if (!isfinite(xn[i])) { rc = k; goto done; }
-    for (i = 0; i < nx; ++i) x[i] = xn[i];
+    bad = 0;
+    for (i = 0; i < nx; ++i) bad |= !(fabs(nxt[i]) <= 1.7976931348623157e308);  /* NaN or inf, no branch */
+    if (bad) { rc = k; goto done; }
+    swap = cur; cur = nxt; nxt = swap;  /* the new state becomes the current one without a copy */
     for (i = 0; i < nz; ++i) z[i] = zn[i];
   }
 done:
+  if (cur != x) for (i = 0; i < nx; ++i) x[i] = cur[i];  /* x: the last finite state */
   free(arg); free(res); free(iw); free(w);
   return rc;
 }

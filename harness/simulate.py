@@ -203,7 +203,16 @@ class Simulator:
         return {k: v for k, v in out.items() if k != v}
 
     def _record_layout(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
-        """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element)."""
+        """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element).
+
+        Worked out once per simulator (the model and the patterns do not change between runs)."""
+        cached = self.__dict__.get("_record_cache")
+        if cached is None:
+            cached = self.__dict__["_record_cache"] = self._record_layout_uncached()
+        cols, units, picks = cached
+        return list(cols), list(units), list(picks)
+
+    def _record_layout_uncached(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
         m = self.model
         cols, units, picks = [], [], []
         for slot in m.signals_layout.slots:

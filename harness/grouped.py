@@ -616,7 +616,9 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     import os
     import tempfile
 
-    groups = [g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
+    fused = _fused_first_stage(s)
+    groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
+              + list(fused.values()))
     cg = ca.CodeGenerator("cpgsim_kinds.c", {"with_header": False, "casadi_real": "double",
                                              "casadi_int": "long long int"})
     for g in groups:
@@ -639,7 +641,10 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
         return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
 
     read = s.groups_read_by_derivatives()
+    fused_kinds = {id(g.kind) for g in fused.values()}
     level_calls = calls(g for lv in s.signal_levels for g in lv)
+    first_calls = calls(fused.get(id(g), g) for lv in s.signal_levels for g in lv)
+    first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
     inner_calls = calls(g for lv in s.signal_levels for g in lv if id(g) in read)
     deriv_calls = calls(s.derivative_groups)
     disc_calls = calls(s.discrete_groups)
@@ -676,6 +681,15 @@ static void cpgsim_xdot(double t, const double *x, const double *z, const double
 {deriv_calls}
 }}
 
+/* first RK4 stage: every signal and the derivatives; kinds without inputs do both in one call */
+static void cpgsim_first_stage(double t, const double *x, const double *z, const double *p, double *S,
+                               const double *E, double *x_out) {{
+  double *z_out = 0;
+  (void)z_out;
+{first_calls}
+{first_deriv_calls}
+}}
+
 static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, double *S,
                             const double *E, double *x_out, double *z_out) {{
 {disc_calls}
@@ -710,7 +724,7 @@ int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   for (s = 0; s < {substeps}; ++s) {{
     const double ti = t0 + s * {h!r};
     xn = (s == {substeps - 1} && res[0]) ? res[0] : (s % 2 ? xa : xb);
-    if (s == 0) {{ cpgsim_signals(ti, xp, zp, p, S, E); cpgsim_xdot(ti, xp, zp, p, S, E, k1); }}
+    if (s == 0) cpgsim_first_stage(ti, xp, zp, p, S, E, k1);
     else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1); }}
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
     cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
@@ -730,6 +744,30 @@ int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw,
 }}
 """)
     return "".join(parts)
+
+
+def _fused_first_stage(s: Schedule) -> dict[int, Group]:
+    """Signal group id -> one group computing the kind's signals and derivatives together.
+
+    For kinds without inputs whose signals are one group over all instances (an autonomous CPG
+    network): its derivatives need nothing from other kinds, so the first RK4 stage computes both in
+    one pass over the instances (one read of their states and parameters, shared subexpressions).
+    """
+    deriv = {id(g.kind): g for g in s.derivative_groups}
+    out: dict[int, Group] = {}
+    for level in s.signal_levels:
+        for g in level:
+            kind = g.kind
+            if kind.sizes[2] or id(kind) not in deriv or g.n != len(kind.members):
+                continue
+            if sum(int(g.fn.size1_out(k)) for k in range(g.fn.n_out())) != sum(
+                    int(e.numel()) for e in kind.outputs.values()):
+                continue  # the kind's signals are split over levels: not one group
+            outs = [g.fn.call(kind.args)[k] for k in range(g.fn.n_out())] + [kind.xdot]
+            fn = kind.function("first_stage", outs)
+            out[id(g)] = Group(kind, fn, g.x_off, g.z_off, g.p_off, g.u_idx, [*g.out_off, g.x_off],
+                               [*g.out_target, "x"])
+    return out
 
 
 def _c_array(name: str, values: np.ndarray) -> str:

@@ -7,8 +7,8 @@ state recorded at every step. The horizon is 20 s (20,000 steps) up to 1,800 neu
 (20 s of 36,000 states would be 5.8 GB); sizes are compared by *cost per neuron-step*,
 wall / (steps x neurons), so the horizons need not be equal.
 
-Runners (each timed as the median of ``--repeat`` runs; set-up and compilation are outside the timing
-and cpgsim's is printed):
+Runners (each timed as the median of ``--repeat`` runs, the C reference and cpgsim after one untimed
+warm-up run; set-up and compilation are outside the timing and cpgsim's is printed):
 
 * **C reference** (``benchmarks/reference_rk4.c``, gcc -O2, ctypes): RK4 at 1 ms written by hand, every
   state stored into a ``np.empty`` buffer the caller allocates (first-touch page faults are paid, as in
@@ -370,9 +370,17 @@ PEERS: tuple[type[Peer], ...] = (DrakeSymbolic, DrakeNumpy, CollimatorRK4, Colli
 
 
 # -- measuring --------------------------------------------------------------------------------------
-def median_time(fn: Callable[[], object], repeat: int, budget: float = math.inf) -> tuple[float, int, object]:
-    """Median wall time of ``fn`` over ``repeat`` runs (fewer once ``budget`` seconds are used)."""
+def median_time(fn: Callable[[], object], repeat: int, budget: float = math.inf,
+                warmup: bool = False) -> tuple[float, int, object]:
+    """Median wall time of ``fn`` over ``repeat`` runs (fewer once ``budget`` seconds are used).
+
+    ``warmup``: one untimed run first. The first large allocation of a process is slow to fault in
+    (the kernel finds and zeroes huge pages for it): measured here, the C reference's first 2 s run at
+    18,000 neurons took 1.7 s and the next four 0.63-0.74 s; cpgsim's likewise.
+    """
     times, result = [], None
+    if warmup:
+        result = fn()
     for _ in range(repeat):
         result = None  # free the last result before the next run allocates its own
         t0 = time.perf_counter()
@@ -404,7 +412,7 @@ def run_cpgsim(n: int, steps: int, backend: str, repeat: int, c_out: np.ndarray)
     t1 = time.perf_counter()
     sim.prepare()
     t2 = time.perf_counter()
-    wall, runs, res = median_time(lambda: sim.run(steps * DT), repeat)
+    wall, runs, res = median_time(lambda: sim.run(steps * DT), repeat, warmup=True)
     diff = 0.0
     for j, col in enumerate(columns(n)):
         diff = max(diff, max_abs_diff(np.asarray(res[col]), c_out[:, j]))
@@ -515,7 +523,8 @@ def main() -> None:
             steps = int(round(horizon / DT))
             print(f"\n== {n} networks = {neurons:,} neurons, horizon {horizon:g} s ({steps:,} steps) ==", flush=True)
             params, x0 = parameters(n), initial_state(n)
-            c_wall, c_runs, c_out = median_time(lambda: ref.run(params, x0, steps), args.repeat)  # noqa: B023
+            c_wall, c_runs, c_out = median_time(lambda: ref.run(params, x0, steps), args.repeat,  # noqa: B023
+                                                warmup=True)
             c_per = c_wall / (steps * neurons)
             rows = [row("C reference (gcc -O2)", steps, c_runs, c_wall, neurons, c_per, 0.0)]
             build, cp = run_cpgsim(n, steps, args.backend, args.repeat, c_out)

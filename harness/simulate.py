@@ -128,15 +128,14 @@ class Simulator:
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
         rec = _Recorder(times, columns, units)
-        leaves = {c.split("[")[0] for c in columns}
-        rec.aliases = {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}
+        rec.aliases = dict(self._recorded_aliases(columns))
         rec.meta = dict(meta or {})
         if stream is not None:
             from harness.results import ResultsWriter
 
             rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
             rec.flush_rows = max(1, int(round(1.0 / m.dt)))
-        cs = m.flat.cosim_blocks()
+        cs = self._cosim_blocks()
         stop = None
         try:
             if cs:
@@ -201,6 +200,20 @@ class Simulator:
         out = {name: flat._resolve_out("@" + name) for name in flat.aliases_out}
         out.update(self.model.graph_outputs)
         return {k: v for k, v in out.items() if k != v}
+
+    def _recorded_aliases(self, columns: list[str]) -> dict[str, str]:
+        """The aliases of recorded leaves (worked out once: the model and the columns do not change)."""
+        cached = self.__dict__.get("_alias_cache")
+        if cached is None:
+            leaves = {c.split("[")[0] for c in columns}
+            cached = self.__dict__["_alias_cache"] = {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}
+        return cached
+
+    def _cosim_blocks(self) -> dict[str, CoSimBlock]:
+        cached = self.__dict__.get("_cosim_cache")
+        if cached is None:
+            cached = self.__dict__["_cosim_cache"] = self.model.flat.cosim_blocks()
+        return cached
 
     def _record_layout(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
         """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element).

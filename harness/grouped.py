@@ -613,24 +613,12 @@ def _strided(V: ca.MX, off: np.ndarray, size: int) -> ca.MX:
 # -- C form ------------------------------------------------------------------------------------------
 def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc)."""
-    import os
-    import tempfile
+    from harness.native import casadi_c_source
 
     fused = _fused_first_stage(s)
     groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
               + list(fused.values()))
-    cg = ca.CodeGenerator("cpgsim_kinds.c", {"with_header": False, "casadi_real": "double",
-                                             "casadi_int": "long long int"})
-    for g in groups:
-        cg.add(g.fn)
-    with tempfile.TemporaryDirectory() as tmp:
-        cwd = os.getcwd()
-        os.chdir(tmp)
-        try:
-            cg.generate()
-        finally:
-            os.chdir(cwd)
-        source = open(os.path.join(tmp, "cpgsim_kinds.c")).read()
+    source = casadi_c_source([g.fn for g in groups], "cpgsim_kinds")
     parts = [source, "\n/* ---- grouped step (harness/grouped.py) ---- */\n"]
     names: dict[int, str] = {}
     for gi, g in enumerate(groups):

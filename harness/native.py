@@ -253,20 +253,25 @@ def optimization_flags(source: str) -> tuple[str, ...]:
     return ("-O1",) if len(_TABLE.sub("", source)) > 150_000 else ("-O3",)
 
 
-def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
-    """Generate C for ``fn`` (renamed ``step``-style by its own name), append ``driver``, compile."""
+def casadi_c_source(functions: list[ca.Function], tag: str) -> str:
+    """The C that CasADi's ``CodeGenerator`` writes for ``functions`` (each under its own name)."""
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator(f"{tag}.c", {"with_header": False, "casadi_real": "double",
                                            "casadi_int": "long long int"})
-        cg.add(fn)
+        for fn in functions:
+            cg.add(fn)
         cwd = os.getcwd()
         os.chdir(tmp)
         try:
             cg.generate()
         finally:
             os.chdir(cwd)
-        source = (Path(tmp) / f"{tag}.c").read_text()
-    return compile_source(source + driver, tag, flags)
+        return (Path(tmp) / f"{tag}.c").read_text()
+
+
+def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
+    """Generate C for ``fn`` (renamed ``step``-style by its own name), append ``driver``, compile."""
+    return compile_source(casadi_c_source([fn], tag) + driver, tag, flags)
 
 
 def compile_source(source: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:

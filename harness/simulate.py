@@ -29,9 +29,11 @@ from harness.master import run_master
 from harness.results import Results
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
-"""Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM (a six-leg
-Yu controller step is ~11k instructions: its C took gcc 16 s at -O3 on the loaded 2-core machine, while
-the CasADi VM runs it at tens of us per step)."""
+"""Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM for an
+equation-only horizon (a flat six-leg Yu controller step is ~15k instructions: its C took gcc 13-16 s).
+Since the grouped compile (:mod:`harness.grouped`) this only concerns graphs of fewer than 64 blocks
+with very large blocks: large graphs are grouped, their step is a few hundred MX instructions and
+their C (independent of the number of instances) builds in about a second, so they run natively."""
 
 MAX_STEPS = 200_000_000
 """The most macro steps one run may have (55 hours at 1 ms); more is refused before anything is allocated."""

@@ -25,6 +25,8 @@ order the flat compile's recursive resolution implies, with the same algebraic-l
 
 from __future__ import annotations
 
+import hashlib
+import pickle
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -84,7 +86,8 @@ class Kind:
 
     @property
     def name(self) -> str:
-        return f"k{self.index}_{re.sub(r'[^A-Za-z0-9]', '_', self.label)}"[:60]
+        label = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", self.label)).strip("_")[:50]
+        return f"k{self.index}_{label}" if label else f"k{self.index}"
 
     @property
     def sizes(self) -> tuple[int, int, int, int]:
@@ -92,7 +95,8 @@ class Kind:
         return tuple(a.numel() for a in self.args[1:])  # type: ignore[return-value]
 
     def function(self, tag: str, outs: Sequence[ca.SX]) -> ca.Function:
-        return ca.Function(f"{self.name}_{tag}", self.args, list(outs), ["t", "x", "z", "u", "p"],
+        name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", f"{self.name}_{tag}")).strip("_")
+        return ca.Function(name, self.args, list(outs), ["t", "x", "z", "u", "p"],
                            [f"o{i}" for i in range(len(outs))])
 
 
@@ -170,7 +174,7 @@ def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
     Two blocks with equal signatures have the same equations (``define`` sees only its symbols and
     the block's attributes); unconnected inputs enter with their defaults (folded constants).
     """
-    attrs = tuple(sorted((k, repr(v)) for k, v in vars(blk).items() if k not in _DECLARED))
+    attrs = tuple(sorted((k, _attribute_value(v)) for k, v in vars(blk).items() if k not in _DECLARED))
     if any(" at 0x" in r for _, r in attrs):  # an attribute without a value repr: never share
         attrs += (("__id__", str(id(blk))),)
     decl = (tuple((k, s.size) for k, s in blk.states.items()),
@@ -180,6 +184,19 @@ def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
                   for k, p in blk.inputs.items()),
             tuple((k, p.size) for k, p in blk.outputs.items()))
     return (f"{type(blk).__module__}.{type(blk).__qualname__}", attrs, decl, connected)
+
+
+def _attribute_value(value: object) -> str:
+    """A block attribute as text that differs whenever the value does (numpy elides long arrays in repr)."""
+    if isinstance(value, np.ndarray):
+        return f"ndarray({value.dtype.str},{value.shape},{hashlib.sha256(value.tobytes()).hexdigest()})"
+    text = repr(value)
+    if "..." in text:  # an elided repr (e.g. a dataclass holding a long array): hash the value itself
+        try:
+            return "pickle:" + hashlib.sha256(pickle.dumps(value, protocol=4)).hexdigest()
+        except Exception:  # noqa: BLE001 -- not picklable: never shared (see leaf_signature)
+            return f"{text} at 0x{id(value):x}"
+    return text
 
 
 def _generic_equations(blk: Block, connected: tuple[str, ...]) -> tuple[list[ca.SX], Equations, Symbols]:

@@ -139,3 +139,30 @@ def test_auto_grouping_by_size():
     assert compile_graph(networks(12)).grouping == "kinds"  # 72 blocks
     with pytest.raises(Exception, match="grouping must be"):
         compile_graph(networks(1), grouping="loops")
+
+
+class _Table(Gain):
+    """A gain whose value is read from a long table at construction (configuration numpy elides in repr)."""
+
+    def __init__(self, name: str, table: np.ndarray) -> None:
+        self._table = table
+        super().__init__(name)
+
+    def define(self, v):
+        from components.core import Equations
+
+        return Equations(outputs={"y": float(self._table[len(self._table) // 2]) * v.u["u"]})
+
+
+def test_long_array_configuration_is_not_merged():
+    g = Graph("tables")
+    g.add(Constant("one", value=1.0))
+    for i in range(4):
+        table = np.zeros(5000)
+        table[2500] = i  # differs only where numpy's repr shows "..."
+        g.add(_Table(f"t{i}", table))
+        g.connect("one.y", f"t{i}.u")
+    model = compile_graph(g, grouping="kinds")
+    assert sorted(len(k.members) for k in model.schedule.kinds if k.label == "_Table") == [1, 1, 1, 1]
+    y = np.asarray(model.signals(0.0, model.x0, model.z0, np.zeros(0), model.p0)).ravel()
+    assert [y[model.signals_layout.index(f"t{i}.y").start] for i in range(4)] == [0.0, 1.0, 2.0, 3.0]

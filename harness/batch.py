@@ -489,8 +489,10 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     try:
         while worker.is_alive():
             worker.join(0.2)
-            if progress is not None:
+            if progress is not None and worker.is_alive():
                 progress(int(prog[0]), N)
+        if progress is not None:  # always once at the end, however quickly the loop finished
+            progress(int(prog[0]), N)
     except BaseException:
         prog[1] = 1  # the workers stop at their next check (every 4096 steps)
         worker.join()

@@ -22,14 +22,28 @@ from typing import Any
 
 
 def cache_root() -> Path:
-    """The per-user cache folder (created on first use)."""
+    """The per-user cache folder (created on first use).
+
+    ``CPGSIM_CACHE`` if set, else ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``; when that cannot be
+    created or written (a read-only home), a folder of this user's own in the temporary directory.
+    """
     env = os.environ.get("CPGSIM_CACHE")
     if env:
         root = Path(env)
-    else:
-        base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-        root = Path(base) / "cpgsim"
-    root.mkdir(parents=True, exist_ok=True)
+        root.mkdir(parents=True, exist_ok=True)
+        return root
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    root = Path(base) / "cpgsim"
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        if os.access(root, os.W_OK):
+            return root
+    except OSError:
+        pass
+    import tempfile
+
+    root = Path(tempfile.gettempdir()) / f"cpgsim-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+    root.mkdir(mode=0o700, exist_ok=True)
     return root
 
 

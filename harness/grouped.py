@@ -4,7 +4,10 @@ The flat compile (:mod:`harness.compile`) inlines every block instance into one 
 its generated step grows with the number of instances (2.4 MB of straight-line C for 600 Yu Y5
 networks). Here a graph's equation blocks are sorted into *kinds*: instances whose equations are
 the same expression once parameters, states and connected inputs are symbols and unconnected
-inputs are their (folded) defaults. Each kind's equations are compiled once, and the step loops over
+inputs are their (folded) defaults. A kind is either a leaf block class in one configuration
+(:func:`leaf_signature`) or a nested graph with the same leaves and internal wiring (the six legs of
+the hexapod controller, each CPG network of an array), whose equations are the flat compile of one
+instance. Each kind's equations are compiled once, and the step loops over
 the instances of each kind with tables of offsets, so the code size depends on the number of kinds,
 not on the number of instances. The equations still come from each block's ``define`` (one source of
 truth); only the loop structure is generated here, in two forms from one :class:`Schedule`:
@@ -15,8 +18,10 @@ truth); only the loop structure is generated here, in two forms from one :class:
 - C source for the native backend (:func:`c_step_source`): one loop per group calling the kind's
   CasADi-generated C function on pointers into the flat state, parameter and signal vectors (states,
   parameters and outputs of a block are contiguous in the model's layouts, so only inputs are
-  gathered), then RK4 over the whole state vector. It defines ``cpgsim_step_impl`` with CasADi's
-  calling convention, so every driver of :mod:`harness.native` runs it unchanged.
+  gathered), then RK4 over the whole state vector; only the signals that derivatives read are
+  recomputed in the inner RK4 stages, and kinds without inputs compute signals and derivatives in
+  one pass in the first. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every
+  driver of :mod:`harness.native` runs it unchanged.
 
 Evaluation order: an output port's *level* is 0 when it reads no other block's output through direct
 feedthrough, else one more than the highest level it reads; groups run level by level, which is the

@@ -21,8 +21,7 @@ import inspect
 import json
 import os
 import sys
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import casadi as ca
@@ -33,19 +32,6 @@ from components.graph import FlatGraph
 FORMAT = 1
 
 
-def cache_root() -> Path:
-    """The per-user cache folder (created on first use)."""
-    return memo.cache_root()
-
-
-def enabled() -> bool:
-    return memo.caching_enabled()
-
-
-def _file_digest(path: str) -> str:
-    return memo.file_digest(path)
-
-
 def _class_source(cls: type) -> str:
     module = sys.modules.get(cls.__module__)
     path = getattr(module, "__file__", None) if module else None
@@ -54,15 +40,15 @@ def _class_source(cls: type) -> str:
             return hashlib.sha256(inspect.getsource(cls).encode()).hexdigest()
         except (OSError, TypeError):
             return f"unhashable:{id(cls)}"  # defined interactively: never shared across processes
-    return _file_digest(path)
+    return memo.file_digest(path)
 
 
-def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str,
-              leaf_signature: Callable[[Any, tuple[str, ...]], tuple], code_files: list[str]) -> str:
+def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatures: Mapping[str, tuple],
+              code_files: list[str]) -> str:
     """Content hash of a flattened graph's compiled form (see module docstring).
 
-    ``leaf_signature(block, connected_inputs)`` describes an equation block; ``code_files`` are
-    the compiler's own sources.
+    ``signatures``: each equation block's :func:`harness.grouped.leaf_signature` by path; ``code_files``
+    are the compiler's own sources.
     """
     h = hashlib.sha256()
 
@@ -70,14 +56,13 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str,
         h.update(repr(items).encode())
         h.update(b"\0")
 
-    put(FORMAT, ca.__version__, repr(float(dt)), int(substeps), grouping, [_file_digest(f) for f in code_files])
+    put(FORMAT, ca.__version__, repr(float(dt)), int(substeps), grouping, [memo.file_digest(f) for f in code_files])
     classes: set[type] = set()
     for path, blk in flat.blocks.items():
         cls = type(blk)
         classes.add(cls)
-        connected = tuple(k for k in blk.inputs if f"{path}.{k}" in flat.sources)
-        if hasattr(blk, "define"):
-            put(path, leaf_signature(blk, connected))  # type: ignore[arg-type]
+        if path in signatures:
+            put(path, signatures[path])
         else:  # a co-simulation block: only its ports shape the compiled part
             put(path, "cosim", tuple((k, p.size, p.unit, p.kind) for k, p in blk.inputs.items()),
                 tuple((k, p.size, p.unit, p.kind) for k, p in blk.outputs.items()),
@@ -92,9 +77,9 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str,
 
 def load(key: str) -> dict[str, Any] | None:
     """The cached entry for ``key`` (functions deserialized), or None."""
-    if not enabled():
+    if not memo.caching_enabled():
         return None
-    path = cache_root() / "models" / f"{key}.json"
+    path = memo.cache_root() / "models" / f"{key}.json"
     try:
         entry = json.loads(path.read_text())
         if entry.get("format") != FORMAT:
@@ -109,14 +94,14 @@ def load(key: str) -> dict[str, Any] | None:
 
 
 def store(key: str, functions: dict[str, ca.Function], c_source: str | None,
-          feed: dict[str, dict[str, set[str]]], grouping: str, describe: str) -> None:
+          feed: dict[str, dict[str, set[str]]], grouping: str) -> None:
     """Write an entry atomically (a failure to write only costs the next start a compile)."""
-    if not enabled():
+    if not memo.caching_enabled():
         return
-    folder = cache_root() / "models"
+    folder = memo.cache_root() / "models"
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        entry = {"format": FORMAT, "grouping": grouping, "describe": describe, "c_source": c_source,
+        entry = {"format": FORMAT, "grouping": grouping, "c_source": c_source,
                  "functions": {k: f.serialize() for k, f in functions.items()},
                  "feed": {p: {o: sorted(ins) for o, ins in d.items()} for p, d in feed.items()}}
         tmp = folder / f".{key}.{os.getpid()}.tmp"

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import casadi as ca
 import numpy as np
 
+from components import memo
 from components.core import Block, CoSimBlock, ModelError, Port
 from components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
 from harness import cache
@@ -191,20 +192,19 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
         classes = {type(b) for b in eq.values()}
         grouping = "kinds" if len(eq) >= GROUPED_MIN_BLOCKS and len(eq) >= 4 * len(classes) else "flat"
     compiler = _Compiler(flat, dt, int(substeps))
-    if not cache.enabled():
+    if not memo.caching_enabled():
         return compiler.build(grouped=grouping == "kinds")
     from harness import grouped
 
+    compiler.signatures = grouped.leaf_signatures(flat)  # for the key, and the kinds reuse them
     code = [__file__, grouped.__file__, sys.modules[Block.__module__].__file__]
-    key = cache.model_key(flat, dt, int(substeps), grouping, grouped.leaf_signature, code)
+    key = cache.model_key(flat, dt, int(substeps), grouping, compiler.signatures, code)
     entry = cache.load(key)
     if entry is not None:
         return compiler.from_cache(entry)
     model = compiler.build(grouped=grouping == "kinds")
-    model._c_source = model.c_step_source()
     fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
-    cache.store(key, fns, model._c_source, compiler.feed, model.grouping,
-                model.schedule.describe() if model.schedule else "")
+    cache.store(key, fns, model.c_step_source(), compiler.feed, model.grouping)
     return model
 
 
@@ -218,6 +218,7 @@ class _Compiler:
         self.states, self.dstates, self.inputs, self.params, self.sig = (Layout() for _ in range(5))
         self.block_eqs: dict[str, tuple] = {}
         self.feed: dict[str, dict[str, Any]] = {}  # eq block path -> output port -> inputs it reads directly
+        self.signatures: dict[str, tuple] | None = None  # harness.grouped.leaf_signatures, when already known
 
     # -- layouts --------------------------------------------------------------------------------
     def _layouts(self) -> None:

@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 
 from components.core import Block, Equations, Symbols
-from components.graph import AlgebraicLoopError
+from components.graph import AlgebraicLoopError, FlatGraph
 
 if TYPE_CHECKING:
     from harness.compile import _Compiler
@@ -165,12 +165,6 @@ class Schedule:
                     needed[g.u_idx.ravel()] = True
         return read
 
-    def describe(self) -> str:
-        """One line: how many kinds, instances and loops."""
-        n_groups = sum(len(lv) for lv in self.signal_levels) + len(self.derivative_groups) + len(self.discrete_groups)
-        inst = sum(len(k.members) for k in self.kinds)
-        return f"{len(self.kinds)} kinds, {inst} instances, {len(self.signal_levels)} signal levels, {n_groups} loops"
-
 
 # -- leaf signatures ---------------------------------------------------------------------------------
 def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
@@ -189,6 +183,12 @@ def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
                   for k, p in blk.inputs.items()),
             tuple((k, p.size) for k, p in blk.outputs.items()))
     return (f"{type(blk).__module__}.{type(blk).__qualname__}", attrs, decl, connected)
+
+
+def leaf_signatures(flat: FlatGraph) -> dict[str, tuple]:
+    """:func:`leaf_signature` of every equation block of ``flat`` (the wired inputs are its last item)."""
+    return {path: leaf_signature(blk, tuple(k for k in blk.inputs if f"{path}.{k}" in flat.sources))
+            for path, blk in flat.equation_blocks().items()}
 
 
 def _attribute_value(value: object) -> str:
@@ -262,8 +262,6 @@ def _leaf_kind(index: int, blk: Block, connected: tuple[str, ...]) -> Kind:
 # -- kinds of nested graphs --------------------------------------------------------------------------
 def _graph_kind(index: int, c: _Compiler, prefix: str, leaves: list[str], ext: list[str]) -> Kind:
     """The equations of the nested graph ``prefix``, compiled flat with its external sources as inputs."""
-    from components.graph import FlatGraph
-
     n = len(prefix) + 1
     sub = FlatGraph(prefix)
     for path in leaves:
@@ -326,9 +324,9 @@ def find_kinds(c: _Compiler) -> tuple[list[Kind], dict[str, dict[str, set[str]]]
     remaining blocks are grouped by their signatures. Also returns every block's direct feedthrough.
     """
     paths = list(c.eq_blocks)
-    connected = {p: tuple(k for k in c.eq_blocks[p].inputs if f"{p}.{k}" in c.flat.sources) for p in paths}
-    sig_of = {p: leaf_signature(c.eq_blocks[p], connected[p]) for p in paths}
-    leaf_kinds: dict[tuple, Kind] = {}
+    sig_of = c.signatures if c.signatures is not None else leaf_signatures(c.flat)
+    connected = {p: sig_of[p][-1] for p in paths}
+    leaf_kinds: dict[tuple, Kind] = {}  # one per signature: its equations are derived once
     for p in paths:
         if sig_of[p] not in leaf_kinds:
             leaf_kinds[sig_of[p]] = _leaf_kind(-1, c.eq_blocks[p], connected[p])
@@ -347,7 +345,7 @@ def find_kinds(c: _Compiler) -> tuple[list[Kind], dict[str, dict[str, set[str]]]
             members_of.pop(".".join(parts[:d]), None)
     kinds: list[Kind] = []
     taken: set[str] = set()
-    by_graph_sig: dict[tuple, list[tuple[str, list[str]]]] = {}
+    by_graph_sig: dict[tuple, list[tuple[str, list[str], list[str]]]] = {}
     for depth in range(1, max((p.count(".") for p in paths), default=0) + 1):
         by_graph_sig.clear()
         for prefix, leaves in members_of.items():
@@ -356,34 +354,24 @@ def find_kinds(c: _Compiler) -> tuple[list[Kind], dict[str, dict[str, set[str]]]
             n = len(prefix) + 1
             ext, wiring = _external_sources(c, prefix, leaves)
             key = (tuple((q[n:], sig_of[q]) for q in leaves), wiring)
-            by_graph_sig.setdefault(key, []).append((prefix, leaves))
+            by_graph_sig.setdefault(key, []).append((prefix, leaves, ext))
         for group in by_graph_sig.values():
             if len(group) < 2:
                 continue
-            prefix, leaves = group[0]
-            ext, _ = _external_sources(c, prefix, leaves)
-            kind = _graph_kind(len(kinds), c, prefix, leaves, ext)
-            members = []
-            for prefix_i, leaves_i in group:
-                member = _member(c, prefix_i, leaves_i, _external_sources(c, prefix_i, leaves_i)[0], kind)
-                if member is None:
-                    members = []
-                    break
-                members.append(member)
-            if not members:
+            kind = _graph_kind(len(kinds), c, *group[0])
+            members = [_member(c, prefix_i, leaves_i, ext_i, kind) for prefix_i, leaves_i, ext_i in group]
+            if any(m is None for m in members):
                 continue
-            kind.members = members
+            kind.members = members  # type: ignore[assignment]
             kinds.append(kind)
-            for _, leaves_i in group:
+            for _, leaves_i, _ in group:
                 taken.update(leaves_i)
-    leaf_groups: dict[tuple, Kind] = {}
     for p in paths:
         if p in taken:
             continue
-        kind = leaf_groups.get(sig_of[p])
-        if kind is None:
-            kind = _leaf_kind(len(kinds), c.eq_blocks[p], connected[p])
-            leaf_groups[sig_of[p]] = kind
+        kind = leaf_kinds[sig_of[p]]
+        if not kind.members:
+            kind.index = len(kinds)
             kinds.append(kind)
         ext = [c.flat.sources[f"{p}.{k}"] for k in connected[p]]
         member = _member(c, p, [p], ext, kind)

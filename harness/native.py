@@ -20,6 +20,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from components import memo
+
 DRIVER = r"""
 #include <math.h>
 #include <pthread.h>
@@ -232,10 +234,8 @@ class NativeUnavailable(RuntimeError):
 
 
 def cache_dir() -> Path:
-    """Where compiled C libraries go: the per-user cache folder (:func:`harness.cache.cache_root`)."""
-    from harness.cache import cache_root
-
-    return cache_root()
+    """Where compiled C libraries go: the per-user cache folder (:func:`components.memo.cache_root`)."""
+    return memo.cache_root()
 
 
 def compiler() -> str | None:
@@ -370,6 +370,12 @@ class ThreadedStep(BoundStep):
         super().close()
 
 
+def renamed(fn: ca.Function, name: str, opts: dict | None = None) -> ca.Function:
+    """``fn`` under another name (MX stays MX: calling it on SX symbols would inline every map)."""
+    args = fn.mx_in() if fn.is_a("MXFunction") else fn.sx_in()
+    return ca.Function(name, args, fn.call(args), fn.name_in(), fn.name_out(), opts or {})
+
+
 def step_library(step: ca.Function, driver: str, tag: str, source: str | None = None) -> Path:
     """A shared library holding ``driver`` and the model's step as ``cpgsim_step_impl``.
 
@@ -381,9 +387,7 @@ def step_library(step: ca.Function, driver: str, tag: str, source: str | None = 
     """
     if source is not None:
         return compile_source(source + driver, tag)
-    args = step.mx_in() if step.is_a("MXFunction") else step.sx_in()
-    renamed = ca.Function("cpgsim_step_impl", args, step.call(args), step.name_in(), step.name_out())
-    return build_shared_library(renamed, driver, tag)
+    return build_shared_library(renamed(step, "cpgsim_step_impl"), driver, tag)
 
 
 class NativeHorizon:
@@ -466,9 +470,7 @@ class NativeFunction:
                                      + [(a, fn.nnz_out(k)) for k, a in enumerate(outputs)]):
             if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != n:
                 raise ValueError(f"buffer {i} of {fn.name()} must be contiguous float64 of size {n}")
-        args = fn.mx_in() if fn.is_a("MXFunction") else fn.sx_in()
-        renamed = ca.Function("cpgsim_fn_impl", args, fn.call(args))
-        self._lib = ctypes.CDLL(str(build_shared_library(renamed, FUNCTION_DRIVER, "cpgsim_fn")))
+        self._lib = ctypes.CDLL(str(build_shared_library(renamed(fn, "cpgsim_fn_impl"), FUNCTION_DRIVER, "cpgsim_fn")))
         vp, dpp = ctypes.c_void_p, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))
         self._lib.cpgsim_fbind.argtypes = [dpp, ctypes.c_int, dpp, ctypes.c_int]
         self._lib.cpgsim_fbind.restype = vp

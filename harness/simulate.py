@@ -12,6 +12,7 @@ non-finite state and carries the results recorded up to that step (``exc.results
 from __future__ import annotations
 
 import fnmatch
+import functools
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -95,9 +96,9 @@ class Simulator:
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
         if jit:
-            step = self.model.step
-            args = step.mx_in() if step.is_a("MXFunction") else step.sx_in()
-            self._step_fn = ca.Function("step_jit", args, self.model.step.call(args), jit_options())
+            from harness.native import renamed
+
+            self._step_fn = renamed(self.model.step, "step_jit", jit_options())
 
     @property
     def dt(self) -> float:
@@ -130,14 +131,14 @@ class Simulator:
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
         rec = _Recorder(times, columns, units)
-        rec.aliases = dict(self._recorded_aliases(columns))
+        rec.aliases = dict(self._recorded_aliases)
         rec.meta = dict(meta or {})
         if stream is not None:
             from harness.results import ResultsWriter
 
             rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
             rec.flush_rows = max(1, int(round(1.0 / m.dt)))
-        cs = self._cosim_blocks()
+        cs = self._cosim_blocks
         stop = None
         try:
             if cs:
@@ -203,31 +204,24 @@ class Simulator:
         out.update(self.model.graph_outputs)
         return {k: v for k, v in out.items() if k != v}
 
-    def _recorded_aliases(self, columns: list[str]) -> dict[str, str]:
-        """The aliases of recorded leaves (worked out once: the model and the columns do not change)."""
-        cached = self.__dict__.get("_alias_cache")
-        if cached is None:
-            leaves = {c.split("[")[0] for c in columns}
-            cached = self.__dict__["_alias_cache"] = {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}
-        return cached
+    # worked out once per simulator: the model and the record patterns do not change between runs
+    @functools.cached_property
+    def _recorded_aliases(self) -> dict[str, str]:
+        """The aliases of recorded leaves."""
+        leaves = {c.split("[")[0] for c in self._record_layout()[0]}
+        return {a: leaf for a, leaf in self.aliases.items() if leaf in leaves}
 
+    @functools.cached_property
     def _cosim_blocks(self) -> dict[str, CoSimBlock]:
-        cached = self.__dict__.get("_cosim_cache")
-        if cached is None:
-            cached = self.__dict__["_cosim_cache"] = self.model.flat.cosim_blocks()
-        return cached
+        return self.model.flat.cosim_blocks()
 
     def _record_layout(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
-        """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element).
-
-        Worked out once per simulator (the model and the patterns do not change between runs)."""
-        cached = self.__dict__.get("_record_cache")
-        if cached is None:
-            cached = self.__dict__["_record_cache"] = self._record_layout_uncached()
-        cols, units, picks = cached
+        """Columns, units and where each comes from: ("y", index) or ("cs:<path>.<port>", element)."""
+        cols, units, picks = self._record_plan
         return list(cols), list(units), list(picks)
 
-    def _record_layout_uncached(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
+    @functools.cached_property
+    def _record_plan(self) -> tuple[list[str], list[str], list[tuple[str, int, int]]]:
         m = self.model
         cols, units, picks = [], [], []
         for slot in m.signals_layout.slots:

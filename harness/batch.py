@@ -57,7 +57,7 @@ import numpy as np
 from components.core import Block, ModelError, ParameterError
 from components.graph import Graph
 from harness.compile import CompiledModel, compile_graph
-from harness.simulate import horizon_steps
+from harness.simulate import horizon_steps, matching_columns, physical_memory
 
 REDUCTIONS = ("final", "min", "max", "mean", "amplitude", "period", "crossings")
 """Reductions :func:`simulate_batch` computes, in the order of ``BATCH_DRIVER``'s result slots."""
@@ -705,11 +705,7 @@ def _select_signals(model: CompiledModel, record: Sequence[str] | None) -> tuple
         return names, idx
     if isinstance(record, str):
         record = [record]
-    aliases = dict(model.graph_outputs)
-    wanted = {leaf for alias, leaf in aliases.items() if any(fnmatch.fnmatchcase(alias, pat) for pat in record)}
-    keep = [j for j, nm in enumerate(names)
-            if nm.split("[")[0] in wanted
-            or any(fnmatch.fnmatchcase(nm, pat) or fnmatch.fnmatchcase(nm.split("[")[0], pat) for pat in record)]
+    keep = matching_columns(names, model.graph_outputs, record)
     if not keep:
         raise ModelError(f"record patterns {list(record)} match no signal of {model.name!r} "
                          f"(signals: {', '.join(names[:8])}{'...' if len(names) > 8 else ''})")
@@ -751,9 +747,8 @@ def _window(window: float | None, n: int, dt: float) -> tuple[int, float]:
 def _check_memory(N: int, n_samp: int, n_sig: int, threads: int, window_values: int, fraction: float = 0.5) -> None:
     need_rec = 8.0 * N * n_samp * n_sig
     need = need_rec + 8.0 * threads * window_values
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+    total = physical_memory()
+    if total is None:
         return
     if need > fraction * total:
         raise ModelError(

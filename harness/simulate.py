@@ -236,12 +236,7 @@ class Simulator:
                     units.append(port.unit)
                     picks.append((f"{path}.{port.name}", i, 0))
         if self._record_patterns:
-            wanted = {leaf for alias, leaf in self.aliases.items()
-                      if any(fnmatch.fnmatchcase(alias, pat) for pat in self._record_patterns)}
-            keep = [j for j, c in enumerate(cols)
-                    if c.split("[")[0] in wanted
-                    or any(fnmatch.fnmatchcase(c, pat) or fnmatch.fnmatchcase(c.split("[")[0], pat)
-                           for pat in self._record_patterns)]
+            keep = matching_columns(cols, self.aliases, self._record_patterns)
             if not keep:
                 raise ModelError(f"record patterns {self._record_patterns} match no signal")
             cols, units, picks = [cols[j] for j in keep], [units[j] for j in keep], [picks[j] for j in keep]
@@ -554,13 +549,29 @@ def horizon_steps(t0: float, t_end: float, dt: float) -> int:
     return n
 
 
+def matching_columns(columns: Sequence[str], aliases: Mapping[str, str], patterns: Sequence[str]) -> list[int]:
+    """Indices of the columns a ``record=`` glob list keeps: a pattern matches a column (``a.b[2]``), its
+    port (``a.b``) or an alias of it (an exposed graph output)."""
+    wanted = {leaf for alias, leaf in aliases.items() if any(fnmatch.fnmatchcase(alias, pat) for pat in patterns)}
+    return [j for j, c in enumerate(columns)
+            if c.split("[")[0] in wanted
+            or any(fnmatch.fnmatchcase(c, pat) or fnmatch.fnmatchcase(c.split("[")[0], pat) for pat in patterns)]
+
+
+def physical_memory() -> int | None:
+    """The machine's memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+        return None
+
+
 def check_memory(rows: int, columns: int, fraction: float = 0.5) -> None:
     """Refuse a run whose recorded table (``rows`` x ``columns`` float64) would not fit in ``fraction`` of
     the machine's memory."""
     need = 8.0 * rows * max(columns + 1, 1)
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not a POSIX system
+    total = physical_memory()
+    if total is None:
         return
     if need > fraction * total:
         raise ModelError(f"recording {rows} rows x {columns} columns needs {need / 2**30:.1f} GiB, more than "

@@ -1,4 +1,4 @@
-"""Batch benchmark: 10,000 variants of the Yu Y5 network in one compiled loop (harness.batch.simulate_batch).
+"""Batch benchmark: 10,000 variants of the Yu Y5 network in one compiled loop (cpgsim.harness.batch.simulate_batch).
 
 Each variant: 20 s at 1 ms (20,001 step evaluations, the last one for the signals at t_end), its own
 random parameters (fixed seed): eps of each neuron in [0.05, 0.3], one coupling gain k (k_lead = k_mutual
@@ -21,9 +21,9 @@ import time
 
 import numpy as np
 
-from components.networks import leader_follower_network
-from harness.batch import available_threads, simulate_batch
-from harness.simulate import Simulator
+from cpgsim.components.networks import leader_follower_network
+from cpgsim.harness.batch import available_threads, simulate_batch
+from cpgsim.harness.simulate import Simulator
 
 T_END, DT, WINDOW = 20.0, 1e-3, 10.0
 OUTPUTS = ["x1", "y1", "x2", "y2", "x3", "y3"]

@@ -20,8 +20,8 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from components.library import hexapod_network
-from harness.simulate import Simulator
+from cpgsim.components.library import hexapod_network
+from cpgsim.harness.simulate import Simulator
 
 T_END, DT = 20.0, 1e-3
 EPS, B, K = 0.1, 4.0, 0.1

@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from components.geometry import preset
-from robots.plant import DETECTORS, DartHexapod
+from cpgsim.components.geometry import preset
+from cpgsim.robots.plant import DETECTORS, DartHexapod
 
 
 def bench(preset_name: str = "yu-sim", detector: str = "dart", seconds: float = 5.0,

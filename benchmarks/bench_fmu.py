@@ -1,6 +1,6 @@
 """Native FMU vs PythonFMU: the same VDP network (Yu Y5, Table 1), 10 s at 1 ms, FMI 2 Co-Simulation.
 
-(a) ``fmus.export.exporter.export_fmu``: CasADi-generated C + the FMI layer, no Python at run time;
+(a) ``cpgsim.fmus.export.exporter.export_fmu``: CasADi-generated C + the FMI layer, no Python at run time;
 (b) a PythonFMU (``pythonfmu``) whose slave calls the *same* compiled step (and post-update) CasADi
     functions, serialized into the FMU's resources, through zero-copy CasADi buffers.
 
@@ -28,13 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from components.networks import leader_follower_network  # noqa: E402
-from fmus.export.build import model_functions  # noqa: E402
-from fmus.export.exporter import export_fmu  # noqa: E402
-from fmus.export.host import build_host, extract_fmu, run_host  # noqa: E402
-from harness.compile import compile_graph  # noqa: E402
+from cpgsim.components.networks import leader_follower_network  # noqa: E402
+from cpgsim.fmus.export.build import model_functions  # noqa: E402
+from cpgsim.fmus.export.exporter import export_fmu  # noqa: E402
+from cpgsim.fmus.export.host import build_host, extract_fmu, run_host  # noqa: E402
+from cpgsim.harness.compile import compile_graph  # noqa: E402
 
 SLAVE = '''"""The VDP network stepped from Python by its compiled CasADi step function (cpgsim benchmark)."""
 import json

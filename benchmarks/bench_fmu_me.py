@@ -31,14 +31,13 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests"))  # the C FMU builders of the tests (cpgsim itself is installed)
 
 from c_fmus import build_c_fmu  # noqa: E402
 from test_fmu_hybrid import BALL_C, BALL_MD, H0, T_END, E, G  # noqa: E402
 
-from fmus.importer.block import FmuBlock  # noqa: E402
-from harness.simulate import Simulator  # noqa: E402
+from cpgsim.fmus.importer.block import FmuBlock  # noqa: E402
+from cpgsim.harness.simulate import Simulator  # noqa: E402
 
 DT = 0.01
 

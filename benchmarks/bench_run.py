@@ -6,7 +6,7 @@ installed right after the plant's ``setup``); "harness" is everything else in th
 co-simulation master loop, the controller's compiled C step, the plant's contact readout and
 outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
 interleaved in the same process: the controller's compiled step on a worker thread
-(``CPGSIM_STEP_THREAD=1``, :class:`harness.native.ThreadedStep`) and on the master's own thread (the
+(``CPGSIM_STEP_THREAD=1``, :class:`cpgsim.harness.native.ThreadedStep`) and on the master's own thread (the
 default); medians are printed. Both run twice: on the machine as it is ("idle") and with ``--load``
 busy-looping processes started by the benchmark itself ("loaded", default 2: one per core of the
 benchmark machine), and the thread / no-thread ratio is printed for each.
@@ -15,7 +15,7 @@ The harness time is split into the plant block's own Python around ``world.step(
 ("master+ctl": the master loop, waiting for the controller step, recording). ``--profile`` adds a
 cProfile breakdown of one more run.
 
-``--grouping`` instead compares the controller compiled grouped (the default, :mod:`harness.grouped`)
+``--grouping`` instead compares the controller compiled grouped (the default, :mod:`cpgsim.harness.grouped`)
 and flat, both on the master thread.
 
 Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile] [--grouping]``.
@@ -34,9 +34,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from harness.experiments.runner import build_scenario
-from harness.simulate import Simulator
-from robots.plant import DartHexapod
+from cpgsim.harness.experiments.runner import build_scenario
+from cpgsim.harness.simulate import Simulator
+from cpgsim.robots.plant import DartHexapod
 
 
 class TimedWorld:

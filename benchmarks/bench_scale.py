@@ -72,7 +72,6 @@ import os
 import shutil
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -81,10 +80,9 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))  # run as a script from anywhere
 
-from components.graph import Graph  # noqa: E402
-from components.networks import leader_follower_network  # noqa: E402
+from cpgsim.components.graph import Graph  # noqa: E402
+from cpgsim.components.networks import leader_follower_network  # noqa: E402
 
 DT = 1e-3
 EPS, B, K = 0.1, 4.0, 0.1
@@ -404,7 +402,7 @@ def row(name: str, steps: int, runs: int, wall: float, neurons: int, c_wall_per:
 
 
 def run_cpgsim(n: int, steps: int, backend: str, repeat: int, c_out: np.ndarray) -> tuple[dict, dict]:
-    from harness.simulate import Simulator
+    from cpgsim.harness.simulate import Simulator
 
     graph = networks(n)
     t0 = time.perf_counter()

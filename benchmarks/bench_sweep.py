@@ -1,6 +1,7 @@
 """Parallel efficiency of a sweep: N trials on a 2-worker dask LocalCluster vs the same trials serially.
 
-Both runs call the same :func:`harness.experiments.sweep.run_trial` (scenario ``fukuhara-gaits``, tripod setting by
+Both runs call the same :func:`cpgsim.harness.experiments.sweep.run_trial`
+(scenario ``fukuhara-gaits``, tripod setting by
 default, seeds S..S+N-1) and write the same files. Before timing, the serial process and every worker
 run one short warm-up trial (imports, DART, the controller's compiled C step), so the comparison is
 of the trials themselves; the cluster start-up is reported separately, and an efficiency including it.
@@ -27,7 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from harness.experiments.sweep import run_sweep, run_trial
+from cpgsim.harness.experiments.sweep import run_sweep, run_trial
 
 
 def _warm(out: Path, t_end: float = 0.5) -> None:

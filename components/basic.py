@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import casadi as ca
 
-from components.core import Block, DeclarationError, Equations, Symbols
+from cpgsim.components.core import Block, DeclarationError, Equations, Symbols
 
 
 def per_second(unit: str) -> str:

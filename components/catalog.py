@@ -1,6 +1,6 @@
 """The block library as a table, generated from the blocks' own declarations (``cpgsim blocks``, docs/blocks.md).
 
-Every :class:`~components.core.Block` subclass defined in :mod:`components` and its subpackages is
+Every :class:`~cpgsim.components.core.Block` subclass defined in :mod:`cpgsim.components` and its subpackages is
 instantiated with its defaults and listed with its inputs, outputs, states and parameters (unit, shape,
 kind, default, bounds, description) and the first line of its docstring, which cites the paper equation
 it implements.
@@ -14,8 +14,8 @@ import math
 import pkgutil
 from dataclasses import dataclass
 
-import components
-from components.core import Block, CoSimBlock
+import cpgsim.components
+from cpgsim.components.core import Block, CoSimBlock
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class BlockEntry:
 def library() -> list[BlockEntry]:
     """Every block class of the library, by module then name."""
     entries = []
-    for info in sorted(pkgutil.walk_packages(components.__path__, "components."), key=lambda m: m.name):
+    for info in sorted(pkgutil.walk_packages(cpgsim.components.__path__, "cpgsim.components."), key=lambda m: m.name):
         mod = importlib.import_module(info.name)
         for name, cls in inspect.getmembers(mod, inspect.isclass):
             if issubclass(cls, Block) and cls.__module__ == mod.__name__ and cls not in (Block, CoSimBlock):

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
-from components.core import ParameterError
+from cpgsim.components.core import ParameterError
 
 LEG_NAMES = ("L1", "L2", "L3", "R1", "R2", "R3")  # Yu legs 1..6
 TRIPOD_GROUPS = ((0, 2, 4), (1, 3, 5))  # Yu groups A = {1, 3, 5}, B = {2, 4, 6}

@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared
+from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared
 
 
 class WiringError(ModelError):

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 
-from components.basic import Gain, Integrator, Sum
-from components.graph import Graph
-from components.networks import leader_follower_network
-from components.neurons import VanDerPolNeuron
+from cpgsim.components.basic import Gain, Integrator, Sum
+from cpgsim.components.graph import Graph
+from cpgsim.components.networks import leader_follower_network
+from cpgsim.components.neurons import VanDerPolNeuron
 
 
 def single_vdp(eps: float = 0.1, b: float = 4.0, omega: float = 0.4 * math.pi) -> Graph:

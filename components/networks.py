@@ -6,7 +6,7 @@ Yu Y5 coupling terms::
     u2 = k12*(-4*y1*x1 - y2) + k32*(y3 - y2)
     u3 = k13*(-4*y1*x1 - y3) + k23*(y2 - y3)
 
-The network is a graph: three :class:`~components.neurons.VanDerPolNeuron` blocks, one
+The network is a graph: three :class:`~cpgsim.components.neurons.VanDerPolNeuron` blocks, one
 :class:`LeaderDrive` (the stimulus ``-4*x1*y1``, which oscillates at twice the leader
 frequency) and two :class:`FollowerCoupling` blocks. Searching mode (Yu Y12, Y13) is the
 ``lead_gain`` input of the couplings (0 removes ``k12``, ``k13``) and the neurons'
@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from components.core import Block, Equations, Symbols
-from components.graph import Graph
-from components.neurons import VanDerPolNeuron
+from cpgsim.components.core import Block, Equations, Symbols
+from cpgsim.components.graph import Graph
+from cpgsim.components.neurons import VanDerPolNeuron
 
 TABLE1_OMEGA = (0.4 * math.pi, 0.8 * math.pi, 0.8 * math.pi)
 

@@ -28,7 +28,7 @@ import math
 
 import casadi as ca
 
-from components.core import Block, Equations, Symbols
+from cpgsim.components.core import Block, Equations, Symbols
 
 
 class VanDerPolNeuron(Block):

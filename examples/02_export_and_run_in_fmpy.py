@@ -12,8 +12,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hopf_block import build  # noqa: E402
 
-from fmus.export.exporter import export_fmu  # noqa: E402
-from harness.simulate import simulate  # noqa: E402
+from cpgsim.fmus.export.exporter import export_fmu  # noqa: E402
+from cpgsim.harness.simulate import simulate  # noqa: E402
 
 graph = build(mu=0.5)
 fmu = export_fmu(graph, "hopf.fmu", fmi=2, kind="cs", dt=1e-3)  # C from the same CasADi equations

@@ -9,11 +9,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hopf_block import build  # noqa: E402
 
-from components.basic import Gain  # noqa: E402
-from components.graph import Graph  # noqa: E402
-from fmus.export.exporter import export_fmu  # noqa: E402
-from fmus.importer.block import FmuBlock  # noqa: E402
-from harness.simulate import simulate  # noqa: E402
+from cpgsim.components.basic import Gain  # noqa: E402
+from cpgsim.components.graph import Graph  # noqa: E402
+from cpgsim.fmus.export.exporter import export_fmu  # noqa: E402
+from cpgsim.fmus.importer.block import FmuBlock  # noqa: E402
+from cpgsim.harness.simulate import simulate  # noqa: E402
 
 if not Path("hopf.fmu").exists():
     export_fmu(build(mu=0.5), "hopf.fmu", fmi=2, kind="cs")

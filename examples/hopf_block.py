@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import math
 
-from components.core import Block, Equations, Symbols
-from components.graph import Graph
+from cpgsim.components.core import Block, Equations, Symbols
+from cpgsim.components.graph import Graph
 
 
 class HopfOscillator(Block):

@@ -1,6 +1,6 @@
 """Errors of FMU import, isolation and SSP (each names the file and the cause, on one line).
 
-Load-time problems (the file is not a usable FMU) are :class:`~components.core.ModelError`\\ s, so
+Load-time problems (the file is not a usable FMU) are :class:`~cpgsim.components.core.ModelError`\\ s, so
 the CLI reports them with exit status 2; run-time failures (``doStep`` fails, the FMU crashes its
 process) are :class:`FmuRuntimeError`\\ s, which the co-simulation master turns into a
 ``CoSimulationError`` carrying the results recorded so far.
@@ -8,7 +8,7 @@ process) are :class:`FmuRuntimeError`\\ s, which the co-simulation master turns 
 
 from __future__ import annotations
 
-from components.core import ModelError
+from cpgsim.components.core import ModelError
 
 
 class FmuError(ModelError):

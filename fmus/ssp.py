@@ -1,9 +1,9 @@
 """SSP 1.0 (System Structure and Parameterization): a graph of FMUs as an ``.ssp`` archive, and back.
 
 :func:`export_ssp` writes ``SystemStructure.ssd`` plus one FMU per top-level block under
-``resources/``: an :class:`~fmus.importer.block.FmuBlock` contributes its FMU file (parameters that
+``resources/``: an :class:`~cpgsim.fmus.importer.block.FmuBlock` contributes its FMU file (parameters that
 differ from the FMU's start values become inline parameter bindings); an equation block or a
-sub-graph of equation blocks is exported as an FMU first (:func:`fmus.export.exporter.export_fmu`,
+sub-graph of equation blocks is exported as an FMU first (:func:`cpgsim.fmus.export.exporter.export_fmu`,
 co-simulation by default). Connections between blocks become ``Connection`` elements between
 FMI variable names (one per element of a vector port); the graph's exposed inputs and outputs
 become the system's connectors. Real connectors carry their unit, defined in ``Units`` with SI
@@ -16,7 +16,7 @@ system without it. The result validates against the SSP 1.0 schema and fmpy's ``
 (and, for FMI 2 CS, simulates) it.
 
 :func:`import_ssp` reads an ``.ssp`` (checked like an FMU: safe extraction, no DTDs) into a
-:class:`~components.graph.Graph` of ``FmuBlock``\\ s, nested ``System``\\ s as nested graphs. Inline
+:class:`~cpgsim.components.graph.Graph` of ``FmuBlock``\\ s, nested ``System``\\ s as nested graphs. Inline
 and ``.ssv`` parameter bindings are applied; connection transformations, signal dictionaries and
 ``.ssm`` parameter mappings are refused with a clear error. The extracted files live as long as
 the returned graph.
@@ -34,12 +34,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from components.core import Block, CoSimBlock
-from components.graph import Graph, PortRef, parse_ref
-from fmus.errors import FmuError, ModelDescriptionError, one_line
-from fmus.importer.archive import check_archive, open_zip, read_member, remove_tree, safe_extract
-from fmus.importer.block import FmuBlock
-from fmus.importer.description import identifier
+from cpgsim.components.core import Block, CoSimBlock
+from cpgsim.components.graph import Graph, PortRef, parse_ref
+from cpgsim.fmus.errors import FmuError, ModelDescriptionError, one_line
+from cpgsim.fmus.importer.archive import check_archive, open_zip, read_member, remove_tree, safe_extract
+from cpgsim.fmus.importer.block import FmuBlock
+from cpgsim.fmus.importer.description import identifier
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -157,7 +157,7 @@ def _component(name: str, blk: Any, tmp: Path, kind: str, fmi: int) -> _Comp:
     if not isinstance(blk, (Block, Graph)):
         raise SspError(f"block {name!r}: cannot export {type(blk).__name__} to SSP")
     try:
-        from fmus.export.exporter import export_fmu
+        from cpgsim.fmus.export.exporter import export_fmu
     except ImportError as exc:
         raise SspError(f"block {name!r} is an equation block and native FMU export is not available "
                        f"({one_line(exc)})") from None
@@ -177,7 +177,7 @@ def _unit_attr(unit: str, units: dict[str, Any]) -> str | None:
     if unit in ("", "1"):
         return None
     try:
-        from fmus.units import unit_definition
+        from cpgsim.fmus.units import unit_definition
     except ImportError:  # pragma: no cover - units module missing: leave units to the FMUs
         return None
     d = unit_definition(unit)

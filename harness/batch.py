@@ -1,7 +1,7 @@
 """Batch runs for parameter studies: N parameter sets of one graph in one compiled loop, threads in C.
 
-:func:`simulate_batch` compiles the graph once (:func:`harness.compile.compile_graph`), builds one
-shared library from the model's step and :data:`BATCH_DRIVER` (:func:`harness.native.step_library`) and
+:func:`simulate_batch` compiles the graph once (:func:`cpgsim.harness.compile.compile_graph`), builds one
+shared library from the model's step and :data:`BATCH_DRIVER` (:func:`cpgsim.harness.native.step_library`) and
 runs every variant -- its own parameter vector ``p`` and initial states -- from ``t0`` to ``t_end`` on
 POSIX threads. Variants are handed out one at a time by an atomic counter (a variant is thousands of
 steps, so the counter is touched rarely and nobody waits on it); each thread has its own CasADi work
@@ -16,7 +16,7 @@ Per variant the driver keeps, for the chosen signals (``record`` glob patterns, 
   ``period`` (mean interval between upward crossings of the window's midline (max + min) / 2, each
   crossing located by linear interpolation between samples) and ``crossings`` (how many). A crossing
   counts only after the signal went below ``midline - 0.1 (max - min)`` since the previous one (the
-  hysteresis of ``harness.verify.system.up_crossings``), so wiggles at the midline are not cycles.
+  hysteresis of ``cpgsim.harness.verify.system.up_crossings``), so wiggles at the midline are not cycles.
 
 The midline needs the window's extremes before the first crossing can be counted. The driver keeps the
 window's samples of the reduced signals in a buffer per thread (``window_steps x n_signals`` doubles,
@@ -54,10 +54,10 @@ from typing import Any
 
 import numpy as np
 
-from components.core import Block, ModelError, ParameterError
-from components.graph import Graph
-from harness.compile import CompiledModel, compile_graph
-from harness.simulate import horizon_steps, matching_columns, physical_memory
+from cpgsim.components.core import Block, ModelError, ParameterError
+from cpgsim.components.graph import Graph
+from cpgsim.harness.compile import CompiledModel, compile_graph
+from cpgsim.harness.simulate import horizon_steps, matching_columns, physical_memory
 
 REDUCTIONS = ("final", "min", "max", "mean", "amplitude", "period", "crossings")
 """Reductions :func:`simulate_batch` computes, in the order of ``BATCH_DRIVER``'s result slots."""
@@ -338,7 +338,7 @@ class BatchResult:
     def save(self, path: str | Path) -> list[Path]:
         """Write atomically by suffix: ``.csv`` (the table, plus ``.meta.json``; recorded trajectories go to
         ``<stem>.trajectories.npz`` beside it) or ``.npz`` (everything). Returns the files written."""
-        from harness.results import ResultsError, atomic_write
+        from cpgsim.harness.results import ResultsError, atomic_write
 
         path = Path(path)
         if path.suffix not in (".csv", ".npz"):
@@ -415,10 +415,10 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     about 5 times a second while the variants run. The graph is not modified.
 
     Equation blocks only; free graph inputs are held at their declared defaults (one without a default
-    is an error). Raises :class:`~components.core.ModelError` for bad input before anything runs, and
-    :class:`harness.native.NativeUnavailable` when no C compiler works.
+    is an error). Raises :class:`~cpgsim.components.core.ModelError` for bad input before anything runs, and
+    :class:`cpgsim.harness.native.NativeUnavailable` when no C compiler works.
     """
-    from harness.native import step_library
+    from cpgsim.harness.native import step_library
 
     model = compile_graph(graph, dt, substeps)
     cs = model.flat.cosim_blocks()

@@ -1,14 +1,14 @@
 """Compiled models cached by content hash, so a graph compiled once starts in well under a second.
 
 The key is a SHA-256 of everything the compiled functions depend on: each equation block's class
-and configuration (:func:`harness.grouped.leaf_signature`: declarations, attributes, which inputs
+and configuration (:func:`cpgsim.harness.grouped.leaf_signature`: declarations, attributes, which inputs
 are wired), the source files of the block classes' modules, the wiring, the graph's inputs and
 co-simulation ports, ``dt``, ``substeps``, the grouping, the compiler's own source and the CasADi
 version. Parameter values and start values are not part of it: they are data (the parameter
 vector, the initial state), rebuilt from the graph on every load. An entry is one JSON file
 (CasADi's own serialization of the four functions, the grouped step's C source, each block's direct
 feedthrough), written atomically; an unreadable entry is recompiled and replaced. The C libraries
-built from a model are cached separately by the hash of their source (:mod:`harness.native`).
+built from a model are cached separately by the hash of their source (:mod:`cpgsim.harness.native`).
 
 ``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
 ``CPGSIM_COMPILE_CACHE=0`` turns the model cache off.
@@ -26,8 +26,8 @@ from typing import Any
 
 import casadi as ca
 
-from components import memo
-from components.graph import FlatGraph
+from cpgsim.components import memo
+from cpgsim.components.graph import FlatGraph
 
 FORMAT = 1
 
@@ -47,7 +47,7 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatur
               code_files: list[str]) -> str:
     """Content hash of a flattened graph's compiled form (see module docstring).
 
-    ``signatures``: each equation block's :func:`harness.grouped.leaf_signature` by path; ``code_files``
+    ``signatures``: each equation block's :func:`cpgsim.harness.grouped.leaf_signature` by path; ``code_files``
     are the compiler's own sources.
     """
     h = hashlib.sha256()

@@ -24,13 +24,13 @@ from typing import TYPE_CHECKING, Any, Literal
 import casadi as ca
 import numpy as np
 
-from components import memo
-from components.core import Block, CoSimBlock, ModelError, Port
-from components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
-from harness import cache
+from cpgsim.components import memo
+from cpgsim.components.core import Block, CoSimBlock, ModelError, Port
+from cpgsim.components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
+from cpgsim.harness import cache
 
 if TYPE_CHECKING:
-    from harness.grouped import Schedule
+    from cpgsim.harness.grouped import Schedule
 
 
 @dataclass
@@ -148,7 +148,7 @@ class CompiledModel:
     def c_step_source(self) -> str | None:
         """C source of the step for the native backend when it is not CasADi's own code generation."""
         if self._c_source is None and self.schedule is not None:
-            from harness.grouped import c_step_source
+            from cpgsim.harness.grouped import c_step_source
 
             self._c_source = c_step_source(self.schedule, self.dt, self.substeps)
         return self._c_source
@@ -175,7 +175,7 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     """Flatten and compile ``item`` (a graph, or a single block wrapped in one).
 
     ``grouping``: ``"flat"`` inlines every block instance into one expression graph; ``"kinds"``
-    compiles each kind of identical instances once and loops over them (:mod:`harness.grouped`), so
+    compiles each kind of identical instances once and loops over them (:mod:`cpgsim.harness.grouped`), so
     code size and compile time no longer grow with the number of instances; ``"auto"`` picks
     ``"kinds"`` for graphs of at least :data:`GROUPED_MIN_BLOCKS` equation blocks.
     """
@@ -194,7 +194,7 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     compiler = _Compiler(flat, dt, int(substeps))
     if not memo.caching_enabled():
         return compiler.build(grouped=grouping == "kinds")
-    from harness import grouped
+    from cpgsim.harness import grouped
 
     compiler.signatures = grouped.leaf_signatures(flat)  # for the key, and the kinds reuse them
     code = [__file__, grouped.__file__, sys.modules[Block.__module__].__file__]
@@ -218,7 +218,7 @@ class _Compiler:
         self.states, self.dstates, self.inputs, self.params, self.sig = (Layout() for _ in range(5))
         self.block_eqs: dict[str, tuple] = {}
         self.feed: dict[str, dict[str, Any]] = {}  # eq block path -> output port -> inputs it reads directly
-        self.signatures: dict[str, tuple] | None = None  # harness.grouped.leaf_signatures, when already known
+        self.signatures: dict[str, tuple] | None = None  # cpgsim.harness.grouped.leaf_signatures, when already known
 
     # -- layouts --------------------------------------------------------------------------------
     def _layouts(self) -> None:
@@ -349,7 +349,7 @@ class _Compiler:
     def build(self, grouped: bool = False) -> CompiledModel:
         self._layouts()
         if grouped:
-            from harness.grouped import build_schedule, casadi_functions
+            from cpgsim.harness.grouped import build_schedule, casadi_functions
 
             schedule = build_schedule(self)
             self.feed = schedule.leaf_feed

@@ -16,8 +16,8 @@ import html
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from components.core import Block, CoSimBlock
-from components.graph import Graph, as_graph
+from cpgsim.components.core import Block, CoSimBlock
+from cpgsim.components.graph import Graph, as_graph
 
 PORT_H = 0.32  # vertical distance of two ports
 HEAD_H = 0.62  # block title area
@@ -350,7 +350,7 @@ def draw_graph(item: Graph | Block, path: str | Path, title: str | None = None) 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".svg":
-        from harness.results import atomic_write
+        from cpgsim.harness.results import atomic_write
 
         atomic_write(path, lambda f: f.write(_svg(graph, lay, title)), text=True)
     else:

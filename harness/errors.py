@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from harness.results import Results
+    from cpgsim.harness.results import Results
 
 
 class SimulationError(RuntimeError):

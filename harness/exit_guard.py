@@ -3,7 +3,7 @@
 An FMU runs in-process as a shared library; if it calls ``exit(0)`` inside ``doStep``, the C library
 ends the process: Python's exception handling, ``finally`` blocks and ``atexit`` never run and the
 exit status would be 0. :func:`guard_run` arms a C exit handler (``on_exit``, from a few lines of C
-compiled once into the cache, see :mod:`harness.native`) for the duration of a run: if the process
+compiled once into the cache, see :mod:`cpgsim.harness.native`) for the duration of a run: if the process
 exits while it is armed, the handler prints one line naming the run (and where its partial results
 are, marked incomplete) and ends the process with status 1 instead. While armed, the fatal signals
 of a crash in native code (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) are reported the same way
@@ -92,7 +92,7 @@ def _load() -> ctypes.CDLL | None:
     if _tried:
         return _lib
     _tried = True
-    from harness.native import cache_dir, compiler
+    from cpgsim.harness.native import cache_dir, compiler
 
     cc = compiler()
     if cc is None:

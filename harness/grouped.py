@@ -1,6 +1,6 @@
 """Identical block instances compiled once, evaluated in loops (the grouped compile).
 
-The flat compile (:mod:`harness.compile`) inlines every block instance into one expression graph, so
+The flat compile (:mod:`cpgsim.harness.compile`) inlines every block instance into one expression graph, so
 its generated step grows with the number of instances (2.4 MB of straight-line C for 600 Yu Y5
 networks). Here a graph's equation blocks are sorted into *kinds*: instances whose equations are
 the same expression once parameters, states and connected inputs are symbols and unconnected
@@ -21,7 +21,7 @@ truth); only the loop structure is generated here, in two forms from one :class:
   gathered), then RK4 over the whole state vector; only the signals that derivatives read are
   recomputed in the inner RK4 stages, and kinds without inputs compute signals and derivatives in
   one pass in the first. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every
-  driver of :mod:`harness.native` runs it unchanged.
+  driver of :mod:`cpgsim.harness.native` runs it unchanged.
 
 Evaluation order: an output port's *level* is 0 when it reads no other block's output through direct
 feedthrough, else one more than the highest level it reads; groups run level by level, which is the
@@ -40,11 +40,11 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
-from components.core import Block, Equations, Symbols
-from components.graph import AlgebraicLoopError, FlatGraph
+from cpgsim.components.core import Block, Equations, Symbols
+from cpgsim.components.graph import AlgebraicLoopError, FlatGraph
 
 if TYPE_CHECKING:
-    from harness.compile import _Compiler
+    from cpgsim.harness.compile import _Compiler
 
 
 _DECLARED = {"name", "inputs", "outputs", "parameters", "values", "states", "discrete_states"}
@@ -623,7 +623,7 @@ def _strided(V: ca.MX, off: np.ndarray, size: int) -> ca.MX:
 # -- C form ------------------------------------------------------------------------------------------
 def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc)."""
-    from harness.native import casadi_c_source
+    from cpgsim.harness.native import casadi_c_source
 
     fused = _fused_first_stage(s)
     groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups

@@ -13,7 +13,7 @@ columns are plain slices of a block's output, and whether the compiled step may 
 state itself (one C call that also checks it for NaN/inf: no feedthrough blocks). A failing block
 is named by the stage variable the loop keeps, without a wrapper per call.
 
-A block may ask to end the run by raising :class:`~harness.errors.StopRequested` (an FMU that
+A block may ask to end the run by raising :class:`~cpgsim.harness.errors.StopRequested` (an FMU that
 terminates the simulation): not a failure. The block is not stepped again; the master records every
 macro step up to the last one at or before the requested time (if the block completed the step it
 was asked for, the row at the step's end too, with the block's outputs there), terminates the blocks
@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from components.core import CoSimBlock
-from harness.compile import CompiledModel
-from harness.errors import SimulationError, StopRequested
+from cpgsim.components.core import CoSimBlock
+from cpgsim.harness.compile import CompiledModel
+from cpgsim.harness.errors import SimulationError, StopRequested
 
 
 class StopInfo:

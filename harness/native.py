@@ -20,7 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from components import memo
+from cpgsim.components import memo
 
 DRIVER = r"""
 #include <math.h>
@@ -234,7 +234,7 @@ class NativeUnavailable(RuntimeError):
 
 
 def cache_dir() -> Path:
-    """Where compiled C libraries go: the per-user cache folder (:func:`components.memo.cache_root`)."""
+    """Where compiled C libraries go: the per-user cache folder (:func:`cpgsim.components.memo.cache_root`)."""
     return memo.cache_root()
 
 
@@ -382,7 +382,7 @@ def step_library(step: ca.Function, driver: str, tag: str, source: str | None = 
     ``cpgsim_step_impl(arg, res, iw, w, mem)`` has CasADi's calling convention (inputs ``t, x, z,
     u, p``; outputs ``x_next, z_next, y``) and ``cpgsim_step_impl_work`` gives its work sizes, so a
     driver written against them runs any compiled model. ``source``: C that already defines both
-    (a grouped model's :meth:`~harness.compile.CompiledModel.c_step_source`) instead of CasADi's
+    (a grouped model's :meth:`~cpgsim.harness.compile.CompiledModel.c_step_source`) instead of CasADi's
     generation of ``step``. Cached by content hash.
     """
     if source is not None:

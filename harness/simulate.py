@@ -22,17 +22,17 @@ from typing import Any, Literal
 import casadi as ca
 import numpy as np
 
-from components.core import Block, CoSimBlock, ModelError, ParameterError
-from components.graph import Graph
-from harness.compile import CompiledModel, compile_graph
-from harness.errors import CoSimulationError, SimulationDiverged, SimulationError
-from harness.master import run_master
-from harness.results import Results
+from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
+from cpgsim.components.graph import Graph
+from cpgsim.harness.compile import CompiledModel, compile_graph
+from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
+from cpgsim.harness.master import run_master
+from cpgsim.harness.results import Results
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
 """Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM for an
 equation-only horizon (a flat six-leg Yu controller step is ~15k instructions: its C took gcc 13-16 s).
-Since the grouped compile (:mod:`harness.grouped`) this only concerns graphs of fewer than 64 blocks
+Since the grouped compile (:mod:`cpgsim.harness.grouped`) this only concerns graphs of fewer than 64 blocks
 with very large blocks: large graphs are grouped, their step is a few hundred MX instructions and
 their C (independent of the number of instances) builds in about a second, so they run natively."""
 
@@ -59,11 +59,11 @@ class Simulator:
     ``params`` overrides parameters by path (``{"z1.eps": 0.2}``, globs allowed); ``record`` keeps
     only the columns matching these glob patterns; ``order`` is the co-simulation order;
     ``backend`` picks how an equation-only horizon runs: ``"native"`` (the step's C code from
-    CasADi looped in C, :mod:`harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
-    when a C compiler works). ``grouping`` is :func:`~harness.compile.compile_graph`'s (``"auto"``:
+    CasADi looped in C, :mod:`cpgsim.harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
+    when a C compiler works). ``grouping`` is :func:`~cpgsim.harness.compile.compile_graph`'s (``"auto"``:
     identical instances looped from 64 equation blocks on). ``jit`` compiles the per-step function used by
     the co-simulation master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
-    worker thread (:class:`harness.native.ThreadedStep`); ``None`` (default) keeps it on the master's
+    worker thread (:class:`cpgsim.harness.native.ThreadedStep`); ``None`` (default) keeps it on the master's
     thread unless the environment sets ``CPGSIM_STEP_THREAD=1``. The worker pays on an idle machine
     (1.0-1.4x faster robot runs) but its hand-off busy-waits, which on a loaded machine takes the core the
     master needs (2.3x slower at load 4-5, 5-7x at load 7-15: ``benchmarks/bench_run.py``), so a default
@@ -96,7 +96,7 @@ class Simulator:
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
         if jit:
-            from harness.native import renamed
+            from cpgsim.harness.native import renamed
 
             self._step_fn = renamed(self.model.step, "step_jit", jit_options())
 
@@ -117,7 +117,7 @@ class Simulator:
 
         ``t_end - t0`` must be a whole number of macro steps (a horizon that is not is an error naming
         both numbers). ``stream``: a ``.csv`` or ``.npz`` file the results are written to while the run
-        goes on (:class:`harness.results.ResultsWriter`: at least every simulated second or
+        goes on (:class:`cpgsim.harness.results.ResultsWriter`: at least every simulated second or
         ``STREAM_FLUSH_SECONDS`` of wall time), marked incomplete until the run ends; a run that stops
         early keeps what was recorded there too. ``meta`` is added to the results' metadata.
         """
@@ -134,7 +134,7 @@ class Simulator:
         rec.aliases = dict(self._recorded_aliases)
         rec.meta = dict(meta or {})
         if stream is not None:
-            from harness.results import ResultsWriter
+            from cpgsim.harness.results import ResultsWriter
 
             rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
             rec.flush_rows = max(1, int(round(1.0 / m.dt)))
@@ -259,7 +259,7 @@ class Simulator:
         if native is not None:
             bound = native.bind(x, z, u, p, x_next, z_next, y)
             if self._use_step_thread():
-                from harness.native import NativeUnavailable, ThreadedStep
+                from cpgsim.harness.native import NativeUnavailable, ThreadedStep
 
                 try:
                     bound = ThreadedStep(bound)
@@ -287,7 +287,7 @@ class Simulator:
                 and self.model.step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS):
             return None  # gcc on very large generated C takes longer than a horizon run saves
         if self._native_runner is None:
-            from harness.native import NativeHorizon, NativeUnavailable
+            from cpgsim.harness.native import NativeHorizon, NativeUnavailable
 
             try:
                 self._native_runner = NativeHorizon(self.model.step, self.model.c_step_source())
@@ -354,8 +354,8 @@ class Simulator:
     # -- co-simulation master ---------------------------------------------------------------------
     def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
                    progress: bool):
-        """The co-simulation master (:mod:`harness.master`) with this simulator's step and errors;
-        returns the master's :class:`~harness.master.StopInfo` (a block asked to stop) or None."""
+        """The co-simulation master (:mod:`cpgsim.harness.master`) with this simulator's step and errors;
+        returns the master's :class:`~cpgsim.harness.master.StopInfo` (a block asked to stop) or None."""
         m = self.model
         u = np.zeros(m.inputs.size)
         y = np.zeros(m.signals_layout.size)
@@ -442,7 +442,7 @@ class _Recorder:
         self.aliases: dict[str, str] = {}
         self.exact: dict[str, list[np.ndarray]] = {}  # "block.port" -> exact 64-bit integer rows
         self.meta: dict[str, Any] = {}
-        self.writer: Any = None  # a harness.results.ResultsWriter when the run is streamed
+        self.writer: Any = None  # a cpgsim.harness.results.ResultsWriter when the run is streamed
         self.flush_rows = 1000  # hand rows to the writer at least every this many (one simulated second)
         self.streamed = 0  # rows handed to the writer
 

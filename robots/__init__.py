@@ -1,14 +1,14 @@
 """DART models of the hexapod (Yu Tables 3 and 4), terrains and the plant as a co-simulation block.
 
-- :mod:`robots.hexapod`: :func:`build_hexapod` (skeleton from a geometry preset);
-- :mod:`robots.terrain`: :func:`flat`, :func:`step`, :func:`ditches`, :func:`gaps`;
-- :mod:`robots.plant`: :class:`DartHexapod` (the plant block: servo targets in, joint states, toe
+- :mod:`cpgsim.robots.hexapod`: :func:`build_hexapod` (skeleton from a geometry preset);
+- :mod:`cpgsim.robots.terrain`: :func:`flat`, :func:`step`, :func:`ditches`, :func:`gaps`;
+- :mod:`cpgsim.robots.plant`: :class:`DartHexapod` (the plant block: servo targets in, joint states, toe
   forces and body pose out).
 """
 
-from robots.hexapod import HexapodModel, build_hexapod
-from robots.plant import DartHexapod, default_gains, standing_posture
-from robots.terrain import Terrain, ditches, flat, gaps, step
+from cpgsim.robots.hexapod import HexapodModel, build_hexapod
+from cpgsim.robots.plant import DartHexapod, default_gains, standing_posture
+from cpgsim.robots.terrain import Terrain, ditches, flat, gaps, step
 
 __all__ = ["DartHexapod", "HexapodModel", "Terrain", "build_hexapod", "default_gains", "ditches", "flat",
            "gaps", "standing_posture", "step"]

@@ -1,4 +1,4 @@
-"""The hexapod as a DART skeleton, built in code from a :class:`~components.geometry.RobotGeometry`.
+"""The hexapod as a DART skeleton, built in code from a :class:`~cpgsim.components.geometry.RobotGeometry`.
 
 Structure (Yu 2019, Tables 3 and 4): a ``FreeJoint`` root carrying the body box, and per
 leg a chain of three ``RevoluteJoint`` s -- ``alpha`` (body-coxa, vertical axis), ``beta``
@@ -9,7 +9,7 @@ cylinder lying on a box sink in (measured). Every shape has visual, collision an
 aspects. Masses come from the geometry dataclass; each body's inertia is computed from its shapes
 (uniform density per shape, parallel-axis theorem for the tibia + foot).
 
-Frames and signs match :mod:`components.geometry` exactly:
+Frames and signs match :mod:`cpgsim.components.geometry` exactly:
 
 - body frame ``x`` lateral (right), ``y`` forward, ``z`` up; the alpha joints sit at the mount
   points ``geometry.mounts[leg]`` in the body's mid-plane ``z = 0``; legs 0, 1, 2 (L1..L3) at
@@ -18,7 +18,7 @@ Frames and signs match :mod:`components.geometry` exactly:
   right legs and backward for left legs). The alpha axis is ``side * z`` so ``alpha > 0`` moves the
   foot forward on both sides; beta turns about ``-y`` of the coxa (``beta > 0`` lifts the femur),
   gamma about ``+y`` of the femur (knee flexion: the tibia points ``beta - gamma`` above the
-  horizontal). Hence the foot centre is :func:`components.geometry.leg_fk` of the joint angles.
+  horizontal). Hence the foot centre is :func:`cpgsim.components.geometry.leg_fk` of the joint angles.
 
 Skeleton DOF order: the six FreeJoint coordinates, then ``alpha, beta, gamma`` of leg 0, leg 1, ...,
 leg 5 (``JOINT_DOFS``).
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import dartpy as dart
 import numpy as np
 
-from components.geometry import LEG_NAMES, RobotGeometry, leg_fk
+from cpgsim.components.geometry import LEG_NAMES, RobotGeometry, leg_fk
 
 JOINT_NAMES = ("alpha", "beta", "gamma")
 FREE_DOFS = 6
@@ -222,7 +222,7 @@ def build_hexapod(geometry: RobotGeometry, friction: float = 1.0,
 
 
 def foot_positions_body(geometry: RobotGeometry, q: Sequence[float]) -> np.ndarray:
-    """Foot centres in the body frame from :func:`~components.geometry.leg_fk`, shape (6, 3)."""
+    """Foot centres in the body frame from :func:`~cpgsim.components.geometry.leg_fk`, shape (6, 3)."""
     q = np.asarray(q, dtype=float).reshape(6, 3)
     out = np.empty((6, 3))
     for i, (mx, my) in enumerate(geometry.mounts):

@@ -45,7 +45,7 @@ Cost (``benchmarks/bench_run.py``, docs/performance.md). A 1 kHz closed loop cal
 by their (kept-alive) wrappers' ``id()`` after the first sight (two ``getShape()`` calls less per
 contact; the terrain is usually object 1, so object 2 is looked at first); and every output (foot
 centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi function
-(:mod:`robots.readout`, about 1 us per call) on the skeleton's positions and velocities.
+(:mod:`cpgsim.robots.readout`, about 1 us per call) on the skeleton's positions and velocities.
 """
 
 from __future__ import annotations
@@ -57,12 +57,12 @@ from collections.abc import Mapping, Sequence
 import dartpy as dart
 import numpy as np
 
-from components.core import CoSimBlock, ModelError, ParameterError
-from components.geometry import YU_SIM, RobotGeometry, leg_ik
-from harness.native import NativeFunction, NativeUnavailable
-from robots.hexapod import HexapodModel, build_hexapod, tilt_angle
-from robots.readout import OUTPUT_PORTS, readout_function
-from robots.terrain import Terrain, flat
+from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
+from cpgsim.components.geometry import YU_SIM, RobotGeometry, leg_ik
+from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots.hexapod import HexapodModel, build_hexapod, tilt_angle
+from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
+from cpgsim.robots.terrain import Terrain, flat
 
 GRAVITY = 9.81
 _free_to_transform = dart.dynamics.FreeJoint.convertToTransform
@@ -120,8 +120,8 @@ class DartHexapod(CoSimBlock):
 
     Constructor arguments (fixed for the block's life; parameters go in ``**params``):
 
-    - ``geometry``: a :class:`~components.geometry.RobotGeometry` (default ``YU_SIM``);
-    - ``terrain``: a :class:`~robots.terrain.Terrain` (default flat ground);
+    - ``geometry``: a :class:`~cpgsim.components.geometry.RobotGeometry` (default ``YU_SIM``);
+    - ``terrain``: a :class:`~cpgsim.robots.terrain.Terrain` (default flat ground);
     - ``q0``: initial joint angles (18, rad; default :func:`standing_posture`);
     - ``body_height``: initial height of the body frame (m); default: the lowest foot sphere just
       touches the ground under it (body level, at the world origin, facing ``+y``);
@@ -265,7 +265,7 @@ class DartHexapod(CoSimBlock):
         self._update_outputs()
 
     def _bind_readout(self) -> None:
-        """The compiled sensor readout (:mod:`robots.readout`) on this plant's buffers."""
+        """The compiled sensor readout (:mod:`cpgsim.robots.readout`) on this plant's buffers."""
         self._pos, self._vel = np.zeros(24), np.zeros(24)
         self._force_world = np.zeros(18)
         self._force_bytes = memoryview(self._force_world).cast("B")

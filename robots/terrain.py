@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import dartpy as dart
 import numpy as np
 
-from components.core import ParameterError
+from cpgsim.components.core import ParameterError
 
 SIDES = ("right", "left", "both")
 GROUND_COLOR = (0.55, 0.60, 0.55)

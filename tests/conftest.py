@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+import sys
 import tempfile
 from pathlib import Path
 
 import pytest
+
+# `python -m pytest` puts the working directory (the repository root) first on sys.path, which would make
+# the folders importable under their bare names (`components`, `harness`, ...) beside `cpgsim.components`:
+# two copies of every class, and code written against the old names would pass here and fail for users.
+# The project is imported only as the installed package `cpgsim`.
+_ROOT = Path(__file__).resolve().parents[1]
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _ROOT]
 
 
 @pytest.fixture

@@ -2,11 +2,15 @@
 
 Layers, lowest first (a module may import only from its own layer or a lower one):
 
-0. ``components``            the block kit and each paper's blocks
-1. ``harness`` (its root)    the engine: compile, native, simulate, master, results, diagram, errors
-2. ``harness.verify``, ``fmus``, ``robots``   built on the engine, independent of each other
-3. ``harness.experiments``   the papers' robot experiments
-4. ``harness.cli``           the ``cpgsim`` command
+0. ``cpgsim.components``              the block kit and each paper's blocks
+1. ``cpgsim.harness`` (its root)       the engine: compile, native, simulate, master, results, diagram, errors
+2. ``cpgsim.harness.verify``, ``cpgsim.fmus``, ``cpgsim.robots``   built on the engine, independent of each other
+3. ``cpgsim.harness.experiments``      the papers' robot experiments
+4. ``cpgsim.harness.cli``              the ``cpgsim`` command
+5. ``cpgsim`` (the root ``__init__``)  the public face: names loaded on first use; nothing inside imports it
+
+The repository root is the package ``cpgsim`` (``package-dir`` in pyproject.toml), so a file's module name
+is ``cpgsim.`` plus its path.
 
 Every ``import`` counts, including those inside functions (a lazy import hides a cycle, it does not
 remove it); only ``if TYPE_CHECKING:`` blocks are skipped, since they never run.
@@ -24,12 +28,14 @@ PACKAGES = ("components", "harness", "fmus", "robots")
 
 
 def module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix("").parts
+    parts = ("cpgsim", *path.relative_to(ROOT).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
 def project_modules() -> dict[str, Path]:
-    return {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+    modules = {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+    modules["cpgsim"] = ROOT / "__init__.py"
+    return modules
 
 
 def _type_checking_block(node: ast.AST) -> bool:
@@ -105,8 +111,10 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def layer(module: str) -> int:
-    for prefix, level in (("harness.cli", 4), ("harness.experiments", 3), ("harness.verify", 2), ("fmus", 2),
-                          ("robots", 2), ("harness", 1), ("components", 0)):
+    if module == "cpgsim":
+        return 5
+    for prefix, level in (("cpgsim.harness.cli", 4), ("cpgsim.harness.experiments", 3), ("cpgsim.harness.verify", 2),
+                          ("cpgsim.fmus", 2), ("cpgsim.robots", 2), ("cpgsim.harness", 1), ("cpgsim.components", 0)):
         if module == prefix or module.startswith(prefix + "."):
             return level
     raise AssertionError(f"module {module} belongs to no layer")
@@ -114,7 +122,7 @@ def layer(module: str) -> int:
 
 def side(module: str) -> str:
     """Which of the independent layer-2 parts a module belongs to."""
-    return "harness.verify" if module.startswith("harness.verify") else module.split(".")[0]
+    return "cpgsim.harness.verify" if module.startswith("cpgsim.harness.verify") else ".".join(module.split(".")[:2])
 
 
 def test_cycle_finder_finds_a_planted_cycle():
@@ -156,3 +164,38 @@ def test_engine_root_stays_small():
 def test_every_package_says_its_role(package):
     doc = ast.get_docstring(ast.parse(project_modules()[package].read_text()))
     assert doc and len(doc) > 30, f"package {package} has no docstring saying its role"
+
+
+def test_layer_of_the_public_face_and_of_subpackages():
+    # the rule the layer test relies on, checked on names it must place (and refuse)
+    assert layer("cpgsim") == 5 and layer("cpgsim.components.yu.fsm") == 0 and layer("cpgsim.harness.cli.main") == 4
+    assert side("cpgsim.fmus.importer.me") == "cpgsim.fmus"
+    assert side("cpgsim.harness.verify.sync") != side("cpgsim.robots")
+    with pytest.raises(AssertionError):
+        layer("components.core")  # an old top-level name belongs to no layer
+
+
+def test_installed_packages_are_the_folders():
+    """pyproject's explicit package list (a regular install copies only these) is every folder with an
+    ``__init__.py`` under the four top-level folders, as ``cpgsim.`` subpackages, plus ``cpgsim`` itself."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {module_name(p) for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")} | {"cpgsim"}
+    assert listed == folders
+
+
+def test_no_module_imports_an_old_top_level_name():
+    old = [f"{name} -> {dep}" for name, path in project_modules().items()
+           for dep in _absolute_imports(path) if dep.split(".")[0] in PACKAGES]
+    assert not old, "imports of pre-0.2 top-level names: " + ", ".join(old)
+
+
+def _absolute_imports(path: Path) -> set[str]:
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            out.add(node.module)
+    return out

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components.basic import Sum
-from components.library import hexapod_network
-from harness.compile import compile_graph
-from harness.simulate import Simulator
+from cpgsim.components.basic import Sum
+from cpgsim.components.library import hexapod_network
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.simulate import Simulator
 
 
 @pytest.fixture(autouse=True)
@@ -92,7 +92,7 @@ def test_cache_can_be_turned_off(private_cache, monkeypatch):
 
 
 def test_grouped_model_from_cache_runs_natively(private_cache):
-    from components.library import network_array
+    from cpgsim.components.library import network_array
 
     cold = Simulator(network_array(12), backend="native")
     warm = Simulator(network_array(12), backend="native")
@@ -101,7 +101,7 @@ def test_grouped_model_from_cache_runs_natively(private_cache):
 
 
 def test_locked_orbit_memo_matches_the_computation(private_cache, monkeypatch):
-    from components.yu import converter
+    from cpgsim.components.yu import converter
 
     converter._locked_orbit_disk.cache_clear()
     memo = converter.locked_orbit(0.1, 4.0, converter.TABLE1_OMEGA, 0.1)

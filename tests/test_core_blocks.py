@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from components.basic import Constant, Demux, Gain, Integrator, Mux, Product, StepSource, Sum
-from components.core import Block, DeclarationError, Equations, ParameterError
-from components.graph import Graph
-from components.library import hexapod_network, single_vdp
-from components.networks import leader_follower_network
-from components.neurons import VanDerPolNeuron
-from harness.simulate import simulate
+from cpgsim.components.basic import Constant, Demux, Gain, Integrator, Mux, Product, StepSource, Sum
+from cpgsim.components.core import Block, DeclarationError, Equations, ParameterError
+from cpgsim.components.graph import Graph
+from cpgsim.components.library import hexapod_network, single_vdp
+from cpgsim.components.networks import leader_follower_network
+from cpgsim.components.neurons import VanDerPolNeuron
+from cpgsim.harness.simulate import simulate
 
 
 def _zero_up_crossings(t: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -134,8 +134,8 @@ def test_block_listing_is_generated_from_the_declarations_and_docs_are_current()
     """`cpgsim blocks --markdown` lists every block with its ports and units; docs/blocks.md is that text."""
     from pathlib import Path
 
-    from components.catalog import library, markdown
-    from harness.cli.main import main
+    from cpgsim.components.catalog import library, markdown
+    from cpgsim.harness.cli.main import main
 
     names = {e.name for e in library()}
     assert {"VanDerPolNeuron", "Gain", "YuConverter", "YuGaitFSM", "LimbModeController", "FootTrajectory"} <= names

@@ -10,14 +10,14 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.basic import Gain, Integrator
-from components.core import CoSimBlock, ModelError
-from components.graph import Graph
-from harness.cli import catalog
-from harness.compile import compile_graph
-from harness.native import NativeFunction
-from harness.simulate import SimulationDiverged, Simulator
-from robots.plant import DartHexapod
+from cpgsim.components.basic import Gain, Integrator
+from cpgsim.components.core import CoSimBlock, ModelError
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.native import NativeFunction
+from cpgsim.harness.simulate import SimulationDiverged, Simulator
+from cpgsim.robots.plant import DartHexapod
 
 
 class Pulses(CoSimBlock):
@@ -75,8 +75,8 @@ def test_step_thread_is_off_by_default_even_for_large_steps(monkeypatch):
     """The worker thread's hand-off busy-waits and made loaded machines 2-7x slower: never the default,
     not even for the six-leg controller's step (the size that used to switch it on)."""
     monkeypatch.delenv("CPGSIM_STEP_THREAD", raising=False)
-    from components.yu.leg import hexapod_controller
-    from harness.simulate import NATIVE_AUTO_MAX_INSTRUCTIONS
+    from cpgsim.components.yu.leg import hexapod_controller
+    from cpgsim.harness.simulate import NATIVE_AUTO_MAX_INSTRUCTIONS
 
     sim = Simulator(_leg_with_pulses())
     sim.run(0.05)
@@ -177,7 +177,7 @@ class Stopper(CoSimBlock):
         self._u = float(np.asarray(values["u"]).ravel()[0])
 
     def do_step(self, t: float, dt: float) -> None:
-        from harness.errors import StopRequested
+        from cpgsim.harness.errors import StopRequested
 
         if self._done:
             raise RuntimeError("stepped after the stop request")
@@ -194,13 +194,13 @@ class Stopper(CoSimBlock):
 def test_a_block_asking_to_stop_ends_the_run_cleanly(within):
     """Generic (no FMU): the stop time is the last row, the rows before are all there, the block is
     not given inputs or stepped again (even with direct feedthrough), the other blocks' columns too."""
-    from components.basic import Constant
+    from cpgsim.components.basic import Constant
 
     g = Graph("g")
     g.add(Constant("c", value=2.0))
     g.add(Stopper("s", 0.5, within))
     g.connect("c.y", "s.u")
-    from harness.simulate import simulate
+    from cpgsim.harness.simulate import simulate
 
     res = simulate(g, 2.0, dt=0.1)
     assert res.complete and res.meta["stopped_by"]["block"] == "s"

@@ -8,11 +8,11 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from components.basic import Gain, Integrator, Sum
-from components.graph import Graph
-from harness.cli import catalog
-from harness.cli.main import main
-from harness.diagram import Box, crossings, draw_graph, layout_graph, segment_crosses_box
+from cpgsim.components.basic import Gain, Integrator, Sum
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.diagram import Box, crossings, draw_graph, layout_graph, segment_crosses_box
 
 
 def test_segment_box_test_itself():

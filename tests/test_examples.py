@@ -41,10 +41,11 @@ def test_example_runs(name, tmp_path):
 
 
 def test_own_graph_and_own_scenario_from_the_command_line(tmp_path):
-    proc = _run([sys.executable, "-m", "harness.cli", "simulate", f"{ROOT}/examples/hopf_block.py:build",
+    proc = _run([sys.executable, "-m", "cpgsim.harness.cli", "simulate", f"{ROOT}/examples/hopf_block.py:build",
                  "--t-end", "2", "--set", "osc.mu=0.25", "-o", "hopf.csv"], tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "hopf.csv").read_text().splitlines()[0].startswith("time,")
-    proc = _run([sys.executable, "-m", "harness.cli", "run", f"{ROOT}/examples/my_course.toml", "--show"], tmp_path)
+    proc = _run([sys.executable, "-m", "cpgsim.harness.cli", "run", f"{ROOT}/examples/my_course.toml", "--show"],
+                tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "[terrain.ditch]" in proc.stdout and 'name = "my-course"' in proc.stdout

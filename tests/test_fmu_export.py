@@ -26,15 +26,15 @@ from fmpy.fmi2 import (
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from components.core import Block, CoSimBlock, Equations
-from components.graph import Graph
-from components.neurons import VanDerPolNeuron
-from fmus.export.exporter import ExportError, export_fmu
-from fmus.export.host import build_host, extract_fmu, run_host
-from fmus.units import unit_definition
-from harness.cli import catalog
-from harness.cli.main import main as cli_main
-from harness.simulate import Simulator
+from cpgsim.components.core import Block, CoSimBlock, Equations
+from cpgsim.components.graph import Graph
+from cpgsim.components.neurons import VanDerPolNeuron
+from cpgsim.fmus.export.exporter import ExportError, export_fmu
+from cpgsim.fmus.export.host import build_host, extract_fmu, run_host
+from cpgsim.fmus.units import unit_definition
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.main import main as cli_main
+from cpgsim.harness.simulate import Simulator
 
 pytestmark = pytest.mark.slow  # FMU builds (gcc): the full suite only
 
@@ -217,8 +217,8 @@ def side_by_side(name: str, blocks: list[Block]) -> Graph:
 def test_every_library_block_exports(tmp_path):
     """The library's equation blocks export (inputs become FMU inputs, vector ports scalars) and validate;
     a single block alone is exported by test_cli_export."""
-    import components.basic as basic
-    import components.networks as networks
+    import cpgsim.components.basic as basic
+    import cpgsim.components.networks as networks
 
     blocks = [VanDerPolNeuron("neuron"), networks.LeaderDrive("drive"), networks.FollowerCoupling("coupling"),
               basic.Constant("c", 2.0), basic.StepSource("s"), basic.Gain("g", 2.0, size=2), basic.Sum("sum"),
@@ -234,11 +234,11 @@ def _yu_block_classes():
     import inspect
     import pkgutil
 
-    import components.yu
+    import cpgsim.components.yu
 
     out = []
-    for info in pkgutil.iter_modules(components.yu.__path__):
-        mod = importlib.import_module(f"components.yu.{info.name}")
+    for info in pkgutil.iter_modules(cpgsim.components.yu.__path__):
+        mod = importlib.import_module(f"cpgsim.components.yu.{info.name}")
         out += [obj for _, obj in inspect.getmembers(mod, inspect.isclass)
                 if issubclass(obj, Block) and obj.__module__ == mod.__name__ and obj is not Block]
     return out
@@ -263,11 +263,11 @@ def test_yu_blocks_export(tmp_path):
 
 
 def yu_graph(name: str) -> Graph:
-    """A Yu graph from the catalog, or straight from components.yu.leg until it is registered there."""
+    """A Yu graph from the catalog, or straight from cpgsim.components.yu.leg until it is registered there."""
     if name in catalog.BUILTIN:
         return catalog.load_graph(name)
     try:
-        from components.yu import leg as yu_leg
+        from cpgsim.components.yu import leg as yu_leg
     except ImportError:
         pytest.skip(f"the {name!r} graph does not exist yet")
     return getattr(yu_leg, name.replace("-", "_"))()
@@ -426,7 +426,7 @@ def test_runs_in_python_without_the_project(exported, tmp_path):
     code = (
         "import sys, importlib.util as u\n"
         f"sys.path.append({sysconfig.get_paths()['purelib']!r})\n"
-        "assert all(u.find_spec(m) is None for m in ('harness', 'components', 'fmus'))\n"
+        "assert all(u.find_spec(m) is None for m in ('cpgsim', 'harness', 'components', 'fmus'))\n"
         "import fmpy\n"
         f"r = fmpy.simulate_fmu({str(fmu.path)!r}, stop_time=2.0, step_size=1e-3, output_interval=1e-3)\n"
         "print(repr(float(r['x2'][-1])), len(r))\n"
@@ -704,7 +704,7 @@ def test_cli_export(tmp_path, capsys):
     assert md.fmiVersion == "3.0" and md.coSimulation and not md.modelExchange
     assert next(v for v in md.modelVariables if v.name == "z.eps").start == "0.2"
     blk = tmp_path / "neuron.fmu"
-    assert cli_main(["export", "components.neurons:VanDerPolNeuron", "-o", str(blk), "--kind", "me",
+    assert cli_main(["export", "cpgsim.components.neurons:VanDerPolNeuron", "-o", str(blk), "--kind", "me",
                      "--set", "eps=0.3"]) == 0
     assert validate_fmu(str(blk)) == []
     with zipfile.ZipFile(blk) as zf:
@@ -715,7 +715,7 @@ def test_cli_export(tmp_path, capsys):
                 ["export", "no-such-graph", "-o", str(tmp_path / "x.fmu")],
                 ["export", "vdp", "-o", str(tmp_path / "x.fmu"), "--set", "z.eps=-1"],
                 ["export", "vdp", "-o", str(tmp_path / "x.fmu"), "--set", "z.nope=1"],
-                ["export", "components.neurons:Nope", "-o", str(tmp_path / "x.fmu")]):
+                ["export", "cpgsim.components.neurons:Nope", "-o", str(tmp_path / "x.fmu")]):
         assert cli_main(bad) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("cpgsim export: error:") and "\n" not in err

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from c_fmus import build_c_fmu
 
-from fmus.importer.block import FmuBlock
-from harness.simulate import SimulationError, simulate
+from cpgsim.fmus.importer.block import FmuBlock
+from cpgsim.harness.simulate import SimulationError, simulate
 
 pytestmark = pytest.mark.slow  # FMU builds and ME integration: the full suite only
 
@@ -177,7 +177,7 @@ def test_robertson_under_rk4_at_10ms_fails_naming_the_fmu(c_fmus):
 
 
 def test_solver_arguments_are_checked(c_fmus):
-    from components.core import ModelError
+    from cpgsim.components.core import ModelError
 
     with pytest.raises(ModelError, match="solver must be one of rk4, cvode"):
         FmuBlock("b", c_fmus["ball"], solver="euler")
@@ -186,7 +186,7 @@ def test_solver_arguments_are_checked(c_fmus):
 
 
 def test_cli_simulate_with_cvode(c_fmus, tmp_path):
-    from harness.cli.main import main
+    from cpgsim.harness.cli.main import main
 
     out = tmp_path / "ball.csv"
     assert main(["simulate", str(c_fmus["ball"]), "--t-end", "1", "--dt", "0.01", "--solver", "cvode",
@@ -292,7 +292,7 @@ def test_stop_request_of_an_isolated_fmu(stop_fmus, fmi):
 
 
 def test_discard_without_terminated_is_a_failure_with_partial_results(stop_fmus):
-    from harness.simulate import CoSimulationError
+    from cpgsim.harness.simulate import CoSimulationError
 
     with pytest.raises(CoSimulationError) as info:
         simulate(FmuBlock("stop", stop_fmus["discard"], kind="cs"), t_end=20.0, dt=0.1)
@@ -309,7 +309,7 @@ def test_isolated_me_fmu_with_cvode_locates_the_bounces(c_fmus):
 
 
 def test_cli_stop_request_exits_0_with_a_message_and_metadata(stop_fmus, tmp_path, capsys):
-    from harness.cli.main import main
+    from cpgsim.harness.cli.main import main
 
     out = tmp_path / "stop.csv"
     assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "-o", str(out)]) == 0
@@ -349,7 +349,7 @@ def test_identical_duplicate_members_are_accepted(stop_fmus, tmp_path):
 
 
 def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
-    from fmus.errors import UnsafeArchiveError
+    from cpgsim.fmus.errors import UnsafeArchiveError
 
     fmu = _twice(stop_fmus[2], tmp_path / "conflict.fmu", "modelDescription.xml", b"<other/>")
     with pytest.raises(UnsafeArchiveError, match="'modelDescription.xml' appears twice with different contents"):
@@ -358,7 +358,7 @@ def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
 
 def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path, capsys):
     """--solver on an FMU that offers both interfaces runs it as ME (here: the time event at 9 stops it)."""
-    from harness.cli.main import main
+    from cpgsim.harness.cli.main import main
 
     out = tmp_path / "s.csv"
     assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "--solver", "cvode",

@@ -1,4 +1,4 @@
-"""FMU import (fmus.importer.block): typed blocks from FMUs built by independent tools and by our own
+"""FMU import (cpgsim.fmus.importer.block): typed blocks from FMUs built by independent tools and by our own
 export, the co-simulation master with FMUs (Jacobi / Gauss-Seidel, direct feedthrough, algebraic
 loops), hostile and broken FMUs, isolation in a child process, and the CLI.
 
@@ -20,13 +20,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.basic import Constant, Gain, Integrator, Sum
-from components.core import Block, Equations
-from components.graph import AlgebraicLoopError, Graph
-from fmus.errors import FmuFileError, MissingBinaryError, ModelDescriptionError, UnsafeArchiveError
-from fmus.importer.block import FmuBlock, fmu_graph
-from fmus.importer.description import FmuWarning, describe_fmu
-from harness.simulate import CoSimulationError, simulate
+from cpgsim.components.basic import Constant, Gain, Integrator, Sum
+from cpgsim.components.core import Block, Equations
+from cpgsim.components.graph import AlgebraicLoopError, Graph
+from cpgsim.fmus.errors import FmuFileError, MissingBinaryError, ModelDescriptionError, UnsafeArchiveError
+from cpgsim.fmus.importer.block import FmuBlock, fmu_graph
+from cpgsim.fmus.importer.description import FmuWarning, describe_fmu
+from cpgsim.harness.simulate import CoSimulationError, simulate
 
 pytestmark = pytest.mark.slow  # FMU builds and other tools' FMUs: the full suite only
 
@@ -409,8 +409,8 @@ NETWORK_COLUMNS = {"net.x1": "net.z1.x", "net.y1": "net.z1.y", "net.x2": "net.z2
 
 @pytest.mark.parametrize("fmi,kind", [(2, "cs"), (2, "me"), (3, "cs"), (3, "me")])
 def test_round_trip_network_matches_native(tmp_path, fmi, kind):
-    export = pytest.importorskip("fmus.export.exporter")
-    from components.networks import leader_follower_network
+    export = pytest.importorskip("cpgsim.fmus.export.exporter")
+    from cpgsim.components.networks import leader_follower_network
 
     t_end = 3.0
     ref = simulate(_network_around(leader_follower_network("net", expose_modes=True)), t_end, dt=1e-3)
@@ -430,7 +430,7 @@ def _leg_around(leg) -> Graph:
     """The Yu leg controller (native graph or its FMU) wired with native blocks: the toe force comes
     from sources (the foot loses ground contact at t = 1 s: Fz steps 5 N -> 0 N, a searching
     reflex), the joint targets go through a gain."""
-    from components.basic import Mux, StepSource
+    from cpgsim.components.basic import Mux, StepSource
 
     g = Graph("top")
     g.add(leg)
@@ -449,8 +449,8 @@ def _leg_around(leg) -> Graph:
 
 @pytest.mark.parametrize("fmi,kind", [(2, "cs"), (3, "me")])
 def test_round_trip_leg_matches_native(tmp_path, fmi, kind):
-    export = pytest.importorskip("fmus.export.exporter")
-    from harness.cli import catalog
+    export = pytest.importorskip("cpgsim.fmus.export.exporter")
+    from cpgsim.harness.cli import catalog
 
     if "leg" not in catalog.BUILTIN:
         pytest.skip("no built-in 'leg' graph in the catalog yet")
@@ -514,7 +514,7 @@ def test_missing_file_and_not_a_zip(tmp_path):
     ("../evil.txt", "'..'"), ("resources/../../evil.txt", "'..'"), ("/tmp/evil.txt", "absolute path"),
     ("C:/evil.txt", "absolute path"), ("resources\\..\\evil.txt", "backslash")])
 def test_archive_with_escaping_paths_is_refused(tmp_path, fmus2, member, why):
-    from fmus.importer.archive import safe_extract
+    from cpgsim.fmus.importer.archive import safe_extract
 
     evil = _rewrite(fmus2["integrator"], tmp_path / "evil.fmu", add={member: b"pwned"})
     with pytest.raises(UnsafeArchiveError, match=why) as err:
@@ -646,7 +646,7 @@ def test_isolated_timeout(fmus2, tmp_path):
 # --------------------------------------------------------------------------------------------------
 def _cli(*args, cwd):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "harness.cli.main", *map(str, args)], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *map(str, args)], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=120)
 
 

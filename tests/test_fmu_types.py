@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from c_fmus import build_c_fmu
 
-from components.core import Block, Equations, ParameterError
-from components.graph import Graph
-from fmus.importer.block import FmuBlock
-from fmus.importer.description import describe_fmu
-from harness.simulate import CoSimulationError, simulate
+from cpgsim.components.core import Block, Equations, ParameterError
+from cpgsim.components.graph import Graph
+from cpgsim.fmus.importer.block import FmuBlock
+from cpgsim.fmus.importer.description import describe_fmu
+from cpgsim.harness.simulate import CoSimulationError, simulate
 
 pytestmark = pytest.mark.slow  # FMU builds (gcc): the full suite only
 
@@ -106,7 +106,7 @@ def test_int64_and_uint64_feedthrough_is_exact(types_fmu, isolate):
 
 
 def test_exact_integers_survive_the_results_files(types_fmu, tmp_path):
-    from harness.results import Results
+    from cpgsim.harness.results import Results
 
     res = simulate(_pair(types_fmu, "umax", "u"), t_end=0.2, dt=0.1)
     for path in (tmp_path / "r.csv", tmp_path / "r.npz"):
@@ -116,7 +116,7 @@ def test_exact_integers_survive_the_results_files(types_fmu, tmp_path):
 
 
 def test_python_api_sets_and_reads_64_bit_integers_exactly(types_fmu):
-    from fmus.importer.runtime import FmuRuntime
+    from cpgsim.fmus.importer.runtime import FmuRuntime
 
     rt = FmuRuntime(types_fmu, "cs", "t")
     try:
@@ -171,7 +171,7 @@ def test_array_and_string_parameters_from_python(types_fmu):
 
 
 def test_array_parameters_from_the_cli(types_fmu, tmp_path):
-    from harness.cli.main import main
+    from cpgsim.harness.cli.main import main
 
     out = tmp_path / "t.csv"
     assert main(["simulate", str(types_fmu), "--t-end", "0.2", "--dt", "0.1", "--set", "Types.A=[1,2;3,4]",
@@ -185,7 +185,7 @@ def test_array_parameters_from_the_cli(types_fmu, tmp_path):
 
 
 def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):
-    from harness.cli.main import main
+    from cpgsim.harness.cli.main import main
 
     assert main(["inspect", str(types_fmu)]) == 0
     text = capsys.readouterr().out
@@ -199,7 +199,7 @@ def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):
 def test_scheduled_execution_fmu_is_refused_naming_the_clocks(tmp_path):
     import zipfile
 
-    from fmus.errors import ModelDescriptionError
+    from cpgsim.fmus.errors import ModelDescriptionError
 
     md = TYPES_MD.replace('<CoSimulation modelIdentifier="Types"/>', '<ScheduledExecution modelIdentifier="Types"/>')
     md = md.replace('<Float64 name="time"', '<Clock name="tick" valueReference="60" causality="input" '

@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.fukuhara.blocks import (
+from cpgsim.components.fukuhara.blocks import (
     DEFAULTS,
     EARLY_STANCE,
     LATE_STANCE,
@@ -19,13 +19,13 @@ from components.fukuhara.blocks import (
     LimbModeController,
     swing_height,
 )
-from components.fukuhara.controller import fukuhara_controller, initial_joint_targets, set_initial
-from components.geometry import YU_SIM, leg_fk, leg_ik_plane
-from components.graph import Graph, as_graph
-from harness.compile import compile_graph
-from harness.experiments.gait_classifier import classify, debounce, template
-from harness.experiments.sweep import wilson_interval
-from harness.simulate import simulate
+from cpgsim.components.fukuhara.controller import fukuhara_controller, initial_joint_targets, set_initial
+from cpgsim.components.geometry import YU_SIM, leg_fk, leg_ik_plane
+from cpgsim.components.graph import Graph, as_graph
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.experiments.gait_classifier import classify, debounce, template
+from cpgsim.harness.experiments.sweep import wilson_interval
+from cpgsim.harness.simulate import simulate
 
 AEP, PEP = DEFAULTS["theta_AEP"], DEFAULTS["theta_PEP"]
 

@@ -47,7 +47,7 @@ from test_fuzz_fmus import (
     zip_bytes,
 )
 
-from harness.cli.main import main
+from cpgsim.harness.cli.main import main
 
 pytestmark = pytest.mark.slow  # FMU mutants through the CLI in subprocesses: the full suite only
 
@@ -137,8 +137,8 @@ def run_suite(folder: Path, scale: float, workers: int = 1) -> tuple[dict, list[
     base = c_fmu(build / "fuzz.fmu", library=libs["ok"])
     exported = None
     if scale >= 1:
-        from components.library import single_vdp
-        from fmus.export.exporter import export_fmu
+        from cpgsim.components.library import single_vdp
+        from cpgsim.fmus.export.exporter import export_fmu
 
         exported = export_fmu(single_vdp(), build / "vdp.fmu", fmi=2, kind="cs").path
     cases = mutants(base, exported, libs, rng, scale)

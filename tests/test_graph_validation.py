@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from components.basic import Constant, Gain, Integrator, Sum
-from components.core import Block, Equations
-from components.graph import AlgebraicLoopError, Graph, UnconnectedInputError, WiringError
-from components.library import damped_oscillator
-from components.networks import leader_follower_network
-from components.neurons import VanDerPolNeuron
-from harness.compile import compile_graph
-from harness.simulate import simulate
+from cpgsim.components.basic import Constant, Gain, Integrator, Sum
+from cpgsim.components.core import Block, Equations
+from cpgsim.components.graph import AlgebraicLoopError, Graph, UnconnectedInputError, WiringError
+from cpgsim.components.library import damped_oscillator
+from cpgsim.components.networks import leader_follower_network
+from cpgsim.components.neurons import VanDerPolNeuron
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.simulate import simulate
 
 
 def test_unit_mismatch_names_both_ports():

@@ -14,11 +14,11 @@ import re
 import numpy as np
 import pytest
 
-from components.basic import Constant, Gain, Integrator, Sum
-from components.graph import AlgebraicLoopError, Graph
-from components.library import damped_oscillator, network_array
-from harness.compile import compile_graph
-from harness.simulate import Simulator
+from cpgsim.components.basic import Constant, Gain, Integrator, Sum
+from cpgsim.components.graph import AlgebraicLoopError, Graph
+from cpgsim.components.library import damped_oscillator, network_array
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.simulate import Simulator
 
 
 @pytest.fixture(autouse=True)
@@ -95,8 +95,8 @@ def test_kinds_found():
 
 def test_six_leg_controller_grouped_equals_flat():
     """The Yu controller: discrete states (FSM), state resets, vectors, six identical legs."""
-    from components.yu.leg import hexapod_controller
-    from harness.native import NativeHorizon
+    from cpgsim.components.yu.leg import hexapod_controller
+    from cpgsim.harness.native import NativeHorizon
 
     flat = compile_graph(hexapod_controller(), grouping="flat")
     kinds = compile_graph(hexapod_controller(), grouping="kinds")
@@ -149,7 +149,7 @@ class _Table(Gain):
         super().__init__(name)
 
     def define(self, v):
-        from components.core import Equations
+        from cpgsim.components.core import Equations
 
         return Equations(outputs={"y": float(self._table[len(self._table) // 2]) * v.u["u"]})
 

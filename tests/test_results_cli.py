@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from components.basic import Gain, Integrator
-from components.graph import Graph
-from harness.cli.main import main
-from harness.results import Results
-from harness.simulate import SimulationDiverged, simulate
+from cpgsim.components.basic import Gain, Integrator
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.results import Results
+from cpgsim.harness.simulate import SimulationDiverged, simulate
 
 
 def _exploding_graph() -> Graph:
@@ -38,7 +38,7 @@ def test_divergence_names_the_state_and_keeps_partial_results(backend):
 
 
 def test_csv_and_npz_round_trip(tmp_path):
-    from components.library import single_vdp
+    from cpgsim.components.library import single_vdp
 
     res = simulate(single_vdp(), t_end=0.5)
     csv, meta = res.save(tmp_path / "r.csv")
@@ -54,7 +54,7 @@ def test_csv_and_npz_round_trip(tmp_path):
 
 
 def test_vector_ports_get_indexed_columns(tmp_path):
-    from components.basic import Constant, Mux
+    from cpgsim.components.basic import Constant, Mux
 
     g = Graph("v")
     g.add(Constant("a", value=1.0))
@@ -99,7 +99,7 @@ def test_cli_graph_writes_svg(tmp_path):
     (["graph", "missing_file.py:build"], "does not exist"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "harness.cli.main", *argv], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *argv], capture_output=True, text=True,
                           cwd=tmp_path, env={"PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1]),
                                              "PATH": "/usr/bin:/bin"})
     assert proc.returncode == 2, proc.stderr
@@ -110,7 +110,7 @@ def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):
 def test_cli_user_graph_from_file(tmp_path):
     src = tmp_path / "mygraph.py"
     src.write_text(
-        "from components.library import single_vdp\n"
+        "from cpgsim.components.library import single_vdp\n"
         "def build():\n    return single_vdp(eps=0.5)\n")
     out = tmp_path / "u.csv"
     assert main(["simulate", f"{src}:build", "--t-end", "0.5", "-o", str(out)]) == 0
@@ -120,7 +120,7 @@ def test_cli_user_graph_from_file(tmp_path):
 def test_cli_divergence_exits_1_and_writes_partial(tmp_path, capsys):
     src = tmp_path / "blow.py"
     src.write_text(
-        "from components.basic import Gain, Integrator\nfrom components.graph import Graph\n"
+        "from cpgsim.components.basic import Gain, Integrator\nfrom cpgsim.components.graph import Graph\n"
         "def build():\n    g = Graph('blow')\n    g.add(Integrator('i', x0=1.0))\n"
         "    g.add(Gain('k', k=1e4, unit='1', out_unit='1/s'))\n"
         "    g.connect('i.y', 'k.u')\n    g.connect('k.y', 'i.u')\n    return g\n")

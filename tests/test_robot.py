@@ -1,4 +1,4 @@
-"""Tests of the DART robot package: kinematics agree with components.geometry, the robot stands,
+"""Tests of the DART robot package: kinematics agree with cpgsim.components.geometry, the robot stands,
 contacts are sensed per foot, terrains report their height, parameters are validated (Yu 2019, Tables 3 and 4).
 """
 
@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from components.core import ModelError, ParameterError
-from components.geometry import YU_PROTOTYPE, YU_SIM, leg_fk
-from robots import terrain as tr
-from robots.hexapod import build_hexapod, foot_positions_body
-from robots.plant import DartHexapod, rotation_from_rpy, rpy_from_rotation, standing_posture
+from cpgsim.components.core import ModelError, ParameterError
+from cpgsim.components.geometry import YU_PROTOTYPE, YU_SIM, leg_fk
+from cpgsim.robots import terrain as tr
+from cpgsim.robots.hexapod import build_hexapod, foot_positions_body
+from cpgsim.robots.plant import DartHexapod, rotation_from_rpy, rpy_from_rotation, standing_posture
 
 G = 9.81
 

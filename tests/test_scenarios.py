@@ -9,12 +9,12 @@ import textwrap
 import numpy as np
 import pytest
 
-from harness.cli.main import main
-from harness.experiments.outcomes import evaluate, stall
-from harness.experiments.runner import build_scenario
-from harness.experiments.scenario import ScenarioError, builtin_names, line_of, load, parse_value
-from harness.results import Results
-from robots import terrain as tr
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.experiments.outcomes import evaluate, stall
+from cpgsim.harness.experiments.runner import build_scenario
+from cpgsim.harness.experiments.scenario import ScenarioError, builtin_names, line_of, load, parse_value
+from cpgsim.harness.results import Results
+from cpgsim.robots import terrain as tr
 
 BUILTIN = ["ditches", "flat", "fukuhara-amputation", "fukuhara-gaits", "fukuhara-gap", "prototype-step", "step"]
 

@@ -1,4 +1,4 @@
-"""SSP export and import (fmus.ssp): graphs of FMUs (imported or exported natively) to ``.ssp`` and
+"""SSP export and import (cpgsim.fmus.ssp): graphs of FMUs (imported or exported natively) to ``.ssp`` and
 back, read by fmpy's SSP reader; hostile SSP archives. Every test writes only under ``tmp_path``."""
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from test_fmu_import import INTEGRATOR_FMI2, _build, _shipped_fmu
 
-from components.basic import Gain
-from components.graph import Graph
-from fmus.errors import ModelDescriptionError, UnsafeArchiveError
-from fmus.importer.block import FmuBlock
-from fmus.ssp import SspError, export_ssp, import_ssp
-from harness.simulate import simulate
+from cpgsim.components.basic import Gain
+from cpgsim.components.graph import Graph
+from cpgsim.fmus.errors import ModelDescriptionError, UnsafeArchiveError
+from cpgsim.fmus.importer.block import FmuBlock
+from cpgsim.fmus.ssp import SspError, export_ssp, import_ssp
+from cpgsim.harness.simulate import simulate
 
 pytestmark = pytest.mark.slow  # FMU and SSP builds: the full suite only
 
@@ -98,8 +98,8 @@ def test_ssp_of_openmodelica_fmus_in_a_loop(tmp_path):
 def test_ssp_with_native_blocks_exported_as_fmus(tmp_path, integrator):
     """Equation blocks are exported natively into the SSP; the system imported back matches the
     graph it came from."""
-    pytest.importorskip("fmus.export.exporter")
-    from components.networks import leader_follower_network
+    pytest.importorskip("cpgsim.fmus.export.exporter")
+    from cpgsim.components.networks import leader_follower_network
 
     g = Graph("mixed")
     g.add(leader_follower_network("net"))
@@ -123,7 +123,7 @@ def test_ssp_with_native_blocks_exported_as_fmus(tmp_path, integrator):
 
 
 def test_ssp_refuses_co_simulation_blocks_that_are_not_fmus(tmp_path):
-    from components.core import CoSimBlock
+    from cpgsim.components.core import CoSimBlock
 
     class Box(CoSimBlock):
         def declare(self):
@@ -186,7 +186,7 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
 
     def cli(*args):
-        return subprocess.run([sys.executable, "-m", "harness.cli.main", *map(str, args)], cwd=tmp_path, env=env,
+        return subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *map(str, args)], cwd=tmp_path, env=env,
                               capture_output=True, text=True, timeout=120)
 
     r = cli("inspect", ssp)
@@ -197,8 +197,8 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
 
 
 def test_default_experiment_is_used_unless_the_cli_overrides_it(tmp_path, integrator):
-    from harness.cli.main import main
-    from harness.results import Results
+    from cpgsim.harness.cli.main import main
+    from cpgsim.harness.results import Results
 
     ssp = export_ssp(_chain(integrator), tmp_path / "chain.ssp", dt=0.01, t_end=0.3)
     out = tmp_path / "out.csv"

@@ -10,9 +10,9 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from harness.cli.main import main
-from harness.experiments.sweep import parse_vary, run_sweep, run_trial
-from harness.results import Results
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.experiments.sweep import parse_vary, run_sweep, run_trial
+from cpgsim.harness.results import Results
 
 SETS = {"setting": 1.0}
 T_END = 3.0

@@ -1,4 +1,4 @@
-"""Tests of ``harness.verify.shooting`` / ``cpgsim verify``: periodic orbits by shooting, Floquet
+"""Tests of ``cpgsim.harness.verify.shooting`` / ``cpgsim verify``: periodic orbits by shooting, Floquet
 multipliers, phase lags, synchronisation time, exit codes.
 
 Every numeric check is against an analytic value (Yu Y4, the second-order Lindstedt-Poincare series
@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from components.graph import Graph
-from components.library import damped_oscillator, searching_network, single_vdp
-from components.networks import leader_follower_network
-from components.neurons import VanDerPolNeuron
-from harness.cli.main import main
-from harness.compile import compile_graph
-from harness.verify.result import VerifyInputError, VerifyOptions
-from harness.verify.shooting import verify
+from cpgsim.components.graph import Graph
+from cpgsim.components.library import damped_oscillator, searching_network, single_vdp
+from cpgsim.components.networks import leader_follower_network
+from cpgsim.components.neurons import VanDerPolNeuron
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.verify.result import VerifyInputError, VerifyOptions
+from cpgsim.harness.verify.shooting import verify
 
 pytestmark = pytest.mark.slow  # periodic-orbit shooting: the full suite only
 
@@ -235,7 +235,7 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "eps" in err and len(err.strip().splitlines()) == 1
     assert main(["verify", "network", "--set", "*.eps=-0.1", "-o", str(tmp_path / "e")]) == 2
     mod = tmp_path / "free.py"
-    mod.write_text("from components.graph import Graph\nfrom components.neurons import VanDerPolNeuron\n"
+    mod.write_text("from cpgsim.components.graph import Graph\nfrom cpgsim.components.neurons import VanDerPolNeuron\n"
                    "def g():\n    gr = Graph('free')\n    gr.add(VanDerPolNeuron('z'))\n"
                    "    gr.expose_input('drive', 'z.u')\n    return gr\n")
     capsys.readouterr()

@@ -12,14 +12,14 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from components.yu.converter import YuConverter
-from components.yu.fsm import YuGaitFSM
-from components.yu.leg import LegFK, hexapod_controller, leg
-from components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
-from components.yu.sensors import YuSensoryNeurons
-from harness.cli.main import main
-from harness.compile import compile_graph
-from harness.simulate import Simulator
+from cpgsim.components.yu.converter import YuConverter
+from cpgsim.components.yu.fsm import YuGaitFSM
+from cpgsim.components.yu.leg import LegFK, hexapod_controller, leg
+from cpgsim.components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
+from cpgsim.components.yu.sensors import YuSensoryNeurons
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.simulate import Simulator
 
 pytestmark = pytest.mark.slow  # large graph compilation and figures: the full suite only
 

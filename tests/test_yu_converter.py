@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from components.core import ParameterError
-from components.geometry import YU_PROTOTYPE, YU_SIM, leg_ik_plane
-from components.yu.converter import YuConverter, converter_coefficients, locked_orbit
-from components.yu.leg import foot_positions, leg, nominal_targets
-from harness.simulate import Simulator
+from cpgsim.components.core import ParameterError
+from cpgsim.components.geometry import YU_PROTOTYPE, YU_SIM, leg_ik_plane
+from cpgsim.components.yu.converter import YuConverter, converter_coefficients, locked_orbit
+from cpgsim.components.yu.leg import foot_positions, leg, nominal_targets
+from cpgsim.harness.simulate import Simulator
 
 MM = 1e-3
 

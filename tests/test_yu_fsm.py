@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components.core import ParameterError
-from components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG, YuGaitFSM
-from components.yu.leg import hexapod_controller
-from harness.simulate import Simulator
+from cpgsim.components.core import ParameterError
+from cpgsim.components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG, YuGaitFSM
+from cpgsim.components.yu.leg import hexapod_controller
+from cpgsim.harness.simulate import Simulator
 
 pytestmark = pytest.mark.slow  # multi-second closed-loop FSM runs: the full suite only
 

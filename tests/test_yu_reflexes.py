@@ -7,13 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components.core import ParameterError
-from components.geometry import YU_SIM
-from components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING
-from components.yu.leg import foot_positions, leg, nominal_targets
-from components.yu.sensors import YuSensoryNeurons
-from harness.experiments.yu.figures import elevator_force, hole_force
-from harness.simulate import Simulator, simulate
+from cpgsim.components.core import ParameterError
+from cpgsim.components.geometry import YU_SIM
+from cpgsim.components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING
+from cpgsim.components.yu.leg import foot_positions, leg, nominal_targets
+from cpgsim.components.yu.sensors import YuSensoryNeurons
+from cpgsim.harness.experiments.yu.figures import elevator_force, hole_force
+from cpgsim.harness.simulate import Simulator, simulate
 
 MM = 1e-3
 H = YU_SIM.height

@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 
-from components.yu.converter import converter_coefficients, locked_orbit
-from components.yu.leg import foot_positions, nominal_targets
-from harness.experiments.runner import run_scenario
-from harness.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
-from harness.results import Results
+from cpgsim.components.yu.converter import converter_coefficients, locked_orbit
+from cpgsim.components.yu.leg import foot_positions, nominal_targets
+from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.harness.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
+from cpgsim.harness.results import Results
 
 pytestmark = pytest.mark.slow  # closed-loop robot runs: the full suite only
 

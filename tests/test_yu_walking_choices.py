@@ -11,14 +11,14 @@ import math
 import numpy as np
 import pytest
 
-from components.geometry import YU_SIM
-from components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING, WITHDRAW
-from components.yu.fsm import STANCE
-from components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets
-from components.yu.reflexes import elevator_descent_rate
-from components.yu.sensors import YuSensoryNeurons
-from harness.experiments.yu.figures import elevator_force, hole_force
-from harness.simulate import Simulator, simulate
+from cpgsim.components.geometry import YU_SIM
+from cpgsim.components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING, WITHDRAW
+from cpgsim.components.yu.fsm import STANCE
+from cpgsim.components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets
+from cpgsim.components.yu.reflexes import elevator_descent_rate
+from cpgsim.components.yu.sensors import YuSensoryNeurons
+from cpgsim.harness.experiments.yu.figures import elevator_force, hole_force
+from cpgsim.harness.simulate import Simulator, simulate
 
 pytestmark = pytest.mark.slow  # scripted leg runs: the full suite only
 

@@ -67,7 +67,7 @@ import math
 
 import casadi as ca
 
-from components.core import Block, Equations, Symbols
+from cpgsim.components.core import Block, Equations, Symbols
 
 SWING, EARLY_STANCE, LATE_STANCE = 0, 1, 2
 MODE_NAMES = ("Swing", "EarlyStance", "LateStance")
@@ -195,7 +195,7 @@ def swing_height(alpha, theta_aep, theta_pep, h_sw):
 def plane_ik(r, h, coxa, thigh, shank):
     """``(beta, gamma)`` for the foot at leg-plane point ``(r, h)`` (cpgsim convention, knee up).
 
-    The same closed form as :func:`components.geometry.leg_ik_plane`, in CasADi: F7/F8 and F11/F12 are
+    The same closed form as :func:`cpgsim.components.geometry.leg_ik_plane`, in CasADi: F7/F8 and F11/F12 are
     this two-link inverse kinematics for equal links and no coxa; here the links may differ and the
     coxa offset is subtracted. An unreachable point is clamped to the stretched/folded leg.
     """

@@ -21,11 +21,11 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from components.basic import Demux, Mux
-from components.core import ParameterError
-from components.fukuhara.blocks import LATE_STANCE, FootTrajectory, HeldLeg, LimbModeController
-from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
-from components.graph import Graph
+from cpgsim.components.basic import Demux, Mux
+from cpgsim.components.core import ParameterError
+from cpgsim.components.fukuhara.blocks import LATE_STANCE, FootTrajectory, HeldLeg, LimbModeController
+from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
+from cpgsim.components.graph import Graph
 
 CONTROLLER_PARAMS = ("omega_sw", "omega_st", "theta_AEP", "theta_PEP", "theta_SRH", "theta_ALS", "theta_DRT",
                      "N_SRH", "N_ALS", "rule1", "rule2", "rule3", "rule4", "alpha_limit", "tau_SRH")
@@ -120,7 +120,7 @@ def set_initial(graph: Graph, alpha: Mapping[int, float] | Sequence[float], mode
 def initial_joint_targets(geometry: RobotGeometry, alpha: Sequence[float], amputated: Sequence[int] = (),
                           held: tuple[float, float, float] = (0.0, 1.3, 2.6)) -> list[float]:
     """The 18 joint targets the controller outputs at start (stance posture at ``alpha``; held legs folded)."""
-    from components.geometry import leg_ik_plane
+    from cpgsim.components.geometry import leg_ik_plane
 
     q: list[float] = []
     for i in range(6):

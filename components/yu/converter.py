@@ -10,7 +10,7 @@ The leg is in swing while ``y1 > 0`` (and, at ``y1 == 0`` exactly, when ``x1 < 0
 at its PEP extreme about to protract; both sets give the same angles there).
 
 **Where the coefficients come from.** :func:`converter_coefficients` computes them from a
-:class:`~components.geometry.RobotGeometry` by inverse kinematics (``leg_ik_plane``) at the
+:class:`~cpgsim.components.geometry.RobotGeometry` by inverse kinematics (``leg_ik_plane``) at the
 geometry's nominal points, on the *real* locked waveforms of the Y5 network rather than on
 idealised cosines: :func:`locked_orbit` computes the network's periodic orbit (leader limit
 cycle and the followers' fixed point over one half period, by shooting). Measured on Table 1:
@@ -29,7 +29,7 @@ The apex angles are placed so that the *highest* point of the swing (over the jo
 the straight joint-space segment, so the stance foot deviates from the ground line by a few
 tenths of a millimetre (YU_SIM), as Yu's linear converter implies.
 
-**Modes** (input ``mode``, set by :class:`~components.yu.reflexes.YuReflexLogic`):
+**Modes** (input ``mode``, set by :class:`~cpgsim.components.yu.reflexes.YuReflexLogic`):
 
 ====== ================== ==================================================================
 mode   name               joint targets
@@ -92,7 +92,7 @@ FK(q_AEP)`` (outward, forward, up; m), and for the whole stance outputs ``q = IK
 the foot follows the nominal stance path shifted by ``d``. During the next swing the shift fades
 linearly with the leader (``fade = (x1_peak - x1)/(2*x1_peak)``), so the swing ends on the
 nominal AEP again (Yu 6.1.2: "can be corrected in the next swing"). ``FK``/``IK`` are the leg's
-kinematics (knee up, as :func:`~components.geometry.leg_ik`); with ``d = 0`` the output is Y6.
+kinematics (knee up, as :func:`~cpgsim.components.geometry.leg_ik`); with ``d = 0`` the output is Y6.
 The shift is Cartesian, not a joint-angle offset (the first version added ``q - q_AEP`` to the
 angles): all feet of a tripod then move exactly alike relative to the body. With a joint offset
 the shifted foot's path bent away from the others' by a few mm over a stance; the servos
@@ -142,10 +142,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from components.core import Block, Equations, ParameterError, Symbols
-from components.geometry import YU_SIM, RobotGeometry, leg_ik_plane
-from components.memo import disk_memo
-from components.networks import TABLE1_OMEGA
+from cpgsim.components.core import Block, Equations, ParameterError, Symbols
+from cpgsim.components.geometry import YU_SIM, RobotGeometry, leg_ik_plane
+from cpgsim.components.memo import disk_memo
+from cpgsim.components.networks import TABLE1_OMEGA
 
 NOMINAL, ELEV_RETRACT, ELEV_FORWARD, SEARCHING, RETURNING, WITHDRAW = 0, 1, 2, 3, 4, 5
 MODE_NAMES = {NOMINAL: "nominal", ELEV_RETRACT: "elevator-retract", ELEV_FORWARD: "elevator-forward",
@@ -189,7 +189,7 @@ def locked_orbit(eps: float = 0.1, b: float = 4.0, omega: tuple[float, float, fl
                  k: float = 0.1) -> LockedOrbit:
     """Shoot the Y5 network's periodic orbit (leader limit cycle + followers' fixed point).
 
-    About a second of numerical work: memoised in the process and on disk (:mod:`components.memo`).
+    About a second of numerical work: memoised in the process and on disk (:mod:`cpgsim.components.memo`).
     """
     return _locked_orbit_disk(float(eps), float(b), tuple(float(w) for w in omega), float(k))
 
@@ -234,7 +234,7 @@ def _locked_orbit_disk(eps: float, b: float, omega: tuple[float, float, float], 
 # -- coefficients from the geometry ----------------------------------------------------------------
 
 def leg_height(geometry: RobotGeometry, beta: float | np.ndarray, gamma: float | np.ndarray) -> np.ndarray:
-    """Foot height relative to the alpha joint (the leg-plane ``h`` of :mod:`components.geometry`)."""
+    """Foot height relative to the alpha joint (the leg-plane ``h`` of :mod:`cpgsim.components.geometry`)."""
     leg = geometry.leg
     return leg.thigh * np.sin(beta) + leg.shank * np.sin(np.asarray(beta) - gamma)
 

@@ -41,7 +41,7 @@ unloads (its force drops below ``Fcz``, e.g. after a leg stepped onto a 40 mm st
 true and the FSM waited for ever.
 
 - ERT / SRT (elevator / searching trigger) are detected in the legs
-  (:class:`~components.yu.reflexes.YuReflexLogic`); the FSM sees their effect ``active_i``.
+  (:class:`~cpgsim.components.yu.reflexes.YuReflexLogic`); the FSM sees their effect ``active_i``.
   While any leg runs a reflex (``R``), legs in ``Stance`` go to ``StanceProlong`` at once
   (aborted: frozen mid-stance, "enforcing the leg on the ground come into the Prolong state
   until the leg executing local reflex reaches the touchdown state"), and resume when no reflex
@@ -110,8 +110,8 @@ import math
 
 import casadi as ca
 
-from components.core import Block, Equations, ParameterError, Symbols
-from components.yu.converter import locked_orbit
+from cpgsim.components.core import Block, Equations, ParameterError, Symbols
+from cpgsim.components.yu.converter import locked_orbit
 
 SWING, STANCE, SWING_PROLONG, STANCE_PROLONG = 0, 1, 2, 3
 STATE_NAMES = ("Swing", "Stance", "SwingProlong", "StanceProlong")

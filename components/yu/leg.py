@@ -1,9 +1,9 @@
 """Yu single-leg controller and six-leg controller graphs, and the leg's forward kinematics.
 
 ``leg`` (Yu Fig. 11, partial view): the Y5 network (:func:`leg_network`), the sensory neurons
-(:class:`~components.yu.sensors.YuSensoryNeurons`), the reflex logic
-(:class:`~components.yu.reflexes.YuReflexLogic`), the linear converter
-(:class:`~components.yu.converter.YuConverter`) and :class:`LegFK` (foot position)::
+(:class:`~cpgsim.components.yu.sensors.YuSensoryNeurons`), the reflex logic
+(:class:`~cpgsim.components.yu.reflexes.YuReflexLogic`), the linear converter
+(:class:`~cpgsim.components.yu.converter.YuConverter`) and :class:`LegFK` (foot position)::
 
     toe_force -> sensors -> reflex -> network (modes, resets, rates) -> converter -> q -> fk -> foot
                                ^---- x1, y1 ----'                 mode_cmd, capture --^
@@ -12,7 +12,7 @@
                              reflex <- support flag (foothold-like contact) <- sensors
 
 ``hexapod_controller``: six ``leg`` graphs (``L1, L2, L3, R1, R2, R3`` = Yu legs 1-6) and the gait
-FSM (:class:`~components.yu.fsm.YuGaitFSM`), which drives each leg's clock ``rate``.
+FSM (:class:`~cpgsim.components.yu.fsm.YuGaitFSM`), which drives each leg's clock ``rate``.
 
 Ports of ``hexapod_controller`` (leg-major vectors, legs 0..5 = L1, L2, L3, R1, R2, R3):
 
@@ -20,7 +20,7 @@ Ports of ``hexapod_controller`` (leg-major vectors, legs 0..5 = L1, L2, L3, R1, 
 port         dir   shape unit   meaning
 ============ ===== ===== ====== ===================================================================
 toe_force    in    18    N      per leg ``(Fx lateral, Fy forward, Fz vertical)``, the ground's force
-                                on the foot, ``Fz > 0`` standing (``robots.plant.DartHexapod``'s
+                                on the foot, ``Fz > 0`` standing (``cpgsim.robots.plant.DartHexapod``'s
                                 ``toe_force``); default 5 N everywhere: all feet in contact, no
                                 obstacle (the controller then walks its nominal gait)
 q_target     out   18    rad    joint targets ``(alpha, beta, gamma)`` per leg (to ``q_target``)
@@ -48,15 +48,15 @@ from collections.abc import Sequence
 import casadi as ca
 import numpy as np
 
-from components.basic import Demux, Mux
-from components.core import Block, Equations, ParameterError, Symbols
-from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry, leg_fk
-from components.graph import Graph
-from components.networks import TABLE1_OMEGA, leader_follower_network
-from components.yu.converter import LockedOrbit, YuConverter, locked_orbit
-from components.yu.fsm import YuGaitFSM, gait_id
-from components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
-from components.yu.sensors import YuSensoryNeurons
+from cpgsim.components.basic import Demux, Mux
+from cpgsim.components.core import Block, Equations, ParameterError, Symbols
+from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry, leg_fk
+from cpgsim.components.graph import Graph
+from cpgsim.components.networks import TABLE1_OMEGA, leader_follower_network
+from cpgsim.components.yu.converter import LockedOrbit, YuConverter, locked_orbit
+from cpgsim.components.yu.fsm import YuGaitFSM, gait_id
+from cpgsim.components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
+from cpgsim.components.yu.sensors import YuSensoryNeurons
 
 DEFAULT_TOE_FORCE = 5.0
 
@@ -64,7 +64,7 @@ DEFAULT_TOE_FORCE = 5.0
 class LegFK(Block):
     """Foot position of one leg relative to its alpha joint: ``(outward, forward, up)`` (m).
 
-    Conventions of :mod:`components.geometry`: ``r = L_c + L_f cos(beta) + L_t cos(beta -
+    Conventions of :mod:`cpgsim.components.geometry`: ``r = L_c + L_f cos(beta) + L_t cos(beta -
     gamma)``, ``h = L_f sin(beta) + L_t sin(beta - gamma)``; outward ``r cos(alpha)``, forward
     ``r sin(alpha)``, up ``h``. Parameters ``coxa``, ``thigh``, ``shank`` (m) from ``geometry``.
     """
@@ -108,7 +108,7 @@ def nominal_targets(geometry: RobotGeometry = YU_SIM) -> dict[str, np.ndarray]:
 def leg_network(name: str = "network", leader_start: Sequence[float] = (-1.0, 0.0), eps: float = 0.1,
                 b: float = 4.0, omega: Sequence[float] = TABLE1_OMEGA, k: float = 0.1,
                 orbit: LockedOrbit | None = None) -> Graph:
-    """The Y5 network of :func:`~components.networks.leader_follower_network` with settable neurons.
+    """The Y5 network of :func:`~cpgsim.components.networks.leader_follower_network` with settable neurons.
 
     Same blocks and wiring; the three neurons are :class:`SettableVanDerPolNeuron` (the Van der
     Pol neuron plus a state reset used by the reflex logic). The followers start on the locked
@@ -152,7 +152,7 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
     ``rate`` (clock time scale, default 1). Outputs: ``q`` (3, rad), ``foot`` (3, m),
     ``x1, y1, x2, y2, x3, y3``, ``lambda_ob``, ``lambda_td``, ``swing``, ``active``, ``reflex``,
     ``gaveup``, ``landed``, ``mode`` and the event counters ``n_ert, n_srt, n_found, n_early, n_giveup``.
-    The converter's coefficients come from ``geometry`` (see :mod:`components.yu.converter`).
+    The converter's coefficients come from ``geometry`` (see :mod:`cpgsim.components.yu.converter`).
     """
     if not isinstance(geometry, RobotGeometry):
         raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
@@ -195,7 +195,7 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
 
 def hexapod_controller(name: str = "controller", geometry: RobotGeometry = YU_SIM, gait: int | str = 1,
                        clearance_elevator: float | None = None, T_g: float = 5.0) -> Graph:
-    """Yu six-leg controller: six :func:`leg` graphs + :class:`~components.yu.fsm.YuGaitFSM`.
+    """Yu six-leg controller: six :func:`leg` graphs + :class:`~cpgsim.components.yu.fsm.YuGaitFSM`.
 
     Legs ``L1, L2, L3, R1, R2, R3`` (Yu 1-6); leaders start at ``[-1, 0]`` (legs 1, 3, 5) and
     ``[1, 0]`` (2, 4, 6), as in Yu 2019's simulation. ``gait`` (1 tripod, 2 tetrapod, 3 wave) and ``T_g`` set the

@@ -4,7 +4,7 @@
 the network's mode inputs (Y10, Y12, Y13), state resets and the converter mode. Everything is
 sampled at the macro step (discrete states updated with ``casadi.if_else``).
 
-Modes (same numbers as :mod:`components.yu.converter`): 0 nominal, 1 elevator retraction,
+Modes (same numbers as :mod:`cpgsim.components.yu.converter`): 0 nominal, 1 elevator retraction,
 2 elevator forward stroke, 3 searching, 4 return to the AEP after a failed search.
 
 Events at a sample ``t_k`` (``half``: the leader protracts, ``y1 > 0``; ``rate > 0``: the FSM lets
@@ -94,7 +94,7 @@ Status outputs: ``landed`` (latched touchdown: set by ``lambda_td`` while the le
 -- swing ended or stance -- and by an early touchdown or a found foothold; cleared when the foot
 has no contact while the leg swings (``x1 > x1_lift``, past its PEP) or runs a reflex, i.e. at
 lift-off; the FSM's ATD uses it, see
-:mod:`components.yu.fsm`), ``swing`` (1 while the leg is in a swing, including the whole elevator
+:mod:`cpgsim.components.yu.fsm`), ``swing`` (1 while the leg is in a swing, including the whole elevator
 reflex), ``active`` (1 while a reflex runs: modes 1-3; from the mode state, so that the FSM's
 clock rate, which reads it, does not feed back into the same sample), ``reflex`` (0 none,
 1 elevator, 2 searching, 3 returning), ``gaveup``, ``mode``; event counters ``n_ert``, ``n_srt``,
@@ -106,10 +106,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from components.core import Block, Equations, Symbols
-from components.networks import TABLE1_OMEGA
-from components.neurons import VanDerPolNeuron
-from components.yu.converter import (
+from cpgsim.components.core import Block, Equations, Symbols
+from cpgsim.components.networks import TABLE1_OMEGA
+from cpgsim.components.neurons import VanDerPolNeuron
+from cpgsim.components.yu.converter import (
     ELEV_FORWARD,
     ELEV_RETRACT,
     NOMINAL,
@@ -132,7 +132,7 @@ def elevator_descent_rate(x1_apex: float, eps: float = 0.1, b: float = 4.0,
     import numpy as np
     from scipy.integrate import solve_ivp
 
-    from components.yu.converter import _network_rhs
+    from cpgsim.components.yu.converter import _network_rhs
 
     o = locked_orbit(eps, b, tuple(omega), k)
     rhs = _network_rhs((eps,) * 3, (b,) * 3, tuple(omega), (k,) * 4)
@@ -149,7 +149,7 @@ def elevator_descent_rate(x1_apex: float, eps: float = 0.1, b: float = 4.0,
 
 
 class SettableVanDerPolNeuron(VanDerPolNeuron):
-    """:class:`~components.neurons.VanDerPolNeuron` plus a state reset: ``set = 1`` puts
+    """:class:`~cpgsim.components.neurons.VanDerPolNeuron` plus a state reset: ``set = 1`` puts
     ``(x, y) = (x_set, y_set)`` at the sampled update (used to restart a leg's network on its limit
     cycle after a reflex). Inputs ``set`` (boolean), ``x_set`` (1), ``y_set`` (1/s), default 0.
     ``set`` takes precedence over ``y_reset``.
@@ -181,7 +181,7 @@ def _eq(mode, value: int):
 class YuReflexLogic(Block):
     """Elevator and searching reflex logic of one leg (module docstring).
 
-    Constructor: ``orbit`` (the network's :class:`~components.yu.converter.LockedOrbit`, default
+    Constructor: ``orbit`` (the network's :class:`~cpgsim.components.yu.converter.LockedOrbit`, default
     Table 1) gives the defaults of ``x1_peak``, ``x2_aep``, ``y2_aep``, ``x2_apex``; ``height`` (the
     robot's ``H``, m) the default of ``ground_h = -H``.
     """

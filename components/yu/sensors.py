@@ -43,7 +43,7 @@ import math
 
 import casadi as ca
 
-from components.core import Block, Equations, Symbols
+from cpgsim.components.core import Block, Equations, Symbols
 
 
 def debounced(flag, t_agree, raw, t, debounce):

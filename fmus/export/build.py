@@ -32,8 +32,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from fmus.export.model_description import ExportError, Variables
-from harness.compile import CompiledModel
+from cpgsim.fmus.export.model_description import ExportError, Variables
+from cpgsim.harness.compile import CompiledModel
 
 TEMPLATES = Path(__file__).parent / "templates"
 FUNCTIONS = ("step", "post", "ode", "signals", "discrete")

@@ -1,16 +1,16 @@
 """Native FMU export: any block or graph to an FMI 2.0 / 3.0 FMU that runs without Python.
 
->>> from components.library import single_vdp
+>>> from cpgsim.components.library import single_vdp
 >>> export_fmu(single_vdp(), "vdp.fmu", fmi=2, kind="both")            # doctest: +SKIP
 
 The C code comes from the compiled model's CasADi functions (one source of truth: ``step`` for
-Co-Simulation, ``ode``/``signals``/``discrete`` for Model Exchange, see :mod:`fmus.export.build`), wrapped by a
+Co-Simulation, ``ode``/``signals``/``discrete`` for Model Exchange, see :mod:`cpgsim.fmus.export.build`), wrapped by a
 small hand-written FMI layer (``fmus/templates``). The binary links only libc and libm.
 
 Semantics
 ---------
 - **Co-Simulation** (FMI 2 and 3): internal fixed step ``dt`` (default 1 ms), exactly the sampled-step
-  semantics of :class:`harness.simulate.Simulator`: each internal step applies the discrete updates and
+  semantics of :class:`cpgsim.harness.simulate.Simulator`: each internal step applies the discrete updates and
   resets with the inputs held, then integrates with RK4 (``substeps`` per step). The communication step
   must be a multiple of ``dt``. Values read at a communication point are those after the sampled update
   at that point, computed with the inputs currently set, which is what the simulator records.
@@ -26,7 +26,7 @@ Semantics
   the simulation. Continuous and discrete state start values can be set the same way. ``Reset`` restores
   every start value. FMU states can be saved, restored and serialized.
 
-See :mod:`fmus.export.model_description` for variable names and value references.
+See :mod:`cpgsim.fmus.export.model_description` for variable names and value references.
 """
 
 from __future__ import annotations
@@ -43,11 +43,11 @@ from typing import Any
 
 import casadi as ca
 
-from components.core import Block
-from components.graph import Graph
-from fmus.export import build
-from fmus.export.model_description import ExportError, Variables, collect_variables, model_description
-from harness.compile import compile_graph
+from cpgsim.components.core import Block
+from cpgsim.components.graph import Graph
+from cpgsim.fmus.export import build
+from cpgsim.fmus.export.model_description import ExportError, Variables, collect_variables, model_description
+from cpgsim.harness.compile import compile_graph
 
 KINDS = {"cs": ("cs",), "me": ("me",), "both": ("me", "cs")}
 
@@ -102,9 +102,10 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
     ``dt`` the internal step and sample period, ``substeps`` the RK4 substeps per step (CS); ``params``
     overrides parameter defaults by path (globs allowed for graphs, as in ``Graph.set_param``); ``name``
     sets the model identifier (default: the graph's name); ``optimize`` the C compiler's optimization flag
-    for the model code (default: ``-O2``, less for very large models, see :func:`fmus.export.build.auto_optimization`;
+    for the model code (default: ``-O2``, less for very large models, see
+    :func:`cpgsim.fmus.export.build.auto_optimization`;
     the results do not depend on it). Raises :class:`ExportError` (a
-    :class:`~components.core.ModelError`) for anything that cannot be exported.
+    :class:`~cpgsim.components.core.ModelError`) for anything that cannot be exported.
     """
     if fmi not in (2, 3):
         raise ExportError(f"FMI version must be 2 or 3, got {fmi!r}")

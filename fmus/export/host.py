@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fmus.export.build import TEMPLATES, compiler, fmi_headers
-from fmus.export.model_description import ExportError
+from cpgsim.fmus.export.build import TEMPLATES, compiler, fmi_headers
+from cpgsim.fmus.export.model_description import ExportError
 
 
 def build_host(directory: str | Path | None = None) -> Path:

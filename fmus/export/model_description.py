@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from components.core import ModelError
-from fmus.units import unit_definition
-from harness.compile import CompiledModel
+from cpgsim.components.core import ModelError
+from cpgsim.fmus.units import unit_definition
+from cpgsim.harness.compile import CompiledModel
 
 VR_STRIDE = 1_000_000
 CATEGORIES = {"time": 0, "input": 1, "output": 2, "parameter": 3, "state": 4, "derivative": 5,
@@ -186,7 +186,7 @@ def collect_variables(model: CompiledModel, fmi: int = 2) -> Variables:
 
 
 def _per_second(unit: str) -> str:
-    from components.basic import per_second
+    from cpgsim.components.basic import per_second
 
     return "1/s" if unit == "1" else per_second(unit)
 

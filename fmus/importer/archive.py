@@ -12,7 +12,7 @@ an archive whose members together expand more than ``MAX_RATIO`` times their com
 (plus ``TOTAL_RATIO_SLACK``). :func:`safe_extract` checks the same and then streams each member
 into a fresh directory, counting bytes as it writes (a lying header cannot make it write more than
 the limits), with ordinary file modes. Corrupt data behind a valid directory (bad CRC, bad deflate
-stream, truncated member) is an :class:`~fmus.errors.FmuFileError` naming the member.
+stream, truncated member) is an :class:`~cpgsim.fmus.errors.FmuFileError` naming the member.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import zipfile
 import zlib
 from pathlib import Path, PurePosixPath
 
-from fmus.errors import FmuFileError, UnsafeArchiveError
+from cpgsim.fmus.errors import FmuFileError, UnsafeArchiveError
 
 MAX_MEMBERS = 20_000
 MAX_MEMBER_BYTES = 1 << 30  # 1 GiB

@@ -1,13 +1,13 @@
 """Import an FMU (FMI 2.0 or 3.0, co-simulation or model exchange) as a typed block.
 
->>> from fmus.importer.block import FmuBlock
+>>> from cpgsim.fmus.importer.block import FmuBlock
 >>> blk = FmuBlock("plant", "Mass_Damper.fmu", damper_d=20.0)   # doctest: +SKIP
 >>> blk.inputs["f"].unit, blk.parameters["damper_d"].unit      # doctest: +SKIP
 ('N', 'N.s/m')
 
 Ports, parameters, kinds, units, start values and direct feedthrough come from the FMU's
-``modelDescription.xml`` (:mod:`fmus.importer.description` says how FMI names and types are mapped). The
-block is a :class:`~components.core.CoSimBlock`: the co-simulation master exchanges its values
+``modelDescription.xml`` (:mod:`cpgsim.fmus.importer.description` says how FMI names and types are mapped). The
+block is a :class:`~cpgsim.components.core.CoSimBlock`: the co-simulation master exchanges its values
 at every macro step.
 
 - ``kind="cs"``: the FMU's own solver advances it with ``doStep(t, dt)``.
@@ -15,18 +15,18 @@ at every macro step.
   held over the step: ``solver="rk4"`` (default; fixed step, ``substeps`` per macro step) or
   ``solver="cvode"`` (CVODE BDF, adaptive and stiff, ``rtol`` default 1e-6, ``atol`` default ``rtol``
   times each state's nominal). State, time and step events are located inside the step
-  (:mod:`fmus.importer.me`, :mod:`fmus.importer.runtime`). The compiler cannot put an FMU inside
+  (:mod:`cpgsim.fmus.importer.me`, :mod:`cpgsim.fmus.importer.runtime`). The compiler cannot put an FMU inside
   its CasADi functions, so ME states are not integrated in the same RK4 stages as the equation
   blocks: the coupling to the rest of the graph is sampled at the macro step, as for a CS FMU.
 - ``kind="auto"`` (default): CS if the FMU has it, else ME.
-- ``isolate=True``: the FMU runs in a child process (:mod:`fmus.importer.isolation`); a crash there
-  (segmentation fault, abort) becomes an :class:`~fmus.errors.FmuCrashedError`, which the
+- ``isolate=True``: the FMU runs in a child process (:mod:`cpgsim.fmus.importer.isolation`); a crash there
+  (segmentation fault, abort) becomes an :class:`~cpgsim.fmus.errors.FmuCrashedError`, which the
   master reports with the results recorded so far, instead of killing the harness.
 - ``feedthrough``: override the direct feedthrough read from ``ModelStructure`` (``{output:
   {inputs}}``); an FMU that lists no dependencies is taken to feed every input through, which
-  makes any loop around it an :class:`~components.graph.AlgebraicLoopError`.
+  makes any loop around it an :class:`~cpgsim.components.graph.AlgebraicLoopError`.
 
-Every problem with the file raises a specific :class:`~fmus.errors.FmuError` at construction
+Every problem with the file raises a specific :class:`~cpgsim.fmus.errors.FmuError` at construction
 (missing file, not a zip, unsafe archive, bad or missing XML, no binary for this platform).
 """
 
@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from components.core import CoSimBlock, ModelError
-from components.graph import Graph, as_graph
-from fmus.errors import FmuError
-from fmus.importer.description import FmuDescription, check_binary, describe_fmu, identifier
+from cpgsim.components.core import CoSimBlock, ModelError
+from cpgsim.components.graph import Graph, as_graph
+from cpgsim.fmus.errors import FmuError
+from cpgsim.fmus.importer.description import FmuDescription, check_binary, describe_fmu, identifier
 
 __all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation", "set_solver"]
 
@@ -75,7 +75,7 @@ class FmuBlock(CoSimBlock):
         check_binary(self.info, kind)
         if int(substeps) != substeps or substeps < 1:
             raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
-        from fmus.importer.me import SOLVERS
+        from cpgsim.fmus.importer.me import SOLVERS
 
         if solver not in SOLVERS:
             raise ModelError(f"FMU block {name!r}: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
@@ -131,7 +131,7 @@ class FmuBlock(CoSimBlock):
 
     @property
     def value_parameters(self) -> dict[str, Any]:
-        """The FMU's array and String parameters (:class:`~fmus.importer.description.ValueParamSpec`):
+        """The FMU's array and String parameters (:class:`~cpgsim.fmus.importer.description.ValueParamSpec`):
         not block parameters (those are numbers), but settable the same way (keyword, ``set``,
         ``Graph.set_param``, ``--set``)."""
         return self.info.value_parameters
@@ -166,11 +166,11 @@ class FmuBlock(CoSimBlock):
                     workdir=None if self.workdir is None else str(self.workdir), substeps=self.substeps,
                     strict=self.strict, solver=self.solver, rtol=self.rtol, atol=self.atol)
         if self.isolate:
-            from fmus.importer.isolation import IsolatedRuntime
+            from cpgsim.fmus.importer.isolation import IsolatedRuntime
 
             rt = IsolatedRuntime(args, timeout=self.timeout)
         else:
-            from fmus.importer.runtime import FmuRuntime
+            from cpgsim.fmus.importer.runtime import FmuRuntime
 
             rt = FmuRuntime(desc=self.info, **args)
         self._runtime = rt
@@ -237,7 +237,7 @@ def set_solver(graph: Any, solver: str, rtol: float | None = None, atol: float |
     """Use ``solver`` (``"rk4"``/``"cvode"``, tolerances for CVODE) for every ME FMU block of ``graph``
     (with ``switch_to_me``, also for CS blocks whose FMU offers model exchange, which then run as ME);
     returns how many blocks use it."""
-    from fmus.importer.me import SOLVERS
+    from cpgsim.fmus.importer.me import SOLVERS
 
     if solver not in SOLVERS:
         raise ModelError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")

@@ -1,6 +1,6 @@
 """The typed interface of an FMU, read from its ``modelDescription.xml`` (FMI 2.0 and 3.0).
 
-:func:`describe_fmu` opens the archive safely (:mod:`fmus.importer.archive`), parses the XML with fmpy
+:func:`describe_fmu` opens the archive safely (:mod:`cpgsim.fmus.importer.archive`), parses the XML with fmpy
 (schema validation first; an FMU that only fails the schema is still read, with a warning, unless
 ``strict``), and maps it onto the block library's types:
 
@@ -17,7 +17,7 @@
 - direct feedthrough per output from ``ModelStructure/Outputs`` dependencies (an output without
   a ``dependencies`` attribute depends on every input, as the standard says).
 
-Limits (each exceeded one is a :class:`~fmus.errors.ModelDescriptionError` naming the file, the
+Limits (each exceeded one is a :class:`~cpgsim.fmus.errors.ModelDescriptionError` naming the file, the
 limit and the value): the XML is at most ``archive.MAX_XML_BYTES``; any DOCTYPE or ENTITY declaration,
 anywhere and in any encoding, is refused (the document is decoded as the XML rules say and scanned,
 then parsed with a parser that loads no DTD and resolves no entity, which must find no DOCTYPE
@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from components.core import normalize_unit
-from fmus.errors import MissingBinaryError, ModelDescriptionError, one_line
-from fmus.importer.archive import check_archive, open_zip, read_member
+from cpgsim.components.core import normalize_unit
+from cpgsim.fmus.errors import MissingBinaryError, ModelDescriptionError, one_line
+from cpgsim.fmus.importer.archive import check_archive, open_zip, read_member
 
 REAL_TYPES = {"Real", "Float64", "Float32"}
 INT_TYPES = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration"}
@@ -132,7 +132,7 @@ class ValueParamSpec:
     def check(self, value: Any, owner: str) -> Any:
         """``value`` in the form the runtime sets (flat float tuple, or ``str``); a ParameterError
         names the parameter otherwise."""
-        from components.core import ParameterError
+        from cpgsim.components.core import ParameterError
 
         where = f"parameter {owner}.{self.name}"
         if self.type == "String":
@@ -381,7 +381,7 @@ def _check_xml(data: bytes, path: Path) -> None:
 
 
 def describe_fmu(path: str | Path, strict: bool = False) -> FmuDescription:
-    """Read and check an FMU file; raise a specific :class:`~fmus.errors.FmuError` if it is unusable."""
+    """Read and check an FMU file; raise a specific :class:`~cpgsim.fmus.errors.FmuError` if it is unusable."""
     import fmpy
     from fmpy.model_description import ValidationError
 

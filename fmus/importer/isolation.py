@@ -1,7 +1,7 @@
 """Run an FMU in a child process, so that a crash inside it cannot kill the harness.
 
-:class:`IsolatedRuntime` has the interface of :class:`fmus.importer.runtime.FmuRuntime` and forwards each
-call over a socket pair to ``python -m fmus.importer.isolation FD``, a child that owns the FMU. The child
+:class:`IsolatedRuntime` has the interface of :class:`cpgsim.fmus.importer.runtime.FmuRuntime` and forwards each
+call over a socket pair to ``python -m cpgsim.fmus.importer.isolation FD``, a child that owns the FMU. The child
 is a fresh interpreter (not a fork: FMU libraries and CasADi state are never shared), its stdout
 goes to stderr (an FMU printing cannot corrupt the protocol) and it ignores SIGINT (the parent
 decides). One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``,
@@ -9,11 +9,11 @@ whose reply carries the outputs after the step; ``get_outputs`` asks the child o
 changed since the last answer (direct feedthrough).
 
 If the child dies (segmentation fault, abort, out of memory, killed, exit from inside the FMU) the
-call raises :class:`~fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal.
+call raises :class:`~cpgsim.fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal.
 A watchdog bounds every call: ``timeout`` seconds (default :data:`DEFAULT_CALL_TIMEOUT`) for a call,
 at least :data:`MIN_SETUP_TIMEOUT` for ``setup`` (extraction, instantiation, initialisation) and
 :data:`STARTUP_TIMEOUT` for the child's interpreter to start; a call that takes longer kills the
-child and raises :class:`~fmus.errors.FmuTimeoutError`. A child that is stopped (SIGSTOP, SIGTSTP) is
+child and raises :class:`~cpgsim.fmus.errors.FmuTimeoutError`. A child that is stopped (SIGSTOP, SIGTSTP) is
 detected while waiting, killed, and reported as a crash. The master turns these errors into a
 ``CoSimulationError`` with the results recorded so far.
 """
@@ -34,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
-from fmus.importer.archive import remove_tree
-from harness.errors import StopRequested
+from cpgsim.fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
+from cpgsim.fmus.importer.archive import remove_tree
+from cpgsim.harness.errors import StopRequested
 
 _ERRORS = {cls.__name__: cls for cls in (FmuRuntimeError, FmuCrashedError, FmuTimeoutError)}
 DEFAULT_CALL_TIMEOUT = 10.0
@@ -60,7 +60,7 @@ def _signal_name(returncode: int | None) -> str:
 
 
 class IsolatedRuntime:
-    """An :class:`~fmus.importer.runtime.FmuRuntime` living in a child process (see module docstring)."""
+    """An :class:`~cpgsim.fmus.importer.runtime.FmuRuntime` living in a child process (see module docstring)."""
 
     def __init__(self, args: Mapping[str, Any], timeout: float | None = None) -> None:
         self.args = dict(args)
@@ -81,13 +81,17 @@ class IsolatedRuntime:
         self._outputs: dict[str, np.ndarray] | None = None
         self._time = 0.0
         parent, child = socket.socketpair()
-        root = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+        package = Path(__file__).resolve().parents[2]  # the cpgsim package (the repository root when editable)
+        if package.name == "cpgsim":  # a regular install: the folder holding it is an import root for the child
+            paths = [str(package.parent)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+            env["PYTHONPATH"] = os.pathsep.join(paths)
+        # an editable install is found by the child's own interpreter (sys.executable), through its site-packages
         env.setdefault("PYTHONDONTWRITEBYTECODE", "1")
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "fmus.importer.isolation", str(child.fileno())], pass_fds=(child.fileno(),),
+                [sys.executable, "-m", "cpgsim.fmus.importer.isolation", str(child.fileno())],
+                pass_fds=(child.fileno(),),
                 stdin=subprocess.DEVNULL, stdout=sys.stderr.fileno() if _has_fileno(sys.stderr) else None,
                 env=env, cwd=str(self.scratch), close_fds=True)
         except BaseException:
@@ -227,8 +231,8 @@ def _has_fileno(stream: Any) -> bool:
 
 # -- the child ----------------------------------------------------------------------------------------
 def _serve(fd: int) -> None:
-    from fmus.errors import one_line
-    from fmus.importer.runtime import FmuRuntime
+    from cpgsim.fmus.errors import one_line
+    from cpgsim.fmus.importer.runtime import FmuRuntime
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn = Connection(fd)

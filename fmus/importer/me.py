@@ -13,10 +13,10 @@ or the next time event) and returns early at the first event inside the interval
 - **step events**: ``completedIntegratorStep`` is called after every accepted step (every RK4
   substep, every internal CVODE step); ``enterEventMode`` there ends the advance at that time.
 - ``terminateSimulation`` from ``completedIntegratorStep`` raises
-  :class:`~harness.errors.StopRequested` at the step's time.
+  :class:`~cpgsim.harness.errors.StopRequested` at the step's time.
 
 Time events (``nextEventTime``) are hit exactly because the caller passes them as ``t_stop``. The
-event iteration and the state re-read after it are the caller's (:mod:`fmus.importer.runtime`); it
+event iteration and the state re-read after it are the caller's (:mod:`cpgsim.fmus.importer.runtime`); it
 calls :meth:`reset` afterwards.
 
 Why CVODE: the FMI world's reference stiff solver (OMSimulator, fmpy and the FMI cross-check tools
@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from fmus.errors import FmuRuntimeError
-from harness.errors import StopRequested
+from cpgsim.fmus.errors import FmuRuntimeError
+from cpgsim.harness.errors import StopRequested
 
 SOLVERS = ("rk4", "cvode")
 
@@ -44,7 +44,7 @@ class FmuModel:
 
     The four calls of the integration loop (set time, set states, get derivatives, get event
     indicators) go straight to the FMU's library (fmpy's wrappers cost more than the call itself);
-    a status above fmiWarning raises :class:`~fmus.errors.FmuRuntimeError` naming the call."""
+    a status above fmiWarning raises :class:`~cpgsim.fmus.errors.FmuRuntimeError` naming the call."""
 
     def __init__(self, fmu: Any, fmi_version: int, nx: int, nz: int, where: Callable[[str], str]) -> None:
         self.fmu = fmu

@@ -1,11 +1,11 @@
 """Run one FMU instance in this process through fmpy: co-simulation (FMI 2/3) or model exchange.
 
-:class:`FmuRuntime` is what an :class:`~fmus.importer.block.FmuBlock` drives (directly, or from a
-child process with ``isolate=True``, see :mod:`fmus.importer.isolation`). Values cross its interface as
-``{port: numpy array}`` with the ports of :mod:`fmus.importer.description`.
+:class:`FmuRuntime` is what an :class:`~cpgsim.fmus.importer.block.FmuBlock` drives (directly, or from a
+child process with ``isolate=True``, see :mod:`cpgsim.fmus.importer.isolation`). Values cross its interface as
+``{port: numpy array}`` with the ports of :mod:`cpgsim.fmus.importer.description`.
 
 Model exchange ("integrated by our solver"): the FMU's continuous states are integrated within each
-macro step by the block's solver (:mod:`fmus.importer.me`: fixed-step RK4 with ``substeps`` steps per
+macro step by the block's solver (:mod:`cpgsim.fmus.importer.me`: fixed-step RK4 with ``substeps`` steps per
 macro step, or CVODE BDF with ``rtol``/``atol``), the inputs held over the macro step. Events are
 located inside the step: state events (an event indicator changes sign; the crossing is found by root
 finding), time events (the solver stops exactly at ``nextEventTime``) and step events
@@ -19,7 +19,7 @@ applied in event mode at once.
 
 Termination: ``fmi2Discard`` from ``fmi2DoStep`` with ``fmi2GetBooleanStatus(fmi2Terminated)`` true,
 ``terminateSimulation`` from ``fmi3DoStep``, from the event iteration or from
-``completedIntegratorStep`` raise :class:`~harness.errors.StopRequested` with the FMU's last
+``completedIntegratorStep`` raise :class:`~cpgsim.harness.errors.StopRequested` with the FMU's last
 successful time; the outputs stay readable, and the master ends the run cleanly there.
 """
 
@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from fmus.errors import FmuRuntimeError, MissingBinaryError, one_line
-from fmus.importer.archive import remove_tree, safe_extract
-from fmus.importer.description import FmuDescription, check_binary, describe_fmu
-from harness.errors import StopRequested
+from cpgsim.fmus.errors import FmuRuntimeError, MissingBinaryError, one_line
+from cpgsim.fmus.importer.archive import remove_tree, safe_extract
+from cpgsim.fmus.importer.description import FmuDescription, check_binary, describe_fmu
+from cpgsim.harness.errors import StopRequested
 
 _FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8", "UInt8": "getUInt8",
              "Int16": "getInt16", "UInt16": "getUInt16", "Int32": "getInt32", "UInt32": "getUInt32",
@@ -374,7 +374,7 @@ class FmuRuntime:
     def _me_start(self) -> None:
         """After ``exitInitializationMode`` the FMU is in event mode: the event iteration waits for
         the inputs at ``t0`` (the first :meth:`set_inputs`), see :meth:`_leave_event_mode`."""
-        from fmus.importer.me import FmuModel
+        from cpgsim.fmus.importer.me import FmuModel
 
         d = self.desc
         nx = d.n_states
@@ -407,7 +407,7 @@ class FmuRuntime:
         Events found at the end of a step (and the initial one) are handled here, once the inputs
         at that instant have been set, as an FMI master does before it reads the outputs; events
         inside a step are handled at once, with the inputs held over the step. ``terminateSimulation``
-        raises :class:`~harness.errors.StopRequested` at the event's time."""
+        raises :class:`~cpgsim.harness.errors.StopRequested` at the event's time."""
         if not self._in_event_mode or self._terminated:
             return
         update = self.fmu.newDiscreteStates if self.desc.fmi_version == 2 else self.fmu.updateDiscreteStates
@@ -431,7 +431,7 @@ class FmuRuntime:
 
     def _me_step(self, t: float, dt: float) -> None:
         """Integrate from ``t`` to ``t + dt`` with the chosen solver, events located inside the step."""
-        from fmus.importer.me import make_solver
+        from cpgsim.fmus.importer.me import make_solver
 
         self._leave_event_mode()
         if self._terminated:

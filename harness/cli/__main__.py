@@ -1,7 +1,7 @@
-"""``python -m harness.cli``: the ``cpgsim`` command."""
+"""``python -m cpgsim.harness.cli``: the ``cpgsim`` command."""
 
 import sys
 
-from harness.cli.main import main
+from cpgsim.harness.cli.main import main
 
 sys.exit(main())

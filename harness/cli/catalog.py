@@ -13,22 +13,22 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from components.core import Block, ModelError
-from components.graph import Graph
+from cpgsim.components.core import Block, ModelError
+from cpgsim.components.graph import Graph
 
 BUILTIN: dict[str, tuple[str, str]] = {
     # name: ("module:function", one-line description)
-    "vdp": ("components.library:single_vdp", "one Van der Pol neuron, Yu Y2 (eps 0.1, b 4, omega 0.4pi)"),
-    "network": ("components.networks:leader_follower_network", "Yu Y5 leader-follower network, Table 1"),
-    "network-searching": ("components.library:searching_network", "Yu Y13 searching-mode network"),
-    "hexapod-network": ("components.library:hexapod_network", "six Y5 networks (18 neurons), legs 1-6"),
-    "damped-oscillator": ("components.library:damped_oscillator",
+    "vdp": ("cpgsim.components.library:single_vdp", "one Van der Pol neuron, Yu Y2 (eps 0.1, b 4, omega 0.4pi)"),
+    "network": ("cpgsim.components.networks:leader_follower_network", "Yu Y5 leader-follower network, Table 1"),
+    "network-searching": ("cpgsim.components.library:searching_network", "Yu Y13 searching-mode network"),
+    "hexapod-network": ("cpgsim.components.library:hexapod_network", "six Y5 networks (18 neurons), legs 1-6"),
+    "damped-oscillator": ("cpgsim.components.library:damped_oscillator",
                           "damped linear oscillator from generic blocks (no limit cycle)"),
-    "leg": ("components.yu.leg:leg", "Yu single-leg controller: network, sensory neurons, reflexes, converter "
+    "leg": ("cpgsim.components.yu.leg:leg", "Yu single-leg controller: network, sensory neurons, reflexes, converter "
             "(input toe_force)"),
-    "hexapod-controller": ("components.yu.leg:hexapod_controller", "Yu six-leg controller + gait FSM "
+    "hexapod-controller": ("cpgsim.components.yu.leg:hexapod_controller", "Yu six-leg controller + gait FSM "
                            "(in: toe_force[18] N; out: q_target[18] rad)"),
-    "fukuhara-controller": ("components.fukuhara.controller:fukuhara_controller",
+    "fukuhara-controller": ("cpgsim.components.fukuhara.controller:fukuhara_controller",
                             "Fukuhara 2022 six-leg controller, rules 1-4 + Appendix A (in: toe_force[18] N; "
                             "out: q_target[18] rad)"),
 }
@@ -42,6 +42,22 @@ def names() -> list[str]:
     return sorted(BUILTIN)
 
 
+OLD_TOP_LEVEL = ("components", "harness", "fmus", "robots")
+
+
+def moved_name_hint(exc: BaseException, requested: str | None = None) -> str | None:
+    """The one-line advice for code written against the names before cpgsim 0.2 (``components``, ``harness``,
+    ``fmus``, ``robots`` were top-level packages; now they are ``cpgsim.components`` and so on). ``requested``:
+    the full module name asked for, when known (the exception names only its first missing part)."""
+    name = getattr(exc, "name", None) if isinstance(exc, ModuleNotFoundError) else None
+    if not name or name.split(".")[0] not in OLD_TOP_LEVEL:
+        return None
+    if requested and requested.startswith(name):
+        name = requested
+    return (f"module {name!r} is now 'cpgsim.{name}' (cpgsim 0.2 installs one package, cpgsim): "
+            f"write 'from cpgsim.{name} import ...'")
+
+
 def _import_target(target: str) -> Callable[[], Any]:
     module, _, func = target.partition(":")
     mod = importlib.import_module(module)
@@ -51,7 +67,7 @@ def _import_target(target: str) -> Callable[[], Any]:
 def load_graph(spec: str) -> Graph | Block:
     """Resolve a built-in name, ``path/to/module.py:function`` or an ``.fmu``/``.ssp`` file to a graph (or block)."""
     if spec.lower().endswith((".fmu", ".ssp")):
-        from fmus.loader import load_fmu_graph
+        from cpgsim.fmus.loader import load_fmu_graph
 
         return load_fmu_graph(spec)
     if spec in BUILTIN:
@@ -70,6 +86,9 @@ def load_graph(spec: str) -> Graph | Block:
         try:
             spec_obj.loader.exec_module(module)
         except Exception as exc:  # noqa: BLE001 - user code: report, don't crash
+            hint = moved_name_hint(exc)
+            if hint:
+                raise GraphNotFound(f"importing {path} failed: {hint}") from None
             raise GraphNotFound(f"importing {path} failed: {type(exc).__name__}: {exc}") from exc
         if not hasattr(module, func):
             raise GraphNotFound(f"{path} has no function {func!r}")
@@ -81,7 +100,7 @@ def load_graph(spec: str) -> Graph | Block:
 
 def call_builder(builder: Any, spec: str) -> Graph | Block:
     """Call a graph builder without arguments; whatever goes wrong in user code is one-line :class:`GraphNotFound`
-    (a :class:`~components.core.ModelError` the builder raises keeps its own message)."""
+    (a :class:`~cpgsim.components.core.ModelError` the builder raises keeps its own message)."""
     if not callable(builder):
         raise GraphNotFound(f"{spec}: {type(builder).__name__} object is not callable (need a function returning "
                             f"a Graph or Block)")

@@ -27,8 +27,8 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
     files that cannot be read or written); 1: a run that failed (a simulation stopped early, an FMU
     call failed, a resource limit was hit while running); ``None``: an unexpected internal error.
     """
-    from components.core import ModelError
-    from harness.errors import SimulationError
+    from cpgsim.components.core import ModelError
+    from cpgsim.harness.errors import SimulationError
 
     msg = one_line(exc) or type(exc).__name__
     if isinstance(exc, CliError):
@@ -44,7 +44,7 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
         return 2, one_line(f"{where}{exc.strerror or exc}")
     if isinstance(exc, MemoryError):
         return 1, "out of memory (record fewer columns with --record, or a shorter horizon)"
-    if isinstance(exc, ValueError) and type(exc).__module__.split(".")[0] in ("harness", "components", "fmus"):
+    if isinstance(exc, ValueError) and type(exc).__module__.startswith("cpgsim."):
         return 2, msg
     return None, msg
 
@@ -64,7 +64,7 @@ def parse_scenario_sets(items: list[str]) -> dict[str, Any]:
     """``["terrain.step.height=0.06", "terrain.step.side=left"]`` -> ``{"terrain.step.height": 0.06,
     "terrain.step.side": "left"}`` (each VALUE a TOML value, a bare word a string); malformed items raise
     :class:`CliError` naming the item."""
-    from harness.experiments.scenario import ScenarioError, parse_value
+    from cpgsim.harness.experiments.scenario import ScenarioError, parse_value
 
     out: dict[str, Any] = {}
     for item in items:

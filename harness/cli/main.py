@@ -1,4 +1,4 @@
-"""``cpgsim`` command line: one entry point, one module per subcommand in :mod:`harness.cli.commands`.
+"""``cpgsim`` command line: one entry point, one module per subcommand in :mod:`cpgsim.harness.cli.commands`.
 
 Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``.
 
@@ -21,8 +21,8 @@ import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
-from harness.cli import commands
-from harness.cli.common import CliError, exit_code_of
+from cpgsim.harness.cli import commands
+from cpgsim.harness.cli.common import CliError, exit_code_of
 
 __all__ = ["CliError", "build_parser", "main"]
 
@@ -49,7 +49,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     if argv is not None and wanted in {m.name for m in infos}:
         infos = [m for m in infos if m.name == wanted]
     for info in infos:
-        mod = importlib.import_module(f"harness.cli.commands.{info.name}")
+        mod = importlib.import_module(f"cpgsim.harness.cli.commands.{info.name}")
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.__doc__ or mod.HELP,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)

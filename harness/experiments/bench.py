@@ -20,8 +20,8 @@ A suite file (the shipped one: ``harness/experiments/suites/terrain.toml``)::
     jitter_m = 0.05
     features.step = { type = "step", height = 0.045, position_y = 0.35, side = "right" }
 
-Each cell (controller, terrain) runs ``seeds`` trials (:func:`harness.experiments.sweep.run_trial`, the
-summary only); a trial's ``success`` is its scenario's criteria (:mod:`harness.experiments.outcomes`).
+Each cell (controller, terrain) runs ``seeds`` trials (:func:`cpgsim.harness.experiments.sweep.run_trial`, the
+summary only); a trial's ``success`` is its scenario's criteria (:mod:`cpgsim.harness.experiments.outcomes`).
 Output: ``bench.json`` (every trial's outcome, per cell: n, successes, Wilson 95 % interval, falls,
 stalls, crashes, median speed and tilt), ``bench.md`` (the table) and ``bench.png`` (success per cell).
 """
@@ -38,12 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
-from harness.experiments.scenario import ScenarioError
-from harness.experiments.sweep import _bar, _connect, _json_default, run_on_dask, run_trial, wilson_interval
-from harness.results import atomic_write
+from cpgsim.components.core import ModelError
+from cpgsim.harness.experiments.scenario import ScenarioError
+from cpgsim.harness.experiments.sweep import _bar, _connect, _json_default, run_on_dask, run_trial, wilson_interval
+from cpgsim.harness.results import atomic_write
 
-SUITES_PACKAGE = "harness.experiments.suites"
+SUITES_PACKAGE = "cpgsim.harness.experiments.suites"
 SUITE_KEYS = {"name", "description", "seeds", "base_seed", "t_end", "criteria", "controllers", "terrains"}
 
 
@@ -103,7 +103,7 @@ def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str) -> tuple[
 
 def check_cells(suite: Mapping[str, Any]) -> None:
     """Build every cell's closed loop once: a bad key fails here, before any trial, naming the cell."""
-    from harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.runner import build_scenario
 
     for c in suite["controllers"]:
         for t in suite["terrains"]:

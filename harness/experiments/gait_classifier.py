@@ -47,7 +47,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from components.geometry import LEG_NAMES
+from cpgsim.components.geometry import LEG_NAMES
 
 TOLERANCE = 1.0 / 12.0
 MIN_CONSISTENCY = 0.8

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.results import Results
+from cpgsim.harness.results import Results
 
 
 def tilt_deg(res: Results, robot: str) -> np.ndarray:

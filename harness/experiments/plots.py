@@ -18,8 +18,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from components.geometry import LEG_NAMES, RobotGeometry  # noqa: E402
-from harness.results import Results  # noqa: E402
+from cpgsim.components.geometry import LEG_NAMES, RobotGeometry  # noqa: E402
+from cpgsim.harness.results import Results  # noqa: E402
 
 LEG_LABELS = [f"{n} (leg {i + 1})" for i, n in enumerate(LEG_NAMES)]
 REFLEX_COLORS = {"elevator": "tab:red", "searching": "tab:blue", "found": "tab:green", "giveup": "black",

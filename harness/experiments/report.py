@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from harness.experiments.plots import _rotation, leg_points_body
-from harness.results import Results, atomic_write
+from cpgsim.harness.experiments.plots import _rotation, leg_points_body
+from cpgsim.harness.results import Results, atomic_write
 
 FPS = 20  # replay frames per simulated second
 FORCE_SCALE = 0.004  # m of arrow per N
@@ -87,8 +87,8 @@ def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force
 
 def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
     """Write ``run_dir/report.html`` from ``results.npz``, ``summary.json`` and ``scenario.toml``."""
-    from harness.experiments.scenario import load
-    from harness.experiments.setup import robot_geometry, terrain_of
+    from cpgsim.harness.experiments.scenario import load
+    from cpgsim.harness.experiments.setup import robot_geometry, terrain_of
 
     run = Path(run_dir)
     res = Results.load(run / "results.npz")

@@ -1,11 +1,12 @@
 """Robot scenarios: build controller + DART plant, co-simulate at 1 kHz, write results, summary, plots.
 
-A scenario is a TOML document (:mod:`harness.experiments.scenario`; the built-ins are files in
+A scenario is a TOML document (:mod:`cpgsim.harness.experiments.scenario`; the built-ins are files in
 ``harness/experiments/scenarios/``); its ``controller.kind`` picks the builder (Yu:
-:func:`harness.experiments.yu.scenarios.build`, Fukuhara: :func:`harness.experiments.fukuhara.scenarios.build`),
+:func:`cpgsim.harness.experiments.yu.scenarios.build`, Fukuhara:
+:func:`cpgsim.harness.experiments.fukuhara.scenarios.build`),
 which returns a :class:`RunSetup`. :func:`run_scenario` runs it and writes into its directory
-``results.csv``/``results.npz``, ``summary.json`` (with the outcomes of :mod:`harness.experiments.outcomes`)
-and the PNGs of :mod:`harness.experiments.plots`. A run that fails midway still writes what it recorded,
+``results.csv``/``results.npz``, ``summary.json`` (with the outcomes of :mod:`cpgsim.harness.experiments.outcomes`)
+and the PNGs of :mod:`cpgsim.harness.experiments.plots`. A run that fails midway still writes what it recorded,
 marks ``summary.json`` ``"complete": false`` with the error, and re-raises.
 """
 
@@ -20,14 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from harness.experiments import outcomes
-from harness.experiments import plots as plots_run
-from harness.experiments.fukuhara import scenarios as fukuhara
-from harness.experiments.scenario import Scenario, builtin_names, load
-from harness.experiments.setup import RunSetup
-from harness.experiments.yu import scenarios as yu
-from harness.results import Results, atomic_write
-from harness.simulate import SimulationError, Simulator
+from cpgsim.harness.experiments import outcomes
+from cpgsim.harness.experiments import plots as plots_run
+from cpgsim.harness.experiments.fukuhara import scenarios as fukuhara
+from cpgsim.harness.experiments.scenario import Scenario, builtin_names, load
+from cpgsim.harness.experiments.setup import RunSetup
+from cpgsim.harness.experiments.yu import scenarios as yu
+from cpgsim.harness.results import Results, atomic_write
+from cpgsim.harness.simulate import SimulationError, Simulator
 
 
 def scenario_names() -> list[str]:
@@ -37,7 +38,7 @@ def scenario_names() -> list[str]:
 def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None = None, seed: int | None = None,
                    **_: Any) -> RunSetup:
     """The :class:`RunSetup` of a built-in scenario name or a ``.toml`` file, with ``sets`` overrides
-    (``--set`` keys, :mod:`harness.experiments.scenario`) and ``seed`` (overrides the file's)."""
+    (``--set`` keys, :mod:`cpgsim.harness.experiments.scenario`) and ``seed`` (overrides the file's)."""
     scenario = name if isinstance(name, Scenario) else load(name, sets)
     if seed is not None:
         scenario.doc["seed"] = int(seed)
@@ -58,7 +59,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
-    ``step_thread``: see :class:`~harness.simulate.Simulator`; ``save_results=False`` writes only the
+    ``step_thread``: see :class:`~cpgsim.harness.simulate.Simulator`; ``save_results=False`` writes only the
     summary and the scenario (a benchmark of hundreds of trials)."""
     setup = build_scenario(name, sets, **kw)
     t_end = float(t_end if t_end is not None else setup.t_end)
@@ -100,7 +101,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         summary.setdefault("pictures", []).append("report.html")
     atomic_write(out / "summary.json", lambda f: json.dump(summary, f, indent=2, default=_json_default), text=True)
     if plots and save_results and setup.scenario is not None:
-        from harness.experiments.report import build_report
+        from cpgsim.harness.experiments.report import build_report
 
         build_report(out)
     if error is not None:
@@ -110,7 +111,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
 
 def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = None,
           keep: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The honest outcome keys (:func:`harness.experiments.outcomes.evaluate`) under the scenario's criteria;
+    """The honest outcome keys (:func:`cpgsim.harness.experiments.outcomes.evaluate`) under the scenario's criteria;
     a ``speed_m_s`` already in ``keep`` (a scenario's own, e.g. after a gait transient) is kept."""
     criteria = setup.scenario.doc["criteria"] if setup.scenario is not None else {}
     waiting = setup.waiting(res) if setup.waiting is not None else None

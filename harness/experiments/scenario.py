@@ -17,7 +17,7 @@ A scenario file (the built-ins are ``harness/experiments/scenarios/*.toml``)::
     [controller.params]               # any parameter of the controller graph, by path (globs allowed)
     "*.converter.height_memory" = 1.0
 
-    [terrain]                         # named features (robots.terrain.FEATURES), in file order
+    [terrain]                         # named features (cpgsim.robots.terrain.FEATURES), in file order
     friction = 1.0
     jitter_m = 0.0                    # shift every feature by U(-j, j) in y, from the seed
     [terrain.step]
@@ -26,7 +26,7 @@ A scenario file (the built-ins are ``harness/experiments/scenarios/*.toml``)::
     position_y = 0.355
     side = "right"
 
-    [criteria]                        # what "success" means (harness.experiments.outcomes)
+    [criteria]                        # what "success" means (cpgsim.harness.experiments.outcomes)
     max_tilt_deg = 30.0
     min_distance_m = 0.3
 
@@ -51,9 +51,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from components.core import ModelError
+from cpgsim.components.core import ModelError
 
-BUILTIN_PACKAGE = "harness.experiments.scenarios"
+BUILTIN_PACKAGE = "cpgsim.harness.experiments.scenarios"
 CONTROLLER_KINDS = ("yu", "yu-open-loop", "fukuhara")
 ROBOT_PRESETS = ("yu-sim", "yu-prototype")
 
@@ -317,7 +317,7 @@ def _check_params(scenario: Scenario, overridden: bool) -> None:
 
 
 def _check_features(scenario: Scenario, overridden: bool) -> None:
-    from robots.terrain import FEATURES, ParameterError, compose
+    from cpgsim.robots.terrain import FEATURES, ParameterError, compose
 
     feats = scenario.features()
     for name, feat in feats.items():

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
-from components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM, RobotGeometry
-from components.graph import Graph
-from harness.experiments.scenario import GEOMETRY_KEYS, Scenario, ScenarioError
-from harness.results import Results
+from cpgsim.components.core import ModelError
+from cpgsim.components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM, RobotGeometry
+from cpgsim.components.graph import Graph
+from cpgsim.harness.experiments.scenario import GEOMETRY_KEYS, Scenario, ScenarioError
+from cpgsim.harness.results import Results
 
 PRESETS: dict[str, RobotGeometry] = {"yu-sim": YU_SIM, "yu-prototype": YU_PROTOTYPE}
 PLANT_KEYS = ("kp", "kd", "friction", "velocity_ff")
@@ -60,7 +60,7 @@ def robot_geometry(scenario: Scenario) -> RobotGeometry:
 def terrain_of(scenario: Scenario, geometry: RobotGeometry):
     """The terrain of the scenario's features, jittered from its seed, checked against the robot's size:
     a feature may not start under the robot's feet at ``t = 0`` nor stand taller than its body height."""
-    from robots import terrain as tr
+    from cpgsim.robots import terrain as tr
 
     doc = scenario.doc
     feats = {name: dict(f) for name, f in scenario.features().items()}

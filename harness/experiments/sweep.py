@@ -3,7 +3,7 @@
 Trial ``i`` of a sweep with base seed ``S`` runs the scenario with seed ``S + i`` (the same seeds in
 every group of a ``vary`` sweep, so the groups are paired: the same initial conditions with and
 without, e.g., rule 2). A trial is :func:`run_trial` -- a top-level, picklable function -- which
-runs :func:`harness.experiments.runner.run_scenario` into its own directory and returns a small record; any
+runs :func:`cpgsim.harness.experiments.runner.run_scenario` into its own directory and returns a small record; any
 exception in the trial is caught there and recorded as ``status = "failed"`` with its error, and a
 worker that dies is recorded the same way by the master, so the sweep always goes on.
 
@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from components.core import ModelError
-from harness.results import atomic_write
+from cpgsim.components.core import ModelError
+from cpgsim.harness.results import atomic_write
 
 Z95 = 1.959963984540054
 OUTCOME_KEYS = ("success", "criteria_failed", "complete", "fell", "fell_time_s", "fell_reason", "max_tilt_deg",
@@ -58,7 +58,7 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
 def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: str,
               t_end: float | None = None, plots: bool = False, save_results: bool = True) -> dict[str, Any]:
     """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``."""
-    from harness.experiments.runner import run_scenario
+    from cpgsim.harness.experiments.runner import run_scenario
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"seed": int(seed), "dir": str(out_dir), "status": "ok", "error": None, "outcome": {}}
@@ -139,7 +139,7 @@ class Group:
 
 def parse_vary(text: str | None) -> tuple[str, list[Any]] | None:
     """``"rule2=1,0"`` -> ``("rule2", [1, 0])``; each value is a TOML value (a bare word is a string)."""
-    from harness.experiments.scenario import ScenarioError, parse_value
+    from cpgsim.harness.experiments.scenario import ScenarioError, parse_value
 
     if not text:
         return None
@@ -169,7 +169,7 @@ def _groups(sets: dict[str, Any], vary: tuple[str, list[Any]] | None) -> list[Gr
 def check_groups(scenario: str, groups: Sequence[Group], seed: int) -> None:
     """Build every group's closed loop once before any trial runs: an unknown key, a wrong type or a value
     out of range is an error naming the key here, not a failure of every trial."""
-    from harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.runner import build_scenario
 
     for g in groups:
         build_scenario(scenario, g.sets, seed=seed)

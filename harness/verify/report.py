@@ -1,4 +1,4 @@
-"""Presentation of :class:`harness.verify.result.VerifyReport`: text table, JSON file, phase-portrait plot,
+"""Presentation of :class:`cpgsim.harness.verify.result.VerifyReport`: text table, JSON file, phase-portrait plot,
 and the eps x b sweep of a single Van der Pol neuron against Yu Y4 (``cpgsim verify --sweep``).
 """
 
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from harness.verify.result import STATUS_TEXT, Cycle, VerifyOptions, VerifyReport
-from harness.verify.shooting import verify
+from cpgsim.harness.verify.result import STATUS_TEXT, Cycle, VerifyOptions, VerifyReport
+from cpgsim.harness.verify.shooting import verify
 
 SWEEP_EPS = (0.05, 0.1, 0.5, 1.0)
 SWEEP_B = (1.0, 4.0, 9.0)
@@ -276,12 +276,12 @@ SWEEP_WINDOW_PERIODS = 3
 
 def sweep_transients(eps_values: Sequence[float], b_values: Sequence[float], omega: float,
                      t_end: float = SWEEP_TRANSIENT) -> dict[tuple[float, float], dict[str, Any]]:
-    """Every ``eps`` x ``b`` neuron's transient in one batch run (:func:`harness.batch.simulate_batch`):
+    """Every ``eps`` x ``b`` neuron's transient in one batch run (:func:`cpgsim.harness.batch.simulate_batch`):
     ``{(eps, b): {"amplitude", "period", "status", "x_end"}}`` of ``z.x`` over the last cycles, ``{}`` when
     no C compiler works (the sweep then runs without them)."""
-    from components.library import single_vdp
-    from harness.batch import simulate_batch
-    from harness.native import NativeUnavailable
+    from cpgsim.components.library import single_vdp
+    from cpgsim.harness.batch import simulate_batch
+    from cpgsim.harness.native import NativeUnavailable
 
     grid = [(float(e), float(b)) for e in eps_values for b in b_values]
     dt = 1e-3
@@ -305,7 +305,7 @@ def sweep(eps_values: Sequence[float] = SWEEP_EPS, b_values: Sequence[float] = S
     simulated amplitude and period are reported beside the shooting ones (``sim_amplitude``,
     ``sim_period``, ``sim_status``; ``None`` without a C compiler).
     """
-    from components.library import single_vdp
+    from cpgsim.components.library import single_vdp
 
     sims = sweep_transients(eps_values, b_values, omega)
     rows = []

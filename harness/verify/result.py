@@ -1,4 +1,4 @@
-"""What :func:`harness.verify.shooting.verify` takes and gives: options, cycles and the report (text and JSON)."""
+"""What :func:`cpgsim.harness.verify.shooting.verify` takes and gives: options, cycles, the report (text, JSON)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
+from cpgsim.components.core import ModelError
 
 N_ORBIT = 2520  # orbit samples per period: divisible by 1..10 and 12 (exact sub-period shifts)
 

@@ -1,7 +1,7 @@
 """Symbolic limit-cycle verification of autonomous graphs (``cpgsim verify``).
 
 :func:`verify` takes any graph of equation blocks whose free inputs are absent or held constant,
-compiles it (:func:`harness.compile.compile_graph`: its ``ode(t, x, z, u, p)`` is the only source
+compiles it (:func:`cpgsim.harness.compile.compile_graph`: its ``ode(t, x, z, u, p)`` is the only source
 of the equations, e.g. Yu Y2 for a Van der Pol neuron, Y5 for the leader-follower network, Y13 for
 its searching mode) and:
 
@@ -43,10 +43,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from components.core import Block
-from components.graph import Graph
-from harness.compile import CompiledModel, compile_graph
-from harness.verify.result import (
+from cpgsim.components.core import Block
+from cpgsim.components.graph import Graph
+from cpgsim.harness.compile import CompiledModel, compile_graph
+from cpgsim.harness.verify.result import (
     N_ORBIT,
     Cycle,
     VerifyInputError,
@@ -55,8 +55,8 @@ from harness.verify.result import (
     complex_json,
     format_dict,
 )
-from harness.verify.sync import sync_analysis
-from harness.verify.system import AutonomousSystem, IntegrationFailed, interp_crossing, up_crossings
+from cpgsim.harness.verify.sync import sync_analysis
+from cpgsim.harness.verify.system import AutonomousSystem, IntegrationFailed, interp_crossing, up_crossings
 
 # -- public API ------------------------------------------------------------------------------------
 
@@ -548,7 +548,7 @@ class _Verifier:
 
     # -- analytic values (Yu Y4) -----------------------------------------------------------------
     def _analytic(self) -> None:
-        from components.neurons import VanDerPolNeuron
+        from cpgsim.components.neurons import VanDerPolNeuron
 
         rep = self.report
         cycles = ([rep.cycle] if rep.cycle else []) + rep.subcycles

@@ -1,6 +1,6 @@
 """Convergence and synchronisation times of a verified oscillator graph (``cpgsim verify``'s ``sync``).
 
-After :mod:`harness.verify.shooting` has found the periodic orbit (or the sub-cycles of a quasi-periodic
+After :mod:`cpgsim.harness.verify.shooting` has found the periodic orbit (or the sub-cycles of a quasi-periodic
 graph), this measures from the initial state (and ``sync_samples`` random ones):
 
 - ``sync_time``: the earliest time after which every state of each synchronised pair (two VDP
@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from harness.compile import CompiledModel
-from harness.verify.result import N_ORBIT, Cycle, VerifyInputError, VerifyOptions, VerifyReport
-from harness.verify.system import AutonomousSystem, IntegrationFailed
+from cpgsim.harness.compile import CompiledModel
+from cpgsim.harness.verify.result import N_ORBIT, Cycle, VerifyInputError, VerifyOptions, VerifyReport
+from cpgsim.harness.verify.system import AutonomousSystem, IntegrationFailed
 
 
 def sync_analysis(model: CompiledModel, system: AutonomousSystem, opts: VerifyOptions, report: VerifyReport,
@@ -105,7 +105,7 @@ def sync_analysis(model: CompiledModel, system: AutonomousSystem, opts: VerifyOp
 
 def sync_pairs(model: CompiledModel, system: AutonomousSystem, opts: VerifyOptions) -> list[tuple[str, str]]:
     """The given pairs, or every two VDP neurons with equal parameters in one dependency component."""
-    from components.neurons import VanDerPolNeuron
+    from cpgsim.components.neurons import VanDerPolNeuron
 
     if opts.sync_pairs is not None:
         return list(opts.sync_pairs)

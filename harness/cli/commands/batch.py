@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from components.graph import Graph
-from harness.cli import catalog
-from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
 
 NAME = "batch"
 HELP = "run many parameter sets of a graph in one compiled loop (threads in C), one row each"
@@ -130,9 +130,9 @@ def read_table(path: Path) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.batch import simulate_batch
-    from harness.native import NativeUnavailable
-    from harness.results import ResultsError
+    from cpgsim.harness.batch import simulate_batch
+    from cpgsim.harness.native import NativeUnavailable
+    from cpgsim.harness.results import ResultsError
 
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli.common import CliError
+from cpgsim.harness.cli.common import CliError
 
 NAME = "bench"
 HELP = "run controllers x terrains x seeds and tabulate success, falls, stalls, speed"
@@ -32,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.experiments.bench import run_bench
+    from cpgsim.harness.experiments.bench import run_bench
 
     if args.seeds is not None and args.seeds < 1:
         raise CliError(f"--seeds must be >= 1, got {args.seeds}")

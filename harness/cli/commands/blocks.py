@@ -15,7 +15,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from components.catalog import markdown, text
+    from cpgsim.components.catalog import markdown, text
 
     print(markdown() if args.markdown else text())
     return 0

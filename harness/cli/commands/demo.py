@@ -9,10 +9,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli.commands.run import print_summary
-from harness.cli.common import CliError
-from harness.experiments.runner import run_scenario
-from harness.simulate import SimulationError
+from cpgsim.harness.cli.commands.run import print_summary
+from cpgsim.harness.cli.common import CliError
+from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.harness.simulate import SimulationError
 
 NAME = "demo"
 HELP = "run the main demo (Yu hexapod over a step) and write pictures"

@@ -7,7 +7,7 @@ its default parameters, named after --name or the class) or a function returning
 Examples:
   cpgsim export network -o network.fmu
   cpgsim export vdp -o vdp3.fmu --fmi 3 --kind cs --set z.eps=0.2
-  cpgsim export components.neurons:VanDerPolNeuron -o neuron.fmu --kind me
+  cpgsim export cpgsim.components.neurons:VanDerPolNeuron -o neuron.fmu --kind me
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ import os
 import re
 from pathlib import Path
 
-from components.core import Block
-from components.graph import Graph
-from harness.cli import catalog
-from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
+from cpgsim.components.core import Block
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
 
 NAME = "export"
 HELP = "export a block or graph as an FMU (FMI 2 or 3, co-simulation and/or model exchange)"
@@ -53,7 +53,7 @@ def load_item(spec: str, name: str | None = None) -> Graph | Block:
     try:
         mod = importlib.import_module(module)
     except ImportError as exc:
-        raise CliError(f"cannot import module {module!r}: {exc}") from None
+        raise CliError(f"cannot import module {module!r}: {catalog.moved_name_hint(exc, module) or exc}") from None
     if not hasattr(mod, attr):
         raise CliError(f"module {module!r} has no {attr!r}")
     obj = getattr(mod, attr)
@@ -68,7 +68,7 @@ def load_item(spec: str, name: str | None = None) -> Graph | Block:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fmus.export.exporter import export_fmu
+    from cpgsim.fmus.export.exporter import export_fmu
 
     out = Path(args.output)
     if out.suffix.lower() != ".fmu":
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     params = parse_sets(args.sets)
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
                         params=params, name=args.name, optimize=None if args.opt == "auto" else f"-O{args.opt}")
-    from harness.results import file_mode
+    from cpgsim.harness.results import file_mode
 
     os.chmod(result.path, file_mode())  # the user's umask, like every other file cpgsim writes
     variables = result.variables

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from harness.cli.common import CliError
+from cpgsim.harness.cli.common import CliError
 
 NAME = "figures"
 HELP = "remake the Yu figures (network, nominal path, elevator, searching, gait diagrams) as PNGs"
@@ -27,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.experiments.yu.figures import FIGURES, make_figures
+    from cpgsim.harness.experiments.yu.figures import FIGURES, make_figures
 
     if args.list:
         for name in FIGURES:

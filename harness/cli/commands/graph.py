@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli import catalog
-from harness.cli.common import CliError
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.common import CliError
 
 NAME = "graph"
 HELP = "draw a block diagram"
@@ -24,14 +24,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.diagram import draw_graph
+    from cpgsim.harness.diagram import draw_graph
 
     out = Path(args.output)
     if out.suffix not in (".svg", ".png", ".pdf"):
         raise CliError(f"output {out} must end in .svg, .png or .pdf")
     graph = catalog.load_graph(args.graph)
     if args.subgraph:
-        from components.graph import Graph
+        from cpgsim.components.graph import Graph
 
         if not isinstance(graph, Graph):
             raise CliError(f"{args.graph} is a single block: it has no subgraph {args.subgraph!r}")

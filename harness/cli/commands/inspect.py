@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli.common import CliError
+from cpgsim.harness.cli.common import CliError
 
 NAME = "inspect"
 HELP = "print the ports and parameters of an FMU (or the blocks of an SSP)"
@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     if suffix == ".fmu":
         import warnings
 
-        from fmus.importer.description import FmuWarning, describe_fmu
+        from cpgsim.fmus.importer.description import FmuWarning, describe_fmu
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FmuWarning)  # shown in the summary instead
@@ -34,8 +34,8 @@ def run(args: argparse.Namespace) -> int:
         print(desc.summary())
         return 0
     if suffix == ".ssp":
-        from fmus.importer.block import FmuBlock
-        from fmus.ssp import import_ssp
+        from cpgsim.fmus.importer.block import FmuBlock
+        from cpgsim.fmus.ssp import import_ssp
 
         graph = import_ssp(path)
         print(f"{path.name}: SSP system {graph.name!r}, {len(graph.blocks)} block(s)"

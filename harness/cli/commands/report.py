@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli.common import CliError
+from cpgsim.harness.cli.common import CliError
 
 NAME = "report"
 HELP = "rebuild a run directory's report.html (3D replay and linked plots)"
@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.experiments.report import build_report
+    from cpgsim.harness.experiments.report import build_report
 
     run_dir = Path(args.run_dir)
     for name in ("results.npz", "scenario.toml"):

@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
-from harness.experiments.runner import run_scenario
-from harness.experiments.scenario import builtin_descriptions, load
-from harness.simulate import SimulationError
+from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
+from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.harness.experiments.scenario import builtin_descriptions, load
+from cpgsim.harness.simulate import SimulationError
 
 NAME = "run"
 HELP = "run a robot scenario (built-in name or FILE.toml) and make its pictures"
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
         print(scenario.to_toml(), end="")
         return 0
     out = Path(args.output or Path("runs") / scenario.name)
-    from harness.results import prepare_run_directory
+    from cpgsim.harness.results import prepare_run_directory
 
     prepare_run_directory(out)  # a previous run there is replaced as a whole
     try:

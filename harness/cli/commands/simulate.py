@@ -20,12 +20,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from components.graph import Graph
-from harness.cli import catalog
-from harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
-from harness.simulate import SimulationError, Simulator
+from cpgsim.components.graph import Graph
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.common import CliError, add_set_argument, parse_sets, positive_float
+from cpgsim.harness.simulate import SimulationError, Simulator
 
-DEFAULT_CALL_TIMEOUT = 10.0  # mirrors fmus.importer.isolation (imported lazily: the CLI starts fast)
+DEFAULT_CALL_TIMEOUT = 10.0  # mirrors cpgsim.fmus.importer.isolation (imported lazily: the CLI starts fast)
 MIN_SETUP_TIMEOUT = 10.0
 
 NAME = "simulate"
@@ -70,7 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> int:
     """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) those whose
     modelDescription does not name cpgsim as the generation tool. Returns how many are isolated."""
-    from fmus.importer.block import fmu_blocks
+    from cpgsim.fmus.importer.block import fmu_blocks
 
     n = 0
     for blk in fmu_blocks(graph):
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
-    from harness.results import result_files
+    from cpgsim.harness.results import result_files
 
     existing = [f for f in result_files(out) if f.exists()]
     if existing and not args.force:
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     graph = catalog.load_graph(args.graph)
     isolate_fmus(graph, args.isolate, args.fmu_timeout)
     if args.solver is not None or args.rtol is not None or args.atol is not None:
-        from fmus.importer.block import set_solver
+        from cpgsim.fmus.importer.block import set_solver
 
         if (args.rtol is not None or args.atol is not None) and args.solver != "cvode":
             raise CliError("--rtol/--atol apply to --solver cvode")
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     if not t_end > t0:
         raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
     sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
-    from harness.exit_guard import guard_run
+    from cpgsim.harness.exit_guard import guard_run
 
     try:
         with guard_run("cpgsim simulate", args.graph, out):

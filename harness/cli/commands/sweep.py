@@ -18,8 +18,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from components.core import ModelError
-from harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
+from cpgsim.components.core import ModelError
+from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
 
 NAME = "sweep"
 HELP = "run many seeded trials of a scenario on dask (local cluster or --scheduler)"
@@ -53,7 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.experiments.sweep import parse_vary, run_sweep
+    from cpgsim.harness.experiments.sweep import parse_vary, run_sweep
 
     if args.serial and args.scheduler:
         raise CliError("--serial and --scheduler exclude each other")

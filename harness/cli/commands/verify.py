@@ -22,8 +22,8 @@ import json
 import sys
 from pathlib import Path
 
-from harness.cli import catalog
-from harness.cli.common import CliError, add_set_argument, parse_assignments, parse_sets, positive_float
+from cpgsim.harness.cli import catalog
+from cpgsim.harness.cli.common import CliError, add_set_argument, parse_assignments, parse_sets, positive_float
 
 NAME = "verify"
 HELP = "verify a stable limit cycle (period, Floquet multipliers, phase lags, sync time)"
@@ -55,9 +55,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from harness.verify.report import format_report, plot_report, sweep, sweep_markdown, write_json
-    from harness.verify.result import VerifyOptions
-    from harness.verify.shooting import verify
+    from cpgsim.harness.verify.report import format_report, plot_report, sweep, sweep_markdown, write_json
+    from cpgsim.harness.verify.result import VerifyOptions
+    from cpgsim.harness.verify.shooting import verify
 
     if args.sweep:
         if args.graph:

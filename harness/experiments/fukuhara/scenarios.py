@@ -1,6 +1,6 @@
 """Fukuhara 2022 experiments as ``cpgsim run`` scenarios: gaits, amputation, gap crossing.
 
-Every scenario is the ``fukuhara-controller`` graph (:mod:`components.fukuhara.controller`) closed
+Every scenario is the ``fukuhara-controller`` graph (:mod:`cpgsim.components.fukuhara.controller`) closed
 around the DART hexapod (YU_SIM geometry) at 1 kHz, started with a random alpha per leg drawn from
 ``--seed`` (uniform in ``[theta_PEP, theta_AEP]``, every leg in LateStance, the robot standing on
 its feet in that posture after a 0.3 s settle).
@@ -14,7 +14,7 @@ its feet in that posture after a 0.3 s settle).
   ``N_ALS=2``, ``h_sw=0.05`` (see docs/fukuhara.md);
 - a dotted path, for one parameter of the graph: ``ctrl.L1.theta_AEP=0.5``, ``robot.kp=150``.
 
-The summary (``summary.json``) adds: the gait report of :mod:`harness.experiments.gait_classifier` (label, duty
+The summary (``summary.json``) adds: the gait report of :mod:`cpgsim.harness.experiments.gait_classifier` (label, duty
 factors, phase lags, rule), the same classification on the foot contacts, rule counts, walking speed,
 ``success`` (per scenario, see below) and the picture ``alpha.png`` (alpha and mode per leg, Fukuhara
 Figure 7D-F).
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
-from components.fukuhara.blocks import MODE_NAMES, RULE_SEARCH, SWING
-from components.fukuhara.controller import (
+from cpgsim.components.core import ModelError
+from cpgsim.components.fukuhara.blocks import MODE_NAMES, RULE_SEARCH, SWING
+from cpgsim.components.fukuhara.controller import (
     CONTROLLER_PARAMS,
     SPEED_SETTINGS,
     TRAJECTORY_PARAMS,
@@ -42,15 +42,15 @@ from components.fukuhara.controller import (
     leg_indices,
     set_initial,
 )
-from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
-from components.graph import Graph
-from harness.experiments.gait_classifier import classify, stance_from_fz
-from harness.experiments.outcomes import fall
-from harness.experiments.scenario import Scenario, ScenarioError
-from harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
-from harness.results import Results
-from robots.plant import DartHexapod
-from robots.terrain import Terrain
+from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
+from cpgsim.components.graph import Graph
+from cpgsim.harness.experiments.gait_classifier import classify, stance_from_fz
+from cpgsim.harness.experiments.outcomes import fall
+from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
+from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
+from cpgsim.harness.results import Results
+from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.terrain import Terrain
 
 EXPECTED_GAIT = {1: "tripod", 2: "tetrapod", 3: "wave"}
 AMPUTATION_CASES = {1: ("L2", "R2"), 2: ("L1", "R1")}
@@ -267,7 +267,7 @@ def _stance_fn(legs: list[int]):
 
 
 def _thresholds(ctrl_params: dict) -> dict[str, float]:
-    from components.fukuhara.blocks import DEFAULTS
+    from cpgsim.components.fukuhara.blocks import DEFAULTS
 
     # "Fcz" is drawn as a line on the Fz plot (rule 3's N_ALS); N_SRH applies to |(Fx, Fy)|, listed only
     return {"Fcz": float(ctrl_params.get("N_ALS", DEFAULTS["N_ALS"])),

@@ -1,1 +1,1 @@
-"""The built-in robot scenarios as TOML files (their schema: :mod:`harness.experiments.scenario`)."""
+"""The built-in robot scenarios as TOML files (their schema: :mod:`cpgsim.harness.experiments.scenario`)."""

@@ -1,1 +1,1 @@
-"""Benchmark suites (controllers x terrains x seeds) for ``cpgsim bench`` (:mod:`harness.experiments.bench`)."""
+"""Benchmark suites (controllers x terrains x seeds) for ``cpgsim bench`` (:mod:`cpgsim.harness.experiments.bench`)."""

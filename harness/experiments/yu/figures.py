@@ -1,6 +1,6 @@
 """Yu figures remade from simulation results (``cpgsim figures -o DIR``).
 
-Each figure has a *run* function (simulate, return :class:`~harness.results.Results`; the results
+Each figure has a *run* function (simulate, return :class:`~cpgsim.harness.results.Results`; the results
 are also written as ``DIR/<name>.npz``) and a *plot* function (Results -> PNG), so a figure can be
 remade from its results file without re-running:
 
@@ -33,12 +33,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from components.geometry import LEG_NAMES, YU_SIM, RobotGeometry  # noqa: E402
-from components.networks import leader_follower_network  # noqa: E402
-from components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG  # noqa: E402
-from components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets  # noqa: E402
-from harness.results import Results  # noqa: E402
-from harness.simulate import Simulator  # noqa: E402
+from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry  # noqa: E402
+from cpgsim.components.networks import leader_follower_network  # noqa: E402
+from cpgsim.components.yu.fsm import GAITS, STANCE, STANCE_PROLONG, SWING, SWING_PROLONG  # noqa: E402
+from cpgsim.components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets  # noqa: E402
+from cpgsim.harness.results import Results  # noqa: E402
+from cpgsim.harness.simulate import Simulator  # noqa: E402
 
 ELEVATOR_TIMES = (0.3, 0.5, 0.7, 0.9)
 SEARCH_TOUCHDOWN = 8.34  # the fourth searching dip (foot at its deepest): a foothold about 14 mm down

@@ -76,16 +76,16 @@ from typing import Any
 
 import numpy as np
 
-from components.core import ModelError
-from components.geometry import YU_SIM, RobotGeometry
-from components.graph import Graph
-from components.yu.leg import hexapod_controller
-from harness.compile import compile_graph
-from harness.experiments.scenario import Scenario, ScenarioError
-from harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
-from harness.results import Results
-from robots import terrain as tr
-from robots.plant import DartHexapod
+from cpgsim.components.core import ModelError
+from cpgsim.components.geometry import YU_SIM, RobotGeometry
+from cpgsim.components.graph import Graph
+from cpgsim.components.yu.leg import hexapod_controller
+from cpgsim.harness.compile import compile_graph
+from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
+from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
+from cpgsim.harness.results import Results
+from cpgsim.robots import terrain as tr
+from cpgsim.robots.plant import DartHexapod
 
 CONTROLLER = "controller"
 ROBOT = "robot"

@@ -49,6 +49,7 @@ _EXPORTS: dict[str, str] = {
     "Mux": "components.basic",
     "Demux": "components.basic",
     "Integrator": "components.basic",
+    "UnitConversion": "components.basic",
     # Yu 2019: neurons, networks, sensory neurons, reflexes, converter, gait FSM, controllers
     "VanDerPolNeuron": "components.neurons",
     "LeaderDrive": "components.networks",

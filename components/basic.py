@@ -187,3 +187,25 @@ class SineSource(Block):
         p = v.p
         return Equations(outputs={"y": p["amplitude"] * ca.sin(2 * math.pi * p["frequency"] * v.t + p["phase"])
                                   + p["offset"]})
+
+
+class UnitConversion(Block):
+    """``y = scale * u + shift``: a value in unit ``unit_in`` expressed in ``unit_out`` (same dimension).
+
+    Put on a connection by the graph when the two ends carry convertible units (``mm`` into ``m``,
+    ``degC`` into ``K``); ``scale`` and ``shift`` come from :func:`cpgsim.components.units.conversion`
+    (FMI unit model: ``value_SI = factor * value + offset``). Constants, not parameters: they are part of
+    the units, not something to tune."""
+
+    def __init__(self, name: str, shape: int | tuple[int, ...] = 1, unit_in: str = "mm", unit_out: str = "m",
+                 scale: float = 1e-3, shift: float = 0.0) -> None:
+        self._shape, self._unit_in, self._unit_out = shape, unit_in, unit_out
+        self.scale, self.shift = float(scale), float(shift)
+        super().__init__(name)
+
+    def declare(self) -> None:
+        self.add_input("u", self._shape, self._unit_in, description=f"value in {self._unit_in}")
+        self.add_output("y", self._shape, self._unit_out, description=f"value in {self._unit_out}")
+
+    def define(self, v: Symbols) -> Equations:
+        return Equations(outputs={"y": self.scale * v.u["u"] + self.shift})

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared
+from cpgsim.components.units import Conversion, UnitMismatch, conversion
 
 
 class WiringError(ModelError):
@@ -223,14 +224,25 @@ def _leaf(graph: Graph, ref: PortRef, prefix: str, direction: str) -> str:
     return f"{prefix}{ref.block}.{ref.port}"
 
 
-def check_compatible(src: Port, dst: Port, src_name: str, dst_name: str) -> None:
-    """Raise :class:`WiringError` if two ports cannot be connected."""
-    if src.unit != dst.unit:
-        raise WiringError(f"unit mismatch: {src_name} is [{src.unit}] but {dst_name} expects [{dst.unit}]")
+def check_compatible(src: Port, dst: Port, src_name: str, dst_name: str) -> Conversion:
+    """Raise :class:`WiringError` if two ports cannot be connected; else the unit conversion on the wire.
+
+    Units are compared by dimension (:mod:`cpgsim.components.units`): ``N`` feeds ``kg*m/s2`` as is,
+    ``mm`` feeds ``m`` through a factor 1e-3, ``m`` never feeds ``s``. Integer and Boolean ports convert
+    only when the conversion is the identity (a scaled count is no count)."""
+    try:
+        conv = conversion(src.unit, dst.unit)
+    except UnitMismatch as exc:
+        raise WiringError(f"unit mismatch: {src_name} [{src.unit}] cannot feed {dst_name} [{dst.unit}]: {exc}") \
+            from None
+    if not conv.identity and (src.kind != "real" or dst.kind != "real"):
+        raise WiringError(f"unit mismatch: {src_name} [{src.unit}] feeds {dst_name} [{dst.unit}] only through a "
+                          f"conversion (x{conv.scale:g}{conv.shift:+g}), and {src.kind} ports are not converted")
     if src.shape != dst.shape:
         raise WiringError(f"shape mismatch: {src_name} has shape {src.shape} but {dst_name} expects {dst.shape}")
     if src.kind != dst.kind:
         raise WiringError(f"kind mismatch: {src_name} is {src.kind} but {dst_name} expects {dst.kind}")
+    return conv
 
 
 class FlatGraph:
@@ -250,6 +262,8 @@ class FlatGraph:
         self.outputs: dict[str, Port] = {}
         self.sources: dict[str, str] = {}
         self.output_sources: dict[str, str] = {}
+        # leaf input -> (source, its unit, the input's unit, conversion block path) for converted wires
+        self.conversions: dict[str, tuple[str, str, str, str]] = {}
 
     def _resolve_out(self, name: str) -> str:
         seen = set()
@@ -282,6 +296,29 @@ class FlatGraph:
                 self.sources[d] = "$" + name
         for name in self.outputs:
             self.output_sources[name] = self._resolve_out("@" + name)
+        self._insert_conversions()
+
+    def _insert_conversions(self) -> None:
+        """A :class:`~cpgsim.components.basic.UnitConversion` block on every wire whose ends carry different
+        units of one dimension (named ``<block>__<input>_unit``, beside the block it feeds), so the
+        compiler, the co-simulation master and the verifier all see ordinary blocks."""
+        from cpgsim.components.basic import UnitConversion
+
+        for dst, src in list(self.sources.items()):
+            sport = self.inputs[src[1:]] if src.startswith("$") else self.port(src)
+            dport = self.port(dst)
+            conv = check_compatible(sport, dport, src.lstrip("$"), dst)
+            if conv.identity:
+                continue
+            block_path, pname = dst.rsplit(".", 1)
+            path = f"{block_path}__{pname}_unit"
+            while path in self.blocks:
+                path += "_"
+            self.blocks[path] = UnitConversion(path.rsplit(".", 1)[-1], dport.shape, sport.unit, dport.unit,
+                                               conv.scale, conv.shift)
+            self.sources[f"{path}.u"] = src
+            self.sources[dst] = f"{path}.y"
+            self.conversions[dst] = (src, sport.unit, dport.unit, path)
 
     def check_connected(self) -> None:
         for path, blk in self.blocks.items():

@@ -40,6 +40,7 @@ from cpgsim.fmus.errors import FmuError, ModelDescriptionError, one_line
 from cpgsim.fmus.importer.archive import check_archive, open_zip, read_member, remove_tree, safe_extract
 from cpgsim.fmus.importer.block import FmuBlock
 from cpgsim.fmus.importer.description import identifier
+from cpgsim.fmus.units import base_unit_attributes, unit_definition
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -176,10 +177,6 @@ def _component(name: str, blk: Any, tmp: Path, kind: str, fmi: int) -> _Comp:
 def _unit_attr(unit: str, units: dict[str, Any]) -> str | None:
     if unit in ("", "1"):
         return None
-    try:
-        from cpgsim.fmus.units import unit_definition
-    except ImportError:  # pragma: no cover - units module missing: leave units to the FMUs
-        return None
     d = unit_definition(unit)
     if not d.known:
         return None
@@ -308,10 +305,7 @@ def _write_units(root: ET.Element, units: dict[str, Any]) -> None:
     el = ET.SubElement(root, _q("ssd", "Units"))
     for name, d in units.items():
         u = ET.SubElement(el, _q("ssc", "Unit"), {"name": name})
-        attrs = {b: str(e) for b, e in d.exponents.items()}
-        if d.factor != 1.0:
-            attrs["factor"] = repr(d.factor)
-        ET.SubElement(u, _q("ssc", "BaseUnit"), attrs)
+        ET.SubElement(u, _q("ssc", "BaseUnit"), base_unit_attributes(d))
 
 
 def _reorder_root(root: ET.Element) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from cpgsim.components.core import Block, CoSimBlock
 from cpgsim.components.graph import Graph, as_graph
+from cpgsim.components.units import conversion
 
 PORT_H = 0.32  # vertical distance of two ports
 HEAD_H = 0.62  # block title area
@@ -274,6 +275,12 @@ def _svg(graph: Graph, lay: Layout, title: str) -> str:
         if w.source[0] not in (IN, OUT):
             unit = graph.blocks[w.source[0]].outputs[w.source[1]].unit
         tip = f"{w.source[0]}.{w.source[1]} -> {w.target[0]}.{w.target[1]}" + (f" [{unit}]" if unit else "")
+        if unit and w.target[0] not in (IN, OUT):
+            dst_unit = graph.blocks[w.target[0]].inputs[w.target[1]].unit
+            if dst_unit != unit:
+                conv = conversion(unit, dst_unit)
+                shift = f" {conv.shift:+.6g}" if conv.shift else ""
+                tip += f", converted to [{dst_unit}]: x {conv.scale:.6g}{shift}"
         dash = ' stroke-dasharray="5,3"' if w.feedback else ""
         points = " ".join(xy(p) for p in w.points)
         out.append(f'<polyline points="{points}" fill="none" stroke="{color}" stroke-width="1.3"{dash}>'

@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 
 from cpgsim.components.core import ModelError
-from cpgsim.fmus.units import unit_definition
+from cpgsim.fmus.units import base_unit_attributes, unit_definition
 from cpgsim.harness.compile import CompiledModel
 
 VR_STRIDE = 1_000_000
@@ -254,10 +254,7 @@ def _unit_elements(parent: ET.Element, variables: Variables) -> None:
         d = unit_definition(u)
         el = ET.SubElement(defs, "Unit", name=u)
         if d.known:
-            attrs = {b: str(e) for b, e in d.exponents.items()}
-            if d.factor != 1.0:
-                attrs["factor"] = repr(d.factor)
-            ET.SubElement(el, "BaseUnit", attrs)
+            ET.SubElement(el, "BaseUnit", base_unit_attributes(d))
 
 
 def _log_categories(parent: ET.Element) -> None:

@@ -1,0 +1,162 @@
+"""Units by dimension: the parser against SI definitions, conversions on connections, refusals.
+
+Expected values come from the SI brochure (BIPM, 9th edition: N = kg m s^-2, Pa = N m^-2, J = N m,
+W = J s^-1, V = W A^-1, Hz = s^-1; 1 deg = pi/180 rad; 0 degC = 273.15 K) and from the FMI 2.0/3.0
+unit model (``value_SI = factor * value + offset``), worked by hand here, never from the code's output.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from cpgsim.components.basic import Constant, Gain
+from cpgsim.components.core import CoSimBlock
+from cpgsim.components.graph import Graph, WiringError
+from cpgsim.components.units import conversion, parse_unit
+from cpgsim.harness.simulate import simulate
+
+
+@pytest.mark.parametrize("unit, exponents, factor", [
+    ("N", {"kg": 1, "m": 1, "s": -2}, 1.0),
+    ("kg*m/s2", {"kg": 1, "m": 1, "s": -2}, 1.0),
+    ("kg.m.s-2", {"kg": 1, "m": 1, "s": -2}, 1.0),
+    ("kg*m/s^2", {"kg": 1, "m": 1, "s": -2}, 1.0),
+    ("m/s/s", {"m": 1, "s": -2}, 1.0),            # every denominator divides: m s^-2, not m
+    ("1/s2", {"s": -2}, 1.0),
+    ("N*m/rad", {"kg": 1, "m": 2, "s": -2, "rad": -1}, 1.0),
+    ("Pa", {"kg": 1, "m": -1, "s": -2}, 1.0),
+    ("J/s", {"kg": 1, "m": 2, "s": -3}, 1.0),     # = W
+    ("V*A", {"kg": 1, "m": 2, "s": -3}, 1.0),     # = W
+    ("km/h", {"m": 1, "s": -1}, 1000.0 / 3600.0),
+    ("mm2", {"m": 2}, 1e-6),                       # the exponent applies to the prefixed symbol
+    ("1/mm", {"m": -1}, 1e3),                      # a denominator inverts the factor
+    ("g/cm3", {"kg": 1, "m": -3}, 1e-3 / 1e-6),
+    ("deg/s", {"rad": 1, "s": -1}, math.pi / 180.0),
+    ("kHz", {"s": -1}, 1e3),
+    ("1", {}, 1.0),
+])
+def test_parse_against_si_definitions(unit, exponents, factor):
+    d = parse_unit(unit)
+    assert d.known and d.exponents == exponents
+    assert d.factor == pytest.approx(factor, rel=1e-14)
+
+
+@pytest.mark.parametrize("unit", ["furlong", "m/", "/s", "m**2", "s2x", "kg*", "N m?"])
+def test_outside_the_grammar_is_not_known(unit):
+    assert not parse_unit(unit).known
+
+
+def test_offsets_only_for_a_lone_symbol():
+    assert parse_unit("degC").offset == 273.15
+    assert parse_unit("degC/s").offset == 0.0  # a rate: its zero is absolute
+    assert parse_unit("degC2").offset == 0.0
+
+
+def test_conversions_worked_by_hand():
+    assert conversion("N", "kg*m/s2").identity
+    mm_m = conversion("mm", "m")
+    assert mm_m.scale == pytest.approx(1e-3) and mm_m.shift == 0.0
+    kmh = conversion("km/h", "m/s")
+    assert kmh.scale == pytest.approx(1 / 3.6)
+    c_k = conversion("degC", "K")  # 20 degC = 293.15 K
+    assert c_k.scale * 20.0 + c_k.shift == pytest.approx(293.15)
+    k_c = conversion("K", "degC")
+    assert k_c.scale * 293.15 + k_c.shift == pytest.approx(20.0)
+    deg = conversion("deg", "rad")
+    assert deg.scale * 180.0 == pytest.approx(math.pi)
+
+
+def _wire(src_unit: str, dst_unit: str, value: float = 250.0) -> Graph:
+    g = Graph("g")
+    g.add(Constant("c", value, unit=src_unit))
+    g.add(Gain("k", 1.0, unit=dst_unit))
+    g.connect("c.y", "k.u")
+    g.expose_output("y", "k.y")
+    return g
+
+
+def test_same_dimension_connects_without_a_conversion():
+    g = _wire("N", "kg*m/s2")
+    flat = g.flatten()
+    assert flat.conversions == {} and set(flat.blocks) == {"c", "k"}
+    assert simulate(g, t_end=0.002, dt=1e-3)["k.y"][-1] == 250.0
+
+
+def test_millimetres_are_converted_on_the_wire():
+    g = _wire("mm", "m", 250.0)
+    flat = g.flatten()
+    assert flat.conversions["k.u"][1:3] == ("mm", "m")
+    assert simulate(g, t_end=0.002, dt=1e-3)["k.y"][-1] == pytest.approx(0.25, rel=1e-15)
+
+
+def test_graph_input_in_other_units_is_converted():
+    g = Graph("g")
+    g.add(Gain("k", 2.0, unit="m"))
+    g.expose_input("d", "k.u", unit="mm")
+    g.expose_output("y", "k.y")
+    r = simulate(g, t_end=0.002, dt=1e-3, inputs={"d": 500.0})
+    assert r["k.y"][-1] == pytest.approx(1.0)  # 500 mm = 0.5 m, times 2
+
+
+def test_different_dimensions_are_refused_naming_both():
+    with pytest.raises(WiringError, match=r"c\.y \[m\] cannot feed k\.u \[s\].*\[m\] is m but \[s\] is s"):
+        _wire("m", "s")
+
+
+def test_unknown_unit_connects_only_to_itself():
+    assert simulate(_wire("furlong", "furlong", 3.0), t_end=0.001, dt=1e-3)["k.y"][-1] == 3.0
+    with pytest.raises(WiringError, match="furlong is not a unit cpgsim knows"):
+        _wire("furlong", "m")
+
+
+class _Ruler(CoSimBlock):
+    """A black box reading a length in millimetres (the master's side of a converted wire)."""
+
+    def declare(self) -> None:
+        self.add_output("length", 1, "mm")
+
+    def setup(self, t0: float) -> None:
+        pass
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        return {"length": np.array([40.0])}
+
+    def set_inputs(self, values) -> None:
+        pass
+
+    def do_step(self, t: float, dt: float) -> None:
+        pass
+
+
+def test_cosimulation_output_converted_into_an_equation_block():
+    g = Graph("g")
+    g.add(_Ruler("r"))
+    g.add(Gain("k", 1.0, unit="m"))
+    g.connect("r.length", "k.u")
+    assert simulate(g, t_end=0.003, dt=1e-3)["k.y"][-1] == pytest.approx(0.04)
+
+
+def test_exported_unit_definitions_carry_factor_and_offset():
+    from types import SimpleNamespace
+
+    from cpgsim.fmus.export.model_description import _unit_elements
+
+    root = ET.Element("fmiModelDescription")
+    variables = SimpleNamespace(items=[SimpleNamespace(kind="real", unit=u) for u in ("mm", "degC", "N", "1")])
+    _unit_elements(root, variables)
+    units = {u.get("name"): u.find("BaseUnit").attrib for u in root.iter("Unit")}
+    assert units["mm"] == {"m": "1", "factor": repr(1e-3)}
+    assert units["degC"] == {"K": "1", "offset": repr(273.15)}
+    assert units["N"] == {"kg": "1", "m": "1", "s": "-2"}
+
+
+def test_diagram_tooltip_shows_the_conversion():
+    from cpgsim.harness.diagram import _svg, layout_graph
+
+    g = _wire("mm", "m")
+    svg = _svg(g, layout_graph(g), "g")
+    assert "c.y -&gt; k.u [mm], converted to [m]: x 0.001</title>" in svg

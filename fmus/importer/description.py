@@ -182,6 +182,8 @@ class FmuDescription:
     members: frozenset[str] = field(default_factory=frozenset, repr=False)
     value_parameters: dict[str, ValueParamSpec] = field(default_factory=dict)
     structural_parameters: list[str] = field(default_factory=list)
+    # the modelDescription's <DefaultExperiment>: startTime, stopTime, stepSize, tolerance (absent: not set)
+    default_experiment: dict[str, float] = field(default_factory=dict)
 
     @property
     def kinds(self) -> list[str]:
@@ -208,8 +210,8 @@ class FmuDescription:
                  f"  continuous states: {self.n_states}, event indicators: {self.n_event_indicators}, "
                  f"binaries: {', '.join(self.platforms) or 'none'}"
                  + (", sources included" if self.has_sources else "")]
-        if self.default_step:
-            lines.append(f"  default step size: {self.default_step:g} s")
+        if self.default_experiment:
+            lines.append("  default experiment: " + ", ".join(f"{k} {v:g}" for k, v in self.default_experiment.items()))
         for title, table in (("inputs", self.inputs), ("outputs", self.outputs)):
             lines.append(f"  {title} ({len(table)}):")
             for p in table.values():
@@ -378,6 +380,31 @@ def _check_xml(data: bytes, path: Path) -> None:
     if n > MAX_VARIABLES:
         raise ModelDescriptionError(f"FMU {path}: modelDescription.xml declares {n} model variables, more than "
                                     f"the limit of {MAX_VARIABLES}")
+
+
+def default_experiment(exp: Any, path: Path) -> dict[str, float]:
+    """The attributes of ``<DefaultExperiment>`` that are set, as numbers; a value that is not a finite number
+    (or a stop time not after the start time, a step or tolerance not positive) is bad input naming it."""
+    out: dict[str, float] = {}
+    if exp is None:
+        return out
+    for attr in ("startTime", "stopTime", "stepSize", "tolerance"):
+        raw = getattr(exp, attr, None)
+        if raw is None or (isinstance(raw, str) and not raw.strip()):
+            continue
+        try:
+            value = float(raw)
+        except (TypeError, ValueError):
+            raise ModelDescriptionError(f"FMU {path}: DefaultExperiment {attr} {raw!r} is not a number") from None
+        if not math.isfinite(value):
+            raise ModelDescriptionError(f"FMU {path}: DefaultExperiment {attr} {raw!r} is not a finite number")
+        if attr in ("stepSize", "tolerance") and value <= 0:
+            raise ModelDescriptionError(f"FMU {path}: DefaultExperiment {attr} {value:g} must be positive")
+        out[attr] = value
+    if "stopTime" in out and not out["stopTime"] > out.get("startTime", 0.0):
+        raise ModelDescriptionError(f"FMU {path}: DefaultExperiment stopTime {out['stopTime']:g} is not after "
+                                    f"its startTime {out.get('startTime', 0.0):g}")
+    return out
 
 
 def describe_fmu(path: str | Path, strict: bool = False) -> FmuDescription:
@@ -588,12 +615,8 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         if out not in listed:
             feed[out] = set(inputs)
 
-    step = None
-    if md.defaultExperiment is not None and md.defaultExperiment.stepSize is not None:
-        try:
-            step = float(md.defaultExperiment.stepSize)
-        except (TypeError, ValueError):
-            step = None
+    experiment = default_experiment(md.defaultExperiment, path)
+    step = experiment.get("stepSize")
     platforms = sorted({m.split("/")[1] for m in members if m.startswith("binaries/") and m.count("/") >= 2
                         and m.split("/")[1]})
     desc = FmuDescription(
@@ -601,6 +624,7 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         guid=md.guid or "", description=md.description or "", cs_identifier=cs, me_identifier=me,
         n_states=int(md.numberOfContinuousStates or 0), n_event_indicators=int(md.numberOfEventIndicators or 0),
         inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
+        default_experiment=experiment,
         platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
         needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
         skipped=skipped, members=frozenset(members), value_parameters=value_params,

@@ -35,11 +35,12 @@ HELP = "simulate a graph and write results"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("graph", nargs="?", help="built-in graph name, path/to/module.py:function, FILE.fmu or FILE.ssp")
     p.add_argument("--t-end", type=positive_float, default=None,
-                   help="end time in s (default: an SSP's DefaultExperiment stopTime, else 10)")
+                   help="end time in s (default: the FMU's or SSP's DefaultExperiment stopTime, else 10)")
     p.add_argument("--t0", type=float, default=None,
-                   help="start time in s (default: an SSP's DefaultExperiment startTime, else 0)")
+                   help="start time in s (default: the FMU's or SSP's DefaultExperiment startTime, else 0)")
     p.add_argument("--dt", type=positive_float, default=None,
-                   help="macro step in s (default: the step an SSP exported by cpgsim records, else 0.001)")
+                   help="macro step in s (default: the FMU's DefaultExperiment stepSize or the step an SSP "
+                        "exported by cpgsim records, else 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
     p.add_argument("-o", "--output", default="results.csv", help="results file: .csv or .npz")
     p.add_argument("--record", action="append", default=None, metavar="PATTERN",
@@ -61,7 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
                         "or cvode (adaptive BDF for stiff models); events are located inside the step either way. "
                         "FMUs that offer both interfaces then run as model exchange")
-    p.add_argument("--rtol", type=positive_float, default=None, help="CVODE relative tolerance (default 1e-6)")
+    p.add_argument("--rtol", type=positive_float, default=None,
+                   help="CVODE relative tolerance (default: the FMU's DefaultExperiment tolerance, else 1e-6)")
     p.add_argument("--atol", type=positive_float, default=None,
                    help="CVODE absolute tolerance (default: rtol times each state's nominal value)")
     add_set_argument(p)
@@ -80,6 +82,43 @@ def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> 
             blk.timeout = timeout
         n += blk.isolate
     return n
+
+
+def declared_experiment(graph: object, spec: str) -> dict[str, float]:
+    """What the file declares as its default experiment (FMI/SSP attribute names): an SSP's
+    ``DefaultExperiment`` (and the step an SSP exported by cpgsim records), or a bare FMU's."""
+    if spec.lower().endswith(".ssp"):
+        found = {"startTime": getattr(graph, "ssp_start_time", None), "stopTime": getattr(graph, "ssp_stop_time", None),
+                 "stepSize": getattr(graph, "ssp_step", None)}
+        return {k: float(v) for k, v in found.items() if v is not None}
+    if spec.lower().endswith(".fmu"):
+        from cpgsim.fmus.importer.block import fmu_blocks
+
+        blocks = list(fmu_blocks(graph))
+        if len(blocks) == 1:
+            return dict(blocks[0].info.default_experiment)
+    return {}
+
+
+def choose_experiment(args: argparse.Namespace, declared: dict[str, float]) -> dict[str, dict[str, object]]:
+    """Start, stop, step and (CVODE) tolerance of the run, each with where it came from: the command line,
+    the file's DefaultExperiment, or cpgsim's default."""
+    chosen: dict[str, dict[str, object]] = {}
+    for key, attr, flag, fallback in (("t0", "startTime", "--t0", 0.0), ("t_end", "stopTime", "--t-end", 10.0),
+                                      ("dt", "stepSize", "--dt", 1e-3)):
+        given = getattr(args, key)
+        if given is not None:
+            chosen[key] = {"value": float(given), "from": flag}
+        elif attr in declared:
+            chosen[key] = {"value": declared[attr], "from": f"DefaultExperiment {attr}"}
+        else:
+            chosen[key] = {"value": fallback, "from": "cpgsim default"}
+    if "tolerance" in declared:
+        used = args.solver == "cvode" and args.rtol is None
+        chosen["tolerance"] = {"value": declared["tolerance"], "from": "DefaultExperiment tolerance",
+                               "used": "as the CVODE rtol" if used else
+                               ("no: --rtol given" if args.rtol is not None else "no: fixed-step solver")}
+    return chosen
 
 
 def run(args: argparse.Namespace) -> int:
@@ -112,9 +151,18 @@ def run(args: argparse.Namespace) -> int:
     if not isinstance(graph, Graph):
         graph.set(**params)
         params = {}
-    t0 = args.t0 if args.t0 is not None else (getattr(graph, "ssp_start_time", None) or 0.0)
-    t_end = args.t_end if args.t_end is not None else (getattr(graph, "ssp_stop_time", None) or 10.0)
-    dt = args.dt if args.dt is not None else (getattr(graph, "ssp_step", None) or 1e-3)
+    experiment = choose_experiment(args, declared_experiment(graph, args.graph))
+    t0, t_end, dt = (float(experiment[k]["value"]) for k in ("t0", "t_end", "dt"))  # type: ignore[arg-type]
+    tol = experiment.get("tolerance")
+    if tol is not None and str(tol["used"]).startswith("as the"):
+        from cpgsim.fmus.importer.block import set_solver
+
+        set_solver(graph, "cvode", float(tol["value"]), args.atol, switch_to_me=True)  # type: ignore[arg-type]
+    declared = [f"{k} {v['value']:g}" for k, v in experiment.items()
+                if str(v["from"]).startswith("Default") and str(v.get("used", "as")).startswith("as")]
+    if declared:
+        print(f"{Path(args.graph).name}: DefaultExperiment used: {', '.join(declared)} "
+              f"(--t0/--t-end/--dt/--rtol override it)")
     if not t_end > t0:
         raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
     sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
@@ -122,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         with guard_run("cpgsim simulate", args.graph, out):
-            results = sim.run(t_end, t0=t0, progress=args.progress, stream=out)
+            results = sim.run(t_end, t0=t0, progress=args.progress, stream=out, meta={"experiment": experiment})
     except SimulationError as exc:
         res = exc.results
         if res is not None and len(res.time):

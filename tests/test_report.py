@@ -4,6 +4,8 @@ installs Debian's chromium)."""
 
 from __future__ import annotations
 
+import html
+import json
 import os
 import re
 import shutil
@@ -74,3 +76,39 @@ def test_report_draws_the_robot_and_scrubbing_moves_it(run_dir, tmp_path):
         assert coloured > 0.002, f"the viewer shows no robot ({coloured:.4%} coloured pixels)"
     changed = (np.abs(viewer[0] - viewer[1]).sum(axis=2) > 30).mean()
     assert changed > 0.001, f"scrubbing from frame 0 to 70 changed only {changed:.4%} of the viewer"
+
+
+def _body_data(url: str, user_dir: Path) -> dict[str, str]:
+    dom = _browser(url, "--dump-dom", user_dir=user_dir)
+    body = re.search(r"<body([^>]*)>", dom.stdout)
+    assert body and 'data-ready="1"' in body.group(1), dom.stderr[-2000:]
+    return {k: html.unescape(v) for k, v in re.findall(r'data-([\w-]+)="([^"]*)"', body.group(1))}
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium on this machine (.ci/run installs Debian's chromium)")
+def test_one_colour_per_leg_everywhere_and_legend_toggles_it_everywhere(run_dir, tmp_path):
+    url = (run_dir / "report.html").as_uri()
+    data = _body_data(url + "#frame=0", tmp_path / "u0")
+    colours = json.loads(data["leg-colours"])
+    # each leg: one colour string in the CPG plot, the toe-force plot and the 3D view; six different ones
+    assert list(colours) == ["L1", "L2", "L3", "R1", "R2", "R3"]
+    assert all(len(c) == 1 for c in colours.values()), colours
+    assert len({c[0] for c in colours.values()}) == 6, colours
+    assert json.loads(data["leg-visible"]) == [[True, True]] * 6
+    hidden = json.loads(_body_data(url + "#frame=0&hide=R2", tmp_path / "u1")["leg-visible"])
+    assert hidden[4] == [False, False] and all(v == [True, True] for i, v in enumerate(hidden) if i != 4)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium on this machine (.ci/run installs Debian's chromium)")
+def test_replay_follows_the_wall_clock(run_dir, tmp_path):
+    """The frame due after 1 s of wall time at 1x is the one 1 s later in simulated time (2 s at 2x): the
+    replay skips frames when drawing is slow instead of slowing down (it advanced one frame per 50 ms timer
+    tick before, whatever a frame took to draw: 1.1 s of simulated time in 6 s)."""
+    data = _body_data((run_dir / "report.html").as_uri() + "#frame=0", tmp_path / "u0")
+    assert data["replay1x"] == "1.000" and data["replay2x"] == "2.000"
+    page = (run_dir / "report.html").read_text()
+    script = page[page.index("const D = "):]  # the page's own script (plotly's library comes before it)
+    assert "requestAnimationFrame(tick)" in script and "setInterval" not in script
+    # what is drawn is bounded whatever the run's length: at most 1,500 samples per plot trace
+    plots = json.loads(re.search(r"const D = (\{.*?\});\n", page).group(1))["plots"]
+    assert max(len(tr["x"]) for tr in plots["data"] if tr["type"] == "scatter") <= 1500

@@ -24,7 +24,14 @@ from cpgsim.harness.results import Results, atomic_write
 
 FPS = 20  # replay frames per simulated second
 FORCE_SCALE = 0.004  # m of arrow per N
-LEG_COLORS = ("#1f77b4", "#d62728")  # left, right
+LEG_NAMES = ("L1", "L2", "L3", "R1", "R2", "R3")
+# one fixed colour per leg, the same string in the 3D view and every plot (left legs blues/greens/purple,
+# right legs reds/browns/pinks, none of them the reflex markers' orange or the force arrows' grey)
+LEG_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#d62728", "#8c564b", "#e377c2")
+REFLEX_MARKER = "#ff7f0e"
+ARROW_COLOR = "#555555"
+MAX_PLOT_POINTS = 1500  # per trace of the linked plots (what is drawn; the results keep every step)
+VIEWER_TRACES = [1, 2, 3, 4, 5, 6, 7, 8]  # body, six legs, force arrows (trace 0: terrain)
 
 
 def _box_mesh(boxes, window: tuple[float, float, float, float]) -> dict[str, list]:
@@ -66,7 +73,7 @@ BOX_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0,
 
 
 def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force: np.ndarray) -> list[dict]:
-    """The moving traces at one instant: body edges, left legs, right legs, toe force arrows."""
+    """The moving traces at one instant: body edges, each leg (L1..R3, its own colour), toe force arrows."""
     R = _rotation(rpy)
     hl, hw, ht = geometry.body_length / 2, geometry.body_width / 2, geometry.body_thickness / 2
     corners = np.array([[sx * hw, sy * hl, sz * ht] for sz in (-1, 1) for sx, sy in ((-1, -1), (1, -1), (1, 1),
@@ -74,15 +81,19 @@ def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force
     corners = pos + corners @ R.T
     body = _lines([corners[[a, b]] for a, b in BOX_EDGES])
     pts = pos + leg_points_body(geometry, q) @ R.T
-    left, right = _lines([pts[i] for i in range(3)]), _lines([pts[i] for i in range(3, 6)])
+    legs = [_lines([pts[i]]) for i in range(6)]
     feet = pts[:, -1]
     arrows = _lines([np.array([feet[i], feet[i] + FORCE_SCALE * (R @ force[i])]) for i in range(6)])
-    traces = []
-    for (xs, ys, zs), color, width in ((body, "#222222", 6), (left, LEG_COLORS[0], 7), (right, LEG_COLORS[1], 7),
-                                       (arrows, "#2ca02c", 5)):
-        traces.append({"type": "scatter3d", "mode": "lines", "x": xs, "y": ys, "z": zs,
-                       "line": {"color": color, "width": width}, "hoverinfo": "skip", "showlegend": False})
-    return traces
+    styled = [(body, "#222222", 6, "body"), *((legs[i], LEG_COLORS[i], 7, LEG_NAMES[i]) for i in range(6)),
+              (arrows, ARROW_COLOR, 5, "toe forces")]
+    return [{"type": "scatter3d", "mode": "lines", "x": _round(xs), "y": _round(ys), "z": _round(zs),
+             "name": name, "line": {"color": color, "width": width}, "hoverinfo": "skip", "showlegend": False}
+            for (xs, ys, zs), color, width, name in styled]
+
+
+def _round(values: list) -> list:
+    """Coordinates to 0.1 mm (what a screen can show; a third of the page's size)."""
+    return [None if v is None else round(v, 4) for v in values]
 
 
 def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
@@ -113,9 +124,9 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
                    "y": [float(feet_world[k, e["leg_number"] - 1, 1]) for k, e in zip(ev_k, events, strict=True)],
                    "z": [float(feet_world[k, e["leg_number"] - 1, 2]) for k, e in zip(ev_k, events, strict=True)],
                    "text": [f"{e['kind']} {e['leg']} at {e['t']:.2f} s" for e in events],
-                   "marker": {"size": 5, "color": "#ff7f0e", "symbol": "diamond"}, "hoverinfo": "text"}
-    frames = [{"name": str(n), "data": robot_frame(geometry, q[k], pos[k], rpy[k], force[k]), "traces": [1, 2, 3, 4]}
-              for n, k in enumerate(idx)]
+                   "marker": {"size": 5, "color": REFLEX_MARKER, "symbol": "diamond"}, "hoverinfo": "text"}
+    frames = [{"data": [{k: d[k] for k in ("x", "y", "z")}
+                        for d in robot_frame(geometry, q[k], pos[k], rpy[k], force[k])]} for k in idx]
     z_lo, z_hi = -0.15, max(0.45, float(pos[:, 2].max()) + 2 * geometry.height)
     ranges = {"x": 0.9, "y": y_hi - y_lo, "z": z_hi - z_lo}
     scale = 2.0 / max(ranges.values())  # equal scale on the three axes, as in the world
@@ -137,11 +148,13 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
 
 
 def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str, Any]:
-    """The linked plots as one plotly figure with four rows (decimated to the replay's frames x 5)."""
+    """The linked plots as one plotly figure with four rows, each trace decimated to at most
+    :data:`MAX_PLOT_POINTS` samples (every k-th step; the replay's frames x 5 when that is fewer)."""
     t = res.time
-    fine = np.arange(0, len(t), max(1, (idx[1] - idx[0]) // 5 if len(idx) > 1 else 1))
-    ts = t[fine].tolist()
-    labels = ["L1 (1)", "L2 (2)", "L3 (3)", "R1 (4)", "R2 (5)", "R3 (6)"]
+    stride = max(1, (idx[1] - idx[0]) // 5 if len(idx) > 1 else 1, math.ceil(len(t) / MAX_PLOT_POINTS))
+    fine = np.arange(0, len(t), stride)
+    ts = [round(float(v), 4) for v in t[fine]]
+    labels = [f"{n} ({i + 1})" for i, n in enumerate(LEG_NAMES)]
     force = res[f"{robot}.toe_force"].reshape(len(t), 6, 3)
     if "controller.state" in res:  # Yu: stance from the FSM state, holds from the CPG rate
         stance = (res["controller.state"] > 0.5) & (res["controller.reflex"] < 0.5)
@@ -159,7 +172,7 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
                            "%{y} t=%{x:.2f}s: %{z} (0 swing, 1 stance, 2 held swing, 3 held stance)<extra></extra>"}]
     for e in summary.get("reflexes", []):
         traces.append({"type": "scatter", "x": [e["t"]], "y": [labels[e["leg_number"] - 1]], "mode": "markers",
-                       "marker": {"symbol": "triangle-down", "size": 9, "color": "#ff7f0e"}, "xaxis": "x",
+                       "marker": {"symbol": "triangle-down", "size": 9, "color": REFLEX_MARKER}, "xaxis": "x",
                        "yaxis": "y", "showlegend": False, "hovertext": f"{e['kind']} {e['leg']}", "hoverinfo": "text"})
     if "controller.x1" in res:
         states, title = res["controller.x1"], "CPG leader x1 per leg"
@@ -167,21 +180,21 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
         states = np.column_stack([res[f"ctrl.{n}.alpha"] if f"ctrl.{n}.alpha" in res else np.full(len(t), np.nan)
                                   for n in ("L1", "L2", "L3", "R1", "R2", "R3")])
         title = "alpha target per leg [rad]"
-    for i in range(6):
-        traces.append({"type": "scatter", "x": ts, "y": states[fine, i].tolist(), "mode": "lines",
-                       "name": labels[i], "xaxis": "x2", "yaxis": "y2", "line": {"width": 1}, "legendgroup": str(i)})
-        traces.append({"type": "scatter", "x": ts, "y": force[fine, i, 2].tolist(), "mode": "lines",
-                       "name": labels[i], "xaxis": "x3", "yaxis": "y3", "line": {"width": 1}, "showlegend": False,
-                       "legendgroup": str(i)})
+    for i in range(6):  # one legend entry per leg toggles that leg in every plot and in the 3D view
+        traces.append({"type": "scatter", "x": ts, "y": np.round(states[fine, i], 4).tolist(), "mode": "lines",
+                       "name": labels[i], "xaxis": "x2", "yaxis": "y2", "legendgroup": LEG_NAMES[i],
+                       "line": {"width": 1, "color": LEG_COLORS[i]}})
+        traces.append({"type": "scatter", "x": ts, "y": np.round(force[fine, i, 2], 3).tolist(), "mode": "lines",
+                       "name": labels[i], "xaxis": "x3", "yaxis": "y3", "showlegend": False,
+                       "legendgroup": LEG_NAMES[i], "line": {"width": 1, "color": LEG_COLORS[i]}})
     pos, rpy = res[f"{robot}.body_position"], res[f"{robot}.body_rpy"]
-    for y, name in ((100 * pos[fine, 2], "body height [cm]"), (np.degrees(rpy[fine, 0]), "roll [deg]"),
-                    (np.degrees(rpy[fine, 1]), "pitch [deg]")):
-        traces.append({"type": "scatter", "x": ts, "y": np.asarray(y).tolist(), "mode": "lines",
-                       "name": name, "xaxis": "x4", "yaxis": "y4", "line": {"width": 1.2}})
+    for y, name, color in ((100 * pos[fine, 2], "body height [cm]", "#222222"),
+                           (np.degrees(rpy[fine, 0]), "roll [deg]", "#17becf"),
+                           (np.degrees(rpy[fine, 1]), "pitch [deg]", "#bcbd22")):
+        traces.append({"type": "scatter", "x": ts, "y": np.round(y, 3).tolist(), "mode": "lines",
+                       "name": name, "xaxis": "x4", "yaxis": "y4", "line": {"width": 1.2, "color": color}})
     fz = summary.get("thresholds_N", {}).get("Fcz")
-    shapes = [{"type": "line", "xref": f"x{'' if r == 1 else r}", "yref": f"y{'' if r == 1 else r} domain",
-               "x0": ts[0], "x1": ts[0], "y0": 0, "y1": 1, "line": {"color": "#ff7f0e", "width": 2}}
-              for r in range(1, 5)]
+    shapes = []  # the time cursor is an HTML line over the plots (moving a plotly shape redraws the figure)
     if fz is not None:
         shapes.append({"type": "line", "xref": "x3 domain", "yref": "y3", "x0": 0, "x1": 1, "y0": fz, "y1": fz,
                        "line": {"color": "gray", "dash": "dash", "width": 1}})
@@ -221,7 +234,8 @@ def _summary_html(summary: dict) -> str:
 def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
     from plotly.offline import get_plotlyjs
 
-    data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps}, separators=(",", ":"),
+    data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps, "legs": list(LEG_NAMES),
+                       "viewerTraces": VIEWER_TRACES}, separators=(",", ":"),
                       allow_nan=False, default=float).replace("</", "<\\/")
     verdict = "success" if summary.get("success") else "failed: " + ", ".join(summary.get("criteria_failed", []))
     return f"""<!DOCTYPE html>
@@ -229,6 +243,8 @@ def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float
 <style>
 body {{ font-family: sans-serif; margin: 12px; color: #222; }}
 #top {{ display: flex; gap: 12px; }} #left {{ flex: 1.1; min-width: 480px; }} #right {{ flex: 1; min-width: 420px; }}
+#plotbox {{ position: relative; }} #cursor {{ position: absolute; width: 2px; background: #ff7f0e;
+pointer-events: none; top: 0; left: 0; height: 0; }}
 #controls {{ display: flex; gap: 6px; align-items: center; margin: 6px 0; }}
 #controls input[type=range] {{ flex: 1; }} button {{ padding: 3px 10px; }}
 table {{ border-collapse: collapse; font-size: 13px; }} th, td {{ border-bottom: 1px solid #ddd; padding: 2px 8px;
@@ -242,44 +258,89 @@ text-align: left; }}
 <option value="1" selected>1x</option><option value="2">2x</option><option value="4">4x</option></select></label>
 <input id="slider" type="range" min="0" value="0"><span id="clock">0.00 s</span></div>
 <div id="summary">{_summary_html(summary)}</div></div>
-<div id="right"><div id="plots"></div></div></div>
+<div id="right"><div id="plotbox"><div id="plots"></div><div id="cursor"></div></div></div></div>
 <script>
 const D = {data};
 const viewer = document.getElementById('viewer'), plots = document.getElementById('plots');
 const slider = document.getElementById('slider'), clock = document.getElementById('clock');
-slider.max = D.times.length - 1;
-let frame = 0, timer = null;
+const cursor = document.getElementById('cursor');
+const last = D.times.length - 1, period = last > 0 ? (D.times[last] - D.times[0]) / last : 1;
+slider.max = last;
+let frame = 0, playing = false, wall0 = 0, frame0 = 0, speed = 1;
+function placeCursor() {{
+  const L = plots._fullLayout; if (!L || !L.xaxis || !L._size) return;
+  const x = L.xaxis._offset + L.xaxis.l2p(D.times[frame]);
+  cursor.style.left = x.toFixed(1) + 'px'; cursor.style.top = L._size.t + 'px';
+  cursor.style.height = L._size.h + 'px';
+}}
 function show(k) {{
-  frame = Math.max(0, Math.min(D.times.length - 1, k));
-  const f = D.viewer.frames[frame];
-  Plotly.restyle(viewer, {{x: f.data.map(d => d.x), y: f.data.map(d => d.y), z: f.data.map(d => d.z)}}, f.traces);
-  const t = D.times[frame];
-  const upd = {{}};
-  for (let i = 0; i < 4; i++) {{ upd['shapes[' + i + '].x0'] = t; upd['shapes[' + i + '].x1'] = t; }}
-  Plotly.relayout(plots, upd);
-  slider.value = frame; clock.textContent = t.toFixed(2) + ' s';
+  frame = Math.max(0, Math.min(last, k));
+  const f = D.viewer.frames[frame].data;
+  Plotly.restyle(viewer, {{x: f.map(d => d.x), y: f.map(d => d.y), z: f.map(d => d.z)}}, D.viewerTraces);
+  placeCursor();
+  slider.value = frame; clock.textContent = D.times[frame].toFixed(2) + ' s';
   document.body.dataset.frame = String(frame);
+}}
+// the replay follows the wall clock: the frame shown is the one due at (time since play) x speed, so a
+// slow draw skips frames instead of slowing the replay down (1x = real time)
+function replayFrame(startFrame, elapsedMs, speed) {{
+  return Math.min(last, startFrame + Math.floor(speed * elapsedMs / 1000 / period + 1e-9));
+}}
+function tick(now) {{
+  if (!playing) return;
+  const k = replayFrame(frame0, now - wall0, speed);
+  if (k !== frame) show(k);
+  if (k >= last) {{ pause(); return; }}
+  requestAnimationFrame(tick);
 }}
 function play() {{
   pause();
-  const speed = parseFloat(document.getElementById('speed').value);
-  timer = setInterval(() => {{ if (frame >= D.times.length - 1) {{ pause(); return; }} show(frame + 1); }},
-                      1000 / (D.fps * speed));
+  if (frame >= last) show(0);
+  speed = parseFloat(document.getElementById('speed').value);
+  frame0 = frame; wall0 = performance.now(); playing = true; requestAnimationFrame(tick);
 }}
-function pause() {{ if (timer) {{ clearInterval(timer); timer = null; }} }}
+function pause() {{ playing = false; }}
 document.getElementById('play').onclick = play;
 document.getElementById('pause').onclick = pause;
-document.getElementById('speed').onchange = () => {{ if (timer) play(); }};
+document.getElementById('speed').onchange = () => {{ if (playing) play(); }};
 slider.oninput = () => {{ pause(); show(parseInt(slider.value)); }};
+function toggleLeg(group) {{
+  const idx = plots.data.map((d, i) => d.legendgroup === group ? i : -1).filter(i => i >= 0);
+  const hide = plots.data[idx[0]].visible !== 'legendonly';
+  Plotly.restyle(plots, {{visible: hide ? 'legendonly' : true}}, idx);
+  Plotly.restyle(viewer, {{visible: !hide}}, [D.viewerTraces[1 + D.legs.indexOf(group)]]);
+}}
 Promise.all([Plotly.newPlot(viewer, D.viewer.data, D.viewer.layout, {{responsive: true}}),
              Plotly.newPlot(plots, D.plots.data, D.plots.layout, {{responsive: true}})]).then(() => {{
   plots.on('plotly_click', ev => {{
     const t = ev.points[0].x; let k = 0;
-    while (k < D.times.length - 1 && D.times[k + 1] <= t) k++;
+    while (k < last && D.times[k + 1] <= t) k++;
     pause(); show(k);
   }});
+  plots.on('plotly_legendclick', ev => {{
+    const g = ev.data[ev.curveNumber].legendgroup;
+    if (!D.legs.includes(g)) return true;
+    toggleLeg(g); return false;
+  }});
+  plots.on('plotly_legenddoubleclick', () => false);
+  plots.on('plotly_relayout', placeCursor);
+  window.addEventListener('resize', placeCursor);
   const m = /frame=(\\d+)/.exec(location.hash);
   show(m ? parseInt(m[1]) : 0);
+  const h = /hide=(\\w+)/.exec(location.hash);
+  if (h) toggleLeg(h[1]);
+  // what the browser test reads: the replay's clock and the colour of every leg in each view
+  const due = s => (D.times[replayFrame(0, 1000, s)] - D.times[0]).toFixed(3);  // simulated s per wall s
+  document.body.dataset.replay1x = due(1); document.body.dataset.replay2x = due(2);
+  const colours = {{}};
+  const add = (g, c) => (colours[g] ||= new Set()).add(c);
+  for (const d of plots.data) if (D.legs.includes(d.legendgroup)) add(d.legendgroup, d.line.color);
+  D.legs.forEach((g, i) => add(g, viewer.data[D.viewerTraces[1 + i]].line.color));
+  document.body.dataset.legColours = JSON.stringify(Object.fromEntries(D.legs.map(g => [g, [...colours[g]]])));
+  document.body.dataset.legVisible = JSON.stringify(D.legs.map((g, i) => [
+    viewer.data[D.viewerTraces[1 + i]].visible !== false,
+    plots.data.filter(d => d.legendgroup === g).every(d => d.visible !== 'legendonly')]));
+  document.body.dataset.readyMs = String(Math.round(performance.now()));
   document.body.dataset.ready = '1';
 }});
 </script></body></html>

@@ -3,7 +3,8 @@
 Layout (Sugiyama style, :func:`layout_graph`): wires that close a loop are chosen by the Eades-Lin-Smyth
 greedy heuristic and drawn as feedback; every block gets the layer of its longest path from the graph inputs; the order
 within a layer is improved by barycentre sweeps. Routing never crosses a block: between two layers lies a
-channel with one vertical track per wire (wires from the same output port share one); a wire between
+channel with one vertical track per wire (wires from the same output port share one), and consecutive
+layers sit half a port apart so that no two wires of different sources share a segment; a wire between
 adjacent layers runs port -> track -> port; a wire that skips layers runs along its own lane above all
 blocks, a feedback wire along its own lane below them. Nested graphs are drawn collapsed (a box with the
 graph's ports); draw one on its own with ``draw_graph(graph.find("L1"), ...)`` (``cpgsim graph NAME
@@ -23,7 +24,7 @@ from cpgsim.components.units import conversion
 PORT_H = 0.32  # vertical distance of two ports
 HEAD_H = 0.62  # block title area
 BOX_W = 2.3
-GAP_Y = 0.5  # between blocks of one layer
+GAP_Y = 0.66  # between blocks of one layer: HEAD_H + GAP_Y = 4 PORT_H, so a layer's ports lie on one grid
 TRACK = 0.16  # distance of two vertical tracks (or lanes)
 CHANNEL_MIN = 0.9
 IN, OUT = "$inputs", "$outputs"  # the graph's own inputs and outputs, drawn as pseudo-blocks
@@ -160,7 +161,10 @@ def layout_graph(item: Graph | Block) -> Layout:
     boxes: dict[str, Box] = {}
     x = widths[0]
     for i, names in enumerate(layers):
-        y = 0.0
+        # odd layers half a port lower: the output ports of one layer and the input ports of the next never
+        # share a height, so a wire's stub leaving a block and another's entering one (different sources,
+        # the same channel) never run along the same line
+        y = 0.0 if i % 2 == 0 else PORT_H / 2
         w_layer = 0.0
         for n in names:
             ins, outs = _ports(graph, n)
@@ -232,6 +236,51 @@ def crossings(lay: Layout) -> list[str]:
     return out
 
 
+def _on_polyline(v: tuple[float, float], points: list[tuple[float, float]], eps: float = 1e-9) -> bool:
+    return any(min(p[0], q[0]) - eps <= v[0] <= max(p[0], q[0]) + eps
+               and min(p[1], q[1]) - eps <= v[1] <= max(p[1], q[1]) + eps
+               for p, q in zip(points, points[1:], strict=False))
+
+
+def junctions(lay: Layout) -> list[tuple[float, float]]:
+    """Where a net branches: a vertex at which one wire leaves another wire of the same source (drawn as
+    a dot, the schematic convention that tells a junction from two wires crossing)."""
+    found: set[tuple[float, float]] = set()
+    by_source: dict[tuple[str, str], list[Wire]] = {}
+    for w in lay.wires:
+        by_source.setdefault(w.source, []).append(w)
+    for wires in by_source.values():
+        for w in wires:
+            for v, nxt in zip(w.points[1:-1], w.points[2:], strict=False):
+                for other in wires:
+                    if other is not w and _on_polyline(v, other.points) and not _on_polyline(nxt, other.points):
+                        found.add((round(v[0], 9), round(v[1], 9)))
+    return sorted(found)
+
+
+def shared_segments(lay: Layout, eps: float = 1e-9) -> list[str]:
+    """Every pair of wires from different sources that run along the same line for a positive length
+    (a reader would take them for one net): empty for a good layout. Wires of one source may share."""
+    segs = []  # (wire index, horizontal?, fixed coordinate, lo, hi)
+    for k, w in enumerate(lay.wires):
+        for p, q in zip(w.points, w.points[1:], strict=False):
+            if abs(p[1] - q[1]) <= eps and abs(p[0] - q[0]) > eps:
+                segs.append((k, True, p[1], *sorted((p[0], q[0]))))
+            elif abs(p[0] - q[0]) <= eps and abs(p[1] - q[1]) > eps:
+                segs.append((k, False, p[0], *sorted((p[1], q[1]))))
+    out = set()
+    for i, (ka, ha, ca, lo_a, hi_a) in enumerate(segs):
+        for kb, hb, cb, lo_b, hi_b in segs[i + 1:]:
+            wa, wb = lay.wires[ka], lay.wires[kb]
+            if wa.source == wb.source or ha != hb or abs(ca - cb) > eps:
+                continue
+            if min(hi_a, hi_b) - max(lo_a, lo_b) > eps:
+                out.add(f"{wa.source[0]}.{wa.source[1]} -> {wa.target[0]}.{wa.target[1]} and "
+                        f"{wb.source[0]}.{wb.source[1]} -> {wb.target[0]}.{wb.target[1]} share a "
+                        f"{'horizontal' if ha else 'vertical'} segment of {min(hi_a, hi_b) - max(lo_a, lo_b):.2f}")
+    return sorted(out)
+
+
 # -- drawing ------------------------------------------------------------------------------------------
 
 def _port_info(graph: Graph, block: str, port: str, side: str) -> str:
@@ -285,6 +334,8 @@ def _svg(graph: Graph, lay: Layout, title: str) -> str:
         points = " ".join(xy(p) for p in w.points)
         out.append(f'<polyline points="{points}" fill="none" stroke="{color}" stroke-width="1.3"{dash}>'
                    f'<title>{html.escape(tip.replace("$", ""))}</title></polyline>')
+    for jx, jy in junctions(lay):
+        out.append(f'<circle class="junction" cx="{jx * s:.1f}" cy="{jy * s:.1f}" r="2.6" fill="#444444"/>')
     for name, b in lay.boxes.items():
         pseudo = name in (IN, OUT)
         if not pseudo:

@@ -4,6 +4,7 @@ wires are found, the SVG carries port units as tooltips, and the CLI draws a sub
 
 from __future__ import annotations
 
+import random
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -12,7 +13,17 @@ from cpgsim.components.basic import Gain, Integrator, Sum
 from cpgsim.components.graph import Graph
 from cpgsim.harness.cli import catalog
 from cpgsim.harness.cli.main import main
-from cpgsim.harness.diagram import Box, crossings, draw_graph, layout_graph, segment_crosses_box
+from cpgsim.harness.diagram import (
+    Box,
+    Layout,
+    Wire,
+    crossings,
+    draw_graph,
+    junctions,
+    layout_graph,
+    segment_crosses_box,
+    shared_segments,
+)
 
 
 def test_segment_box_test_itself():
@@ -76,3 +87,65 @@ def test_cli_draws_a_subgraph_on_its_own(tmp_path, capsys):
     assert main(["graph", "hexapod-controller", "--subgraph", "L9", "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "L9" in err[0]
+
+
+def _random_graph(rng: random.Random, n: int) -> Graph:
+    """n blocks (gains, two- and three-input sums) wired at random: forward wires, wires that
+    skip layers, feedback, fan-out from one output to many inputs, graph inputs and outputs."""
+    g = Graph("random")
+    blocks = []
+    for i in range(n):
+        kind = rng.choice(["gain", "sum2", "sum3"])
+        blk = {"gain": lambda k: Gain(k), "sum2": lambda k: Sum(k, (1, 1)),
+               "sum3": lambda k: Sum(k, (1, 1, -1))}[kind](f"b{i}")
+        blocks.append(g.add(blk))
+    outputs = [(b.name, p) for b in blocks for p in b.outputs]
+    for b in blocks:
+        for p in b.inputs:
+            if rng.random() < 0.2:
+                g.expose_input(f"in_{b.name}_{p}", f"{b.name}.{p}")
+            else:
+                src = rng.choice(outputs)
+                g.connect(f"{src[0]}.{src[1]}", f"{b.name}.{p}")
+    for k, (b, p) in enumerate(rng.sample(outputs, min(3, len(outputs)))):
+        g.expose_output(f"out{k}", f"{b}.{p}")
+    return g
+
+
+@pytest.mark.parametrize("name", catalog.names())
+def test_no_two_sources_share_a_segment_in_any_builtin_graph(name):
+    assert shared_segments(layout_graph(catalog.load_graph(name))) == []
+
+
+def test_no_two_sources_share_a_segment_in_random_graphs():
+    rng = random.Random(7)
+    for trial in range(60):
+        g = _random_graph(rng, rng.randint(2, 12))
+        try:
+            lay = layout_graph(g)
+        except Exception as exc:  # pragma: no cover - a layout failure is a failure
+            raise AssertionError(f"trial {trial}: {exc}") from exc
+        assert shared_segments(lay) == [], f"trial {trial}"
+        assert crossings(lay) == [], f"trial {trial}"
+
+
+def test_the_reported_pair_is_apart_and_fan_out_gets_a_junction_dot():
+    """The case found from outside: in a two-layer graph ``b.y -> d_a.u1`` ran 19 px along ``a.x -> outputs.xa``."""
+    g = Graph("two")
+    g.add(Gain("a"))
+    g.add(Gain("b"))
+    g.add(Sum("d_a", (1, 1)))
+    g.expose_input("u", "a.u", "b.u")
+    g.connect("b.y", "d_a.u1")
+    g.connect("a.y", "d_a.u2")
+    g.expose_output("xa", "a.y")
+    g.expose_output("d", "d_a.y")
+    lay = layout_graph(g)
+    assert shared_segments(lay) == []
+    # a.y feeds two inputs: its net branches, so one junction dot where the two wires part
+    a_wires = [w for w in lay.wires if w.source == ("a", "y")]
+    assert len(a_wires) == 2 and len(junctions(lay)) >= 1
+    # a hand-made overlap is found (the checker itself can fail)
+    bogus = Layout(lay.boxes, [Wire(("a", "y"), ("d_a", "u1"), [(0, 1), (2, 1)]),
+                               Wire(("b", "y"), ("d_a", "u2"), [(1, 1), (3, 1)])])
+    assert len(shared_segments(bogus)) == 1

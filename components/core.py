@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -45,6 +45,15 @@ def check_name(name: str, what: str) -> str:
     if not isinstance(name, str) or not _NAME_RE.match(name):
         raise DeclarationError(f"invalid {what} name {name!r}: use letters, digits and '_'")
     return name
+
+
+def did_you_mean(word: str, candidates: Iterable[str], n: int = 3, prefix: str = "") -> str:
+    """``"; did you mean 'x'?"`` with the closest candidates (difflib's ratio >= 0.6), each written after
+    ``prefix``, or ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(word, list(candidates), n=n, cutoff=0.6)
+    return f"; did you mean {' or '.join(repr(prefix + c) for c in close)}?" if close else ""
 
 
 def normalize_unit(unit: str) -> str:
@@ -257,7 +266,8 @@ class _Declared:
         for key, value in values.items():
             if key not in self.parameters:
                 known = ", ".join(sorted(self.parameters)) or "none"
-                raise ParameterError(f"block {self.name!r} has no parameter {key!r} (parameters: {known})")
+                raise ParameterError(f"block {self.name!r} has no parameter {key!r}"
+                                     f"{did_you_mean(key, self.parameters)} (parameters: {known})")
             self.values[key] = self.parameters[key].validate(value, owner=self.name)
         return self
 

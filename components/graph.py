@@ -12,7 +12,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared
+from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared, did_you_mean
 from cpgsim.components.units import Conversion, UnitMismatch, conversion
 
 
@@ -153,10 +153,26 @@ class Graph(_Declared):
         """Set one parameter by ``block.sub.param`` path; a glob (``*.eps``) sets every match."""
         matches = [p for p in self.parameter_paths() if fnmatch.fnmatchcase(p, path)]
         if not matches:
-            raise ParameterError(f"graph {self.name!r} has no parameter matching {path!r}")
+            raise ParameterError(f"graph {self.name!r} has no parameter matching {path!r}"
+                                 f"{self._suggest_parameter(path)}")
         for full in matches:
             owner_path, pname = full.rsplit(".", 1)
             self.find(owner_path).set(**{pname: value})
+
+    def _suggest_parameter(self, path: str) -> str:
+        """Close matches for a parameter path: the same path with a close parameter name, else a glob over
+        every block that has a parameter of a close name (``controller.*.Fcx`` for ``controller.Fcxx``)."""
+        paths = self.parameter_paths()
+        owner, _, pname = path.rpartition(".")
+        siblings = [p.rpartition(".")[2] for p in paths if p.rpartition(".")[0] == owner]
+        hint = did_you_mean(path, [f"{owner}.{s}" if owner else s for s in siblings])
+        if hint:
+            return hint
+        inside = [p for p in paths if p.startswith(owner + ".")] if owner else paths
+        if not inside:  # no such block or graph: the closest whole paths
+            return did_you_mean(path, paths)
+        names = sorted({p.rpartition(".")[2] for p in inside})
+        return did_you_mean(pname, names, prefix=f"{owner}.*." if owner else "*.")
 
     def parameter_paths(self) -> list[str]:
         """All parameter paths ``block.param`` (nested graphs: ``sub.block.param``)."""

@@ -25,6 +25,7 @@ import time as _time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -73,6 +74,38 @@ class Results:
         idx = [self._index[n] for n in names]
         return Results(self.time, [self.columns[i] for i in idx], [self.units[i] for i in idx],
                        self.data[:, idx], self.complete, self.message, dict(self.meta))
+
+    # -- notebooks ----------------------------------------------------------------------------
+    def to_pandas(self) -> Any:
+        """The results as a :class:`pandas.DataFrame` indexed by time in s, one column per recorded signal
+        (the names of :attr:`columns`); ``df.attrs`` holds ``units`` (column -> unit), ``complete`` and
+        ``message``. 64-bit integer columns keep their exact values (``int64``/``uint64`` dtype)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ResultsError("Results.to_pandas needs pandas: pip install pandas") from None
+        frame = pd.DataFrame(self.data, columns=self.columns, index=pd.Index(self.time, name="time [s]"),
+                             copy=True)
+        for name in self.meta.get("exact_integers", {}):
+            if name in self._index:
+                frame[name] = self[name]
+        frame.attrs.update({"units": dict(zip(self.columns, self.units, strict=True)),
+                            "complete": self.complete, "message": self.message})
+        return frame
+
+    def _repr_html_(self) -> str:
+        """A notebook's view: span, size, completeness and the first columns with their units."""
+        import html
+
+        status = "complete" if self.complete else f"INCOMPLETE: {self.message or 'the run did not finish'}"
+        span = f"{self.time[0]:.6g} .. {self.time[-1]:.6g} s" if len(self.time) else "no rows"
+        rows = "".join(f"<tr><td>{html.escape(c)}</td><td>{html.escape(u)}</td><td>{self.data[-1, j]:.6g}</td></tr>"
+                       for j, (c, u) in enumerate(zip(self.columns[:12], self.units[:12], strict=True))
+                       if len(self.time))
+        more = f"<p>... and {len(self.columns) - 12} more columns</p>" if len(self.columns) > 12 else ""
+        return (f"<div><b>cpgsim results</b>: {len(self.time)} rows x {len(self.columns)} columns, {span}, "
+                f"<b>{html.escape(status)}</b><table><tr><th>column</th><th>unit</th><th>last value</th></tr>"
+                f"{rows}</table>{more}</div>")
 
     # -- writing ------------------------------------------------------------------------------
     def save(self, path: str | Path) -> list[Path]:
@@ -355,3 +388,4 @@ class ResultsWriter:
             if self._file is not None:
                 self._file.close()
                 self._file = None
+

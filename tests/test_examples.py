@@ -22,6 +22,7 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
 def test_the_examples_are_all_here():
     assert EXAMPLES == ["01_simulate_and_verify.py", "02_export_and_run_in_fmpy.py", "03_import_fmu.py",
                         "04_robot_scenario.py", "05_sweep.py"]
+    assert (ROOT / "examples" / "06_notebook.ipynb").exists()
 
 
 SLOW = {"04_robot_scenario.py", "05_sweep.py"}  # DART runs
@@ -49,3 +50,29 @@ def test_own_graph_and_own_scenario_from_the_command_line(tmp_path):
                 tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "[terrain.ditch]" in proc.stdout and 'name = "my-course"' in proc.stdout
+
+
+@pytest.mark.slow  # its last cell runs a DART scenario
+def test_notebook_example_runs_and_shows_tables(tmp_path, monkeypatch):
+    """examples/06_notebook.ipynb, cell by cell as a kernel would run it (each code cell's last expression
+    is what the notebook displays): the results and the run summary show as HTML tables, the DataFrame is
+    indexed by time with units."""
+    import ast
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    cells = [c for c in json.loads((ROOT / "examples" / "06_notebook.ipynb").read_text())["cells"]
+             if c["cell_type"] == "code"]
+    scope: dict = {}
+    shown = []
+    for cell in cells:
+        tree = ast.parse("".join(cell["source"]))
+        last = tree.body.pop() if tree.body and isinstance(tree.body[-1], ast.Expr) else None
+        exec(compile(tree, "<cell>", "exec"), scope)  # noqa: S102 - the example's own code
+        shown.append(eval(compile(ast.Expression(last.value), "<cell>", "eval"), scope) if last else None)
+    res_html = shown[0]._repr_html_()
+    assert "5001 rows" in res_html and "<b>complete</b>" in res_html and "<td>z1.x</td>" in res_html
+    assert scope["df"].index.name == "time [s]" and len(scope["df"]) == 5001
+    assert shown[2] == "1/s"  # Yu 2019 eq. 2: dx/dt = y with x dimensionless, so y is in 1/s
+    summary_html = shown[3]._repr_html_()
+    assert summary_html.startswith("<div><b>flat: ") and "distance_m" in summary_html

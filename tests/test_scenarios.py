@@ -4,11 +4,13 @@ terrains, and outcomes computed from recorded data (stall, tilt without a fall, 
 from __future__ import annotations
 
 import math
+import re
 import textwrap
 
 import numpy as np
 import pytest
 
+from cpgsim.components.graph import Graph
 from cpgsim.harness.cli.main import main
 from cpgsim.harness.experiments.outcomes import evaluate, stall
 from cpgsim.harness.experiments.runner import build_scenario
@@ -199,3 +201,33 @@ def test_large_tilt_without_a_fall_and_a_fall():
     contact = evaluate(_run(0.02 * t, contact=(t > 7).astype(float)), "robot", CRITERIA)
     assert contact["fell"] and contact["fell_reason"] == "body touched the ground"
     assert math.isclose(contact["max_tilt_deg"], 0.0, abs_tol=1e-9)
+
+
+@pytest.mark.parametrize("key, fragment", [
+    ("criteria.min_distanc_m=0", "did you mean 'min_distance_m'?"),
+    ("robott.body_mass=3", "did you mean 'robot'?"),
+    ("terrain.stepp.height=0.05", "terrain.stepp is not a terrain feature of this scenario; did you mean 'step'?"),
+    ("terrain.new.type=stepp", "got 'stepp'; did you mean 'step'?"),
+])
+def test_misspelt_keys_get_a_suggestion(key, fragment):
+    """Found from outside: --set terrain.stepp.height said 'terrain.stepp.type must be one of ... got NoneType
+    None'; misspelt keys listed every key but not the one meant."""
+    k, _, v = key.partition("=")
+    with pytest.raises(ScenarioError, match=re.escape(fragment)):
+        load("step", {k: parse_value(v)})
+
+
+def test_misspelt_graph_parameter_gets_a_suggestion():
+    from cpgsim.components.core import ParameterError
+    from cpgsim.components.networks import leader_follower_network
+
+    g = leader_follower_network()
+    with pytest.raises(ParameterError, match=re.escape("did you mean 'z1.eps'?")):
+        g.set_param("z1.epss", 0.2)
+    with pytest.raises(ParameterError, match=re.escape("did you mean 'z1.eps' or")) as info:
+        g.set_param("z11.eps", 0.2)  # no block z11: the closest whole paths (z1.eps, ...)
+    assert "no parameter matching 'z11.eps'" in str(info.value)
+    outer = Graph("outer")
+    outer.add(g)
+    with pytest.raises(ParameterError, match=re.escape("did you mean 'network.*.eps'?")):
+        outer.set_param("network.epss", 0.2)  # a parameter name of the blocks inside the graph

@@ -26,6 +26,7 @@ from cpgsim.harness.experiments import plots as plots_run
 from cpgsim.harness.experiments.fukuhara import scenarios as fukuhara
 from cpgsim.harness.experiments.scenario import Scenario, builtin_names, load
 from cpgsim.harness.experiments.setup import RunSetup
+from cpgsim.harness.experiments.summary import RunSummary
 from cpgsim.harness.experiments.yu import scenarios as yu
 from cpgsim.harness.results import Results, atomic_write
 from cpgsim.harness.simulate import SimulationError, Simulator
@@ -106,7 +107,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         build_report(out)
     if error is not None:
         raise error
-    return summary
+    return RunSummary(summary)
 
 
 def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = None,

@@ -51,7 +51,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from cpgsim.components.core import ModelError
+from cpgsim.components.core import ModelError, did_you_mean
 
 BUILTIN_PACKAGE = "cpgsim.harness.experiments.scenarios"
 CONTROLLER_KINDS = ("yu", "yu-open-loop", "fukuhara")
@@ -261,8 +261,8 @@ def validate(scenario: Scenario, overridden: bool = False) -> None:
     doc = scenario.doc
     for key in doc:
         if key not in SCHEMA:
-            raise ScenarioError(f"unknown key {key!r}{_where(scenario, key, overridden)}: known keys are "
-                                + ", ".join(SCHEMA))
+            raise ScenarioError(f"unknown key {key!r}{did_you_mean(key, SCHEMA)}{_where(scenario, key, overridden)}: "
+                                "known keys are " + ", ".join(SCHEMA))
     for key, spec in SCHEMA.items():
         if isinstance(spec, dict):
             table = doc.setdefault(key, {})
@@ -295,8 +295,8 @@ def _validate_table(scenario: Scenario, name: str, table: dict, spec: dict, over
             continue  # a feature, checked by _check_features
         if key not in spec:
             known = ", ".join(spec) + (", or a feature table [terrain.NAME]" if name == "terrain" else "")
-            raise ScenarioError(f"unknown key {full!r}{_where(scenario, full, overridden)}: known keys of "
-                                f"[{name}] are {known}")
+            raise ScenarioError(f"unknown key {full!r}{did_you_mean(key, spec)}{_where(scenario, full, overridden)}: "
+                                f"known keys of [{name}] are {known}")
         f = spec[key]
         if f.kind is dict:
             if not isinstance(value, dict):
@@ -322,8 +322,14 @@ def _check_features(scenario: Scenario, overridden: bool) -> None:
     feats = scenario.features()
     for name, feat in feats.items():
         where = f"terrain.{name}"
+        if "type" not in feat and overridden:  # --set terrain.NAME.KEY on a feature the scenario lacks
+            others = [n for n, f in feats.items() if "type" in f]
+            raise ScenarioError(f"{where} is not a terrain feature of this scenario{did_you_mean(name, others)} "
+                                f"(features: {', '.join(others) or 'none'}; to add one, also set {where}.type to "
+                                f"one of {', '.join(FEATURES)})")
         if feat.get("type") not in FEATURES:
             raise ScenarioError(f"{where}.type must be one of {', '.join(FEATURES)}, got {_show(feat.get('type'))}"
+                                f"{did_you_mean(str(feat.get('type')), FEATURES)}"
                                 f"{_where(scenario, where + '.type', overridden)}")
     try:
         compose({f"terrain.{k}": v for k, v in feats.items()}, scenario.doc["terrain"]["friction"])
@@ -378,8 +384,8 @@ def apply_override(scenario: Scenario, key: str, value: Any) -> None:
             elif path[0] in SECTIONS and len(path) >= 2:
                 node[part] = {}
             else:
-                raise ScenarioError(f"--set {key}: unknown key {'.'.join(path)!r} (known top-level keys: "
-                                    f"{', '.join(SCHEMA)})")
+                raise ScenarioError(f"--set {key}: unknown key {'.'.join(path)!r}{did_you_mean(path[0], SCHEMA)} "
+                                    f"(known top-level keys: {', '.join(SCHEMA)})")
         node = node[part]
         if not isinstance(node, dict):
             raise ScenarioError(f"--set {key}: {part} is not a table")

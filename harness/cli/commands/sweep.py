@@ -1,8 +1,9 @@
 """Run many trials of a robot scenario (one seed each) on dask.distributed and summarise them.
 
 Trial i uses seed S + i. By default the trials run on a local dask cluster (``--workers`` processes);
-``--scheduler tcp://host:8786`` uses a running cluster instead (workers need this project installed and
-the output directory on a shared filesystem); ``--serial`` runs them one after the other in this process.
+``--scheduler tcp://host:8786`` uses a running cluster instead (workers need this project installed, but
+no shared disk: each trial runs in a scratch folder of its worker and sends its files back, and this
+process writes them); ``--serial`` runs them one after the other in this process.
 A trial that crashes is recorded as failed with its error; the sweep goes on.
 
 Writes OUTPUT/sweep.json (per group: successes, ratio, Wilson 95% interval; per trial: seed, status,

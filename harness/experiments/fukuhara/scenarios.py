@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from cpgsim.components.core import ModelError
+from cpgsim.components.core import ModelError, did_you_mean
 from cpgsim.components.fukuhara.blocks import MODE_NAMES, RULE_SEARCH, SWING
 from cpgsim.components.fukuhara.controller import (
     CONTROLLER_PARAMS,
@@ -103,7 +103,9 @@ def _split_sets(sets: dict[str, float], options: dict[str, float]) -> tuple[dict
         elif key in CONTROLLER_PARAMS or key in TRAJECTORY_PARAMS:
             ctrl[key] = value
         else:
-            raise ModelError(f"unknown --set key {key!r}: use a scenario option ({', '.join(options)}), a controller "
+            hint = did_you_mean(key, [*options, *CONTROLLER_PARAMS, *TRAJECTORY_PARAMS])
+            raise ModelError(f"unknown --set key {key!r}{hint}"
+                             f": use a scenario option ({', '.join(options)}), a controller "
                              f"parameter ({', '.join(CONTROLLER_PARAMS + TRAJECTORY_PARAMS[:3])}) or a dotted "
                              "path like ctrl.L1.theta_AEP / robot.kp")
     return opts, ctrl, paths
@@ -286,7 +288,8 @@ def _sets_of(scenario: Scenario) -> dict[str, Any]:
         elif key in CONTROLLER_PARAMS or key in TRAJECTORY_PARAMS:
             sets[key] = float(value)
         else:
-            raise ScenarioError(f"unknown key controller.{key} for a fukuhara controller: use setting, case, "
+            raise ScenarioError(f"unknown key controller.{key} for a fukuhara controller"
+                                f"{did_you_mean(key, CONTROLLER_PARAMS + TRAJECTORY_PARAMS)}: use setting, case, "
                                 f"transient, a controller parameter ({', '.join(CONTROLLER_PARAMS)}; "
                                 f"{', '.join(TRAJECTORY_PARAMS)}) or a graph path like controller.L1.theta_AEP "
                                 f"({scenario.source})")

@@ -76,7 +76,7 @@ from typing import Any
 
 import numpy as np
 
-from cpgsim.components.core import ModelError
+from cpgsim.components.core import ModelError, did_you_mean
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
 from cpgsim.components.graph import Graph
 from cpgsim.components.yu.leg import hexapod_controller
@@ -206,6 +206,12 @@ def build(scenario: Scenario) -> RunSetup:
     terrain = terrain_of(scenario, geometry)
     thresholds = {k: float(ctrl.get(k, d)) for k, d in THRESHOLDS.items()}
     params = {f"{CONTROLLER}.{k}": float(v) for k, v in ctrl["params"].items()}
+    for k in ctrl["params"]:  # a misspelt threshold (controller.Fcxx) lands among the graph parameters
+        hint = did_you_mean(k, THRESHOLDS) if "." not in k and "*" not in k else ""
+        if hint:
+            raise ScenarioError(f"{scenario.name}: unknown controller key {k!r}{hint} (the reflex and sensor "
+                                f"thresholds are {', '.join(THRESHOLDS)}; graph parameters are paths like "
+                                f"controller.L1.sensors.Fcx or controller.*.Fcx)")
     if ctrl["kind"] == "yu-open-loop":
         params.update({f"{CONTROLLER}.{k}": v for k, v in OPEN_LOOP.items()})
     plant = {f"{ROBOT}.{k}": float(doc["robot"][k]) for k in PLANT_KEYS if k in doc["robot"]}

@@ -205,3 +205,19 @@ def test_early_touchdown_ends_the_swing_and_the_next_swing_returns_to_the_aep(le
     aep = [k for k in np.flatnonzero((y1[:-1] > 0) & (y1[1:] <= 0)) + 1 if t[k] > 5.0]
     assert np.linalg.norm(foot[aep[0]] - TARGETS["AEP"]) < 2 * MM
     assert np.abs(np.diff(q, axis=0)).max() < 5e-3
+
+
+def test_hit_window_is_the_contact_episode_around_the_trigger():
+    """By hand: contact from sample 103 (an impact spike of 21 N) to 165 (the last sample >= 1 N), trigger at
+    126; the window is [103, 167): up to and with the first sample below 1 N (166), whatever happens
+    outside it (a later stance at 300 is another contact)."""
+    from cpgsim.harness.experiments.yu.scenarios import hit_window
+
+    f = np.zeros(400)
+    f[103], f[104:111], f[111:114] = 21.0, 6.0, 2.0  # impact spike, a 6 N rub, the foot still on the riser
+    f[114:127] = np.linspace(2.0, 11.0, 13)
+    f[127:166] = np.linspace(11.0, 1.0, 39)
+    f[300:350] = 30.0
+    assert hit_window(f, 126, 1e-3) == (103, 167)
+    f[111] = 0.5  # a gap: the episode holding the trigger starts after it
+    assert hit_window(f, 126, 1e-3) == (112, 167)

@@ -139,7 +139,7 @@ def plot_toe_forces(res: Results, robot: str, thresholds: dict[str, float], refl
             color = REFLEX_COLORS.get(ev["kind"], "tab:green")
             ax.axvline(ev["t"], color=color, lw=1.0)
             if ev["kind"] == "elevator":
-                text = f"elevator {ev.get('force_N', 0):.0f} N"
+                text = f"elevator {ev.get('trigger_force_N', ev.get('force_N', 0)):.0f} N"
                 if "peak_force_N" in ev:
                     text += f" (peak {ev['peak_force_N']:.0f} N)"
             else:
@@ -237,6 +237,37 @@ def plot_snapshots(res: Results, robot: str, geometry: RobotGeometry, terrain, p
         ax.set_title(f"t = {t[k]:.1f} s", fontsize=8)
         ax.tick_params(labelsize=6)
     fig.suptitle("side view (blue: left legs, red: right legs; ground under the right legs)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_elevator_hits(res: Results, robot: str, reflexes: Sequence[dict], path: Path,
+                       paper: dict[int, float] | None = None) -> Path:
+    """Each elevator hit's horizontal toe force ``max(|Fx|, |Fy|)`` from 0.1 s before its trigger to the end
+    of the collision (+0.2 s), one panel per hit: the trigger (the threshold crossing the controller
+    reacted to), the hit's peak, and the paper's peak for that leg (dashed) where it reports one."""
+    hits = [e for e in reflexes if e.get("kind") == "elevator" and "peak_t" in e][:9]
+    f = res[f"{robot}.toe_force"].reshape(len(res.time), 6, 3)
+    fig, axes = plt.subplots(1, len(hits), figsize=(3.6 * len(hits), 3.4), squeeze=False)
+    for ax, ev in zip(axes[0], hits, strict=True):
+        leg = ev["leg_number"] - 1
+        window = (res.time >= ev["t"] - 0.1) & (res.time <= ev["hit_end_t"] + 0.2)
+        ax.plot(res.time[window], np.abs(f[window, leg, :2]).max(axis=1), color="k", lw=0.9)
+        ax.axvline(ev["t"], color="tab:orange", lw=1)
+        ax.plot([ev["t"]], [ev["trigger_force_N"]], "v", color="tab:orange",
+                label=f"trigger {ev['trigger_force_N']:.1f} N")
+        ax.plot([ev["peak_t"]], [ev["peak_force_N"]], "o", color="tab:red",
+                label=f"peak {ev['peak_force_N']:.1f} N")
+        ref = (paper or {}).get(ev["leg_number"])
+        if ref is not None:
+            ax.axhline(ref, color="tab:blue", ls="--", lw=1, label=f"paper's peak {ref:g} N")
+        ax.set_title(f"{ev['leg']} (leg {ev['leg_number']}) at {ev['t']:.2f} s", fontsize=10)
+        ax.set_xlabel("time [s]")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[0][0].set_ylabel("horizontal toe force [N]")
+    fig.suptitle("elevator hits: horizontal toe force, trigger and peak", fontsize=11)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -173,7 +173,8 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
     for e in summary.get("reflexes", []):
         traces.append({"type": "scatter", "x": [e["t"]], "y": [labels[e["leg_number"] - 1]], "mode": "markers",
                        "marker": {"symbol": "triangle-down", "size": 9, "color": REFLEX_MARKER}, "xaxis": "x",
-                       "yaxis": "y", "showlegend": False, "hovertext": f"{e['kind']} {e['leg']}", "hoverinfo": "text"})
+                       "yaxis": "y", "showlegend": False, "hovertext": f"{e['kind']} {e['leg']}{_forces(e)}",
+                       "hoverinfo": "text"})
     if "controller.x1" in res:
         states, title = res["controller.x1"], "CPG leader x1 per leg"
     else:
@@ -217,6 +218,14 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
     return {"data": traces, "layout": layout}
 
 
+def _forces(e: dict) -> str:
+    """An event's forces: the trigger (what the controller reacted to) and, for a hit, its peak."""
+    text = f": trigger {e['trigger_force_N']:.1f} N" if "trigger_force_N" in e else ""
+    if "peak_force_N" in e:
+        text += f", hit peak {e['peak_force_N']:.1f} N at {e['peak_t']:.3f} s"
+    return text
+
+
 def _summary_html(summary: dict) -> str:
     keys = ["scenario", "t_end", "complete", "success", "criteria_failed", "distance_m", "speed_m_s", "fell",
             "fell_reason", "max_tilt_deg", "height_drop_m", "stalled", "waiting_share", "real_time_factor"]
@@ -227,7 +236,7 @@ def _summary_html(summary: dict) -> str:
             v = f"{v:.4g}" if isinstance(v, float) and math.isfinite(v) else v
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>")
     ev = "".join(f"<li>{html.escape(e['kind'])} on {html.escape(e['leg'])} (leg {e['leg_number']}) at "
-                 f"{e['t']:.3f} s</li>" for e in summary.get("reflexes", [])[:40])
+                 f"{e['t']:.3f} s{_forces(e)}</li>" for e in summary.get("reflexes", [])[:40])
     return f"<table>{''.join(rows)}</table><h3>reflex events</h3><ul>{ev or '<li>none</li>'}</ul>"
 
 

@@ -160,6 +160,8 @@ def make_plots(setup: RunSetup, res: Results, summary: dict[str, Any], out: Path
                                   labels=setup.event_labels),
         plots_run.plot_body(res, robot, out / "body.png"),
         plots_run.plot_snapshots(res, robot, setup.geometry, setup.terrain, out / "snapshots.png"),
+        *([plots_run.plot_elevator_hits(res, robot, reflexes, out / "elevator_hits.png", setup.paper_hit_forces)]
+          if any(e.get("kind") == "elevator" and "peak_t" in e for e in reflexes) else []),
     ]
 
 

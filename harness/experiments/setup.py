@@ -40,6 +40,7 @@ class RunSetup:
     scenario: Scenario | None = None
     held: Callable[[Results], np.ndarray] | None = None  # time x 6: the gait FSM holds the leg (CPG rate 0)
     event_labels: dict[str, str] = field(default_factory=dict)  # legend text of the reflex event kinds
+    paper_hit_forces: dict[int, float] = field(default_factory=dict)  # leg number -> the paper's peak hit force
 
 
 def leg_fields(index: int) -> dict[str, Any]:

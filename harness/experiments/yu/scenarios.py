@@ -139,15 +139,37 @@ EVENTS = (("elevator", "n_ert"), ("searching", "n_srt"), ("found", "n_found"), (
 foothold; ``giveup``: a search ended without one, the foot returns to its AEP)."""
 
 
-def reflex_events(res: Results) -> list[dict[str, Any]]:
-    """Reflex events from the legs' event counters: ``{leg, leg_number, kind, t, force_N}`` (+ ``peak_force_N``);
-    ``leg`` is the label (``"R1"``), ``leg_number`` Yu's number (1-6: L1-L3, R1-R3).
+YU_HIT_PEAKS_N = {4: 55.6, 5: 62.4, 6: 85.5}
+"""Yu 2019, Fig. 14c: peak toe forces of the elevator hits of legs 4-6 (R1-R3) at the 40 mm step."""
+HIT_MAX_S = 1.5
+HIT_END_N = 1.0
 
-    ``force_N`` is the horizontal toe force ``max(|Fx|, |Fy|)`` at an elevator trigger (the largest
-    in the 20 ms before it, as the controller saw it) and the vertical one otherwise;
-    ``peak_force_N`` (elevator) is the largest horizontal force of that collision, from 20 ms
-    before the trigger to 100 ms after it (the leg retracts from there) -- what Yu's Fig. 14c
-    reports.
+
+def hit_window(horizontal: np.ndarray, k: int, dt: float) -> tuple[int, int]:
+    """The collision an elevator reflex answers, as sample indices ``[k0, k1)`` around trigger sample ``k``:
+    the contact episode that holds the trigger, i.e. the run of samples with a horizontal toe force
+    ``max(|Fx|, |Fy|)`` of at least :data:`HIT_END_N`, from the foot touching the riser (the first impact
+    comes some 20-30 ms before the trigger: the sensory neuron filters the force) to the foot leaving it,
+    each end at most :data:`HIT_MAX_S` from the trigger."""
+    span = int(round(HIT_MAX_S / dt))
+    lo, hi = max(0, k - span), min(len(horizontal), k + span + 1)
+    before = np.nonzero(horizontal[lo:k] < HIT_END_N)[0]
+    after = np.nonzero(horizontal[k:hi] < HIT_END_N)[0]
+    k0 = lo + int(before[-1]) + 1 if len(before) else lo
+    return k0, (k + int(after[0]) + 1) if len(after) else hi
+
+
+def reflex_events(res: Results) -> list[dict[str, Any]]:
+    """Reflex events from the legs' event counters: ``{leg, leg_number, kind, t, trigger_force_N, force_N}``
+    (+ ``peak_force_N``, ``peak_t``, ``hit_end_t`` for elevators); ``leg`` is the label (``"R1"``),
+    ``leg_number`` Yu's number (1-6: L1-L3, R1-R3).
+
+    ``trigger_force_N`` is what the controller reacted to: the horizontal toe force ``max(|Fx|, |Fy|)``
+    at an elevator trigger (the largest in the 20 ms before it; it is about the threshold ``Fcy`` by
+    construction) and the vertical one otherwise (``force_N`` is the same number, kept for older
+    readers). ``peak_force_N`` (elevator) is the largest horizontal force of the collision itself
+    (:func:`hit_window`: until the foot leaves the riser, at most 1.5 s), at ``peak_t``: what Yu 2019's
+    Fig. 14c reports (55.6, 62.4 and 85.5 N for legs 4-6).
     """
     force = res[f"{ROBOT}.toe_force"].reshape(len(res.time), 6, 3)
     events = []
@@ -160,10 +182,16 @@ def reflex_events(res: Results) -> list[dict[str, Any]]:
             for k in steps:
                 ev = leg_fields(leg) | {"kind": kind, "t": float(res.time[k])}
                 if kind == "elevator":
-                    ev["force_N"] = float(np.abs(force[max(0, k - 20):k + 1, leg, :2]).max())
-                    ev["peak_force_N"] = float(np.abs(force[max(0, k - 20):k + 101, leg, :2]).max())
+                    horizontal = np.abs(force[:, leg, :2]).max(axis=1)
+                    dt = float(res.time[1] - res.time[0]) if len(res.time) > 1 else 1e-3
+                    k0, k1 = hit_window(horizontal, k, dt)
+                    ev["trigger_force_N"] = float(horizontal[max(0, k - int(round(0.02 / dt))):k + 1].max())
+                    peak = k0 + int(np.argmax(horizontal[k0:k1]))
+                    ev.update({"peak_force_N": float(horizontal[peak]), "peak_t": float(res.time[peak]),
+                               "hit_start_t": float(res.time[k0]), "hit_end_t": float(res.time[k1 - 1])})
                 else:
-                    ev["force_N"] = float(force[k, leg, 2])
+                    ev["trigger_force_N"] = float(force[k, leg, 2])
+                ev["force_N"] = ev["trigger_force_N"]
                 events.append(ev)
     return sorted(events, key=lambda e: (e["t"], e["leg_number"]))
 
@@ -224,4 +252,4 @@ def build(scenario: Scenario) -> RunSetup:
             "controller_kind": ctrl["kind"], **feature_summary(terrain)}
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
                     thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
-                    waiting=waiting_of, scenario=scenario, held=held_of)
+                    waiting=waiting_of, scenario=scenario, held=held_of, paper_hit_forces=YU_HIT_PEAKS_N)

@@ -40,7 +40,15 @@ import numpy as np
 
 from cpgsim.components.core import ModelError
 from cpgsim.harness.experiments.scenario import ScenarioError
-from cpgsim.harness.experiments.sweep import _bar, _connect, _json_default, run_on_dask, run_trial, wilson_interval
+from cpgsim.harness.experiments.sweep import (
+    _bar,
+    _connect,
+    _json_default,
+    outcome_signature,
+    run_on_dask,
+    run_trial,
+    wilson_interval,
+)
 from cpgsim.harness.results import atomic_write
 
 SUITES_PACKAGE = "cpgsim.harness.experiments.suites"
@@ -180,7 +188,7 @@ def cell_stats(controller: str, terrain: str, trials: list[dict[str, Any]]) -> d
         vals = [o[key] for o in outs if o.get(key) is not None and np.isfinite(o[key])]
         return float(np.median(vals)) if vals else None
 
-    distinct = len({(bool(o.get("success")), round(float(o.get("distance_m") or 0.0), 6)) for o in outs})
+    distinct = len({outcome_signature(o) for o in outs})
     return {"controller": controller, "terrain": terrain, "n": n, "successes": succ, "distinct_outcomes": distinct,
             "success_ratio": succ / n if n else float("nan"), "ci95": [lo, hi],
             "falls": sum(1 for o in outs if o.get("fell")), "stalls": sum(1 for o in outs if o.get("stalled")),

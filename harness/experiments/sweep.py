@@ -119,6 +119,31 @@ def receive_files(record: dict[str, Any]) -> dict[str, Any]:
     return record
 
 
+def outcome_signature(outcome: dict[str, Any]) -> tuple:
+    """What makes two trials' outcomes the same: verdict, failed criteria, fall, stall, distance (1 um) and
+    maximum tilt (1 mdeg). Trials of a deterministic controller on a terrain the seed does not change give
+    one signature: they are one experiment repeated, not independent samples."""
+    def rounded(key: str, digits: int) -> float | None:
+        v = outcome.get(key)
+        return None if v is None or not math.isfinite(float(v)) else round(float(v), digits)
+
+    return (bool(outcome.get("success")), tuple(outcome.get("criteria_failed", [])), bool(outcome.get("fell")),
+            bool(outcome.get("stalled")), rounded("distance_m", 6), rounded("max_tilt_deg", 3))
+
+
+def failure_reasons(trials: list[dict[str, Any]]) -> dict[str, int]:
+    """Why trials did not succeed: each failed criterion (``min_distance_m``, ``fell``, ...) or ``crashed``,
+    with the number of trials it applies to."""
+    reasons: dict[str, int] = {}
+    for t in trials:
+        if t["status"] != "ok":
+            reasons["crashed"] = reasons.get("crashed", 0) + 1
+        elif not t["outcome"].get("success"):
+            for c in t["outcome"].get("criteria_failed", []) or ["unknown"]:
+                reasons[c] = reasons.get(c, 0) + 1
+    return reasons
+
+
 @dataclass
 class Group:
     """Trials run with the same sets (one value of the varied parameter)."""
@@ -132,9 +157,15 @@ class Group:
         ok = [t for t in self.trials if t["status"] == "ok"]
         succ = sum(1 for t in ok if t["outcome"].get("success"))
         lo, hi = wilson_interval(succ, n)
+        distinct = len({outcome_signature(t["outcome"]) for t in ok})
+        identical = len(ok) == n > 1 and distinct == 1
         return {"label": self.label, "sets": self.sets, "n": n, "failed": n - len(ok), "successes": succ,
                 "success_ratio": succ / n if n else float("nan"), "ci95": [lo, hi],
-                "ci_method": "Wilson score interval, 95 %, failed trials count as unsuccessful"}
+                "ci_method": "Wilson score interval, 95 %, failed trials count as unsuccessful",
+                "distinct_outcomes": distinct, "identical_replicates": identical,
+                "failure_reasons": failure_reasons(self.trials),
+                **({"note": f"all {n} trials gave the same outcome (the seed changes nothing here): one "
+                            f"experiment, not {n}; the interval overstates what is known"} if identical else {})}
 
 
 def parse_vary(text: str | None) -> tuple[str, list[Any]] | None:
@@ -311,8 +342,13 @@ def report_lines(doc: dict[str, Any]) -> list[str]:
              f"{doc['seeds'][0]}..{doc['seeds'][-1]}"]
     for g in doc["groups"]:
         lo, hi = g["ci95"]
-        lines.append(f"  {g['label']:>12s}: {g['successes']}/{g['n']} successful = {g['success_ratio']:.0%} "
+        same = " =" if g.get("identical_replicates") else ""
+        lines.append(f"  {g['label']:>12s}: {g['successes']}/{g['n']}{same} successful = {g['success_ratio']:.0%} "
                      f"(95% Wilson CI {lo:.0%}-{hi:.0%}), {g['failed']} crashed")
+        if g.get("failure_reasons"):
+            lines.append("      not successful: " + ", ".join(f"{k} ({v})" for k, v in g["failure_reasons"].items()))
+        if g.get("note"):
+            lines.append(f"      = {g['note']}")
     return lines
 
 
@@ -334,7 +370,10 @@ def plot_sweep(doc: dict[str, Any], path: Path) -> Path:
     ax1.errorbar(x, ratios, yerr=err, fmt="none", ecolor="k", capsize=6)
     for k, g in zip(x, groups, strict=True):
         ax1.text(k, min(1.0, g["ci95"][1]) + 0.03, f"{g['successes']}/{g['n']}", ha="center", fontsize=9)
-    ax1.set_xticks(list(x), [g["label"] for g in groups])
+    labels = [g["label"].replace("=", "=\n", 1) if len(g["label"]) > 12 else g["label"] for g in groups]
+    ax1.set_xticks(list(x), [lab + (" (=)" if g.get("identical_replicates") else "")
+                             for lab, g in zip(labels, groups, strict=True)],
+                   rotation=30 if len(groups) > 3 else 0, ha="right" if len(groups) > 3 else "center", fontsize=8)
     ax1.set_ylim(0, 1.12)
     ax1.set_ylabel("success ratio (95% Wilson CI)")
     ax1.set_title("success per group", fontsize=10)

@@ -261,8 +261,8 @@ def validate(scenario: Scenario, overridden: bool = False) -> None:
     doc = scenario.doc
     for key in doc:
         if key not in SCHEMA:
-            raise ScenarioError(f"unknown key {key!r}{did_you_mean(key, SCHEMA)}{_where(scenario, key, overridden)}: "
-                                "known keys are " + ", ".join(SCHEMA))
+            raise ScenarioError(f"unknown key {key!r}{_where(scenario, key, overridden)}: known keys are "
+                                + ", ".join(SCHEMA) + did_you_mean(key, SCHEMA))
     for key, spec in SCHEMA.items():
         if isinstance(spec, dict):
             table = doc.setdefault(key, {})
@@ -295,8 +295,8 @@ def _validate_table(scenario: Scenario, name: str, table: dict, spec: dict, over
             continue  # a feature, checked by _check_features
         if key not in spec:
             known = ", ".join(spec) + (", or a feature table [terrain.NAME]" if name == "terrain" else "")
-            raise ScenarioError(f"unknown key {full!r}{did_you_mean(key, spec)}{_where(scenario, full, overridden)}: "
-                                f"known keys of [{name}] are {known}")
+            raise ScenarioError(f"unknown key {full!r}{_where(scenario, full, overridden)}: known keys of "
+                                f"[{name}] are {known}{did_you_mean(key, spec)}")
         f = spec[key]
         if f.kind is dict:
             if not isinstance(value, dict):

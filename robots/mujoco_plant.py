@@ -56,7 +56,7 @@ class MujocoHexapod(CoSimBlock):
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
-                 settle: float = 0.0, **params: float) -> None:
+                 settle: float = 0.0, native: bool = True, **params: float) -> None:
         if not isinstance(geometry, RobotGeometry):
             raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
         contact = contact or ContactModel()
@@ -77,6 +77,8 @@ class MujocoHexapod(CoSimBlock):
         self.time_step = contact.timestep
         self.sense_shank = bool(sense_shank)
         self.settle = float(settle)
+        self.native = bool(native)
+        self._native = None
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
         self._q_target = q0_arr.copy()
@@ -156,10 +158,17 @@ class MujocoHexapod(CoSimBlock):
         self._link_contact = np.zeros(6, dtype=bool)
         self._n_steps = 0
         self._bind_readout()
+        self._native = None
+        if self.native:
+            try:
+                from cpgsim.robots.mujoco_native import NativeMujocoStep
+
+                self._native = NativeMujocoStep(model, data, self._geom_code)
+            except NativeUnavailable:  # no compiler or no libmujoco: Python sub-steps (slower, same results)
+                self._native = None
         for _ in range(int(round(self.settle / self.time_step))):
             self._update_ctrl(self.time_step)
-            mujoco.mj_step(model, data)
-            self._read_contacts()
+            self._substeps(1)
         data.time = float(t0)
         self._t = float(t0)
         self._update_outputs()
@@ -186,6 +195,7 @@ class MujocoHexapod(CoSimBlock):
             self._readout = evaluate
 
     def terminate(self) -> None:
+        self._native = None
         self.model = None
         self.data = None
 
@@ -234,7 +244,26 @@ class MujocoHexapod(CoSimBlock):
         if abs(t - self._t) > 0.5 * self.time_step:
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
         self._update_ctrl(dt)
+        self._substeps(n)
+        self._t = t + dt
+        self._n_steps += n
+        self._update_outputs()
+
+    def _substeps(self, n: int) -> None:
+        """``n`` MuJoCo steps; the contact forces averaged and the contact flags or-ed over them."""
+        if self._native is not None:
+            native = self._native
+            native.run(n)
+            self._force_world[:] = native.force
+            flags = native.flags
+            self._body_contact = bool(flags[0])
+            self._link_contact[:] = flags[1:] > 0.5
+            return
         model, data = self.model, self.data
+        if n == 1:
+            mujoco.mj_step(model, data)
+            self._read_contacts()
+            return
         total = np.zeros(18)
         body = False
         link = np.zeros(6, dtype=bool)
@@ -247,9 +276,6 @@ class MujocoHexapod(CoSimBlock):
         self._force_world[:] = total / n
         self._body_contact = body
         self._link_contact[:] = link
-        self._t = t + dt
-        self._n_steps += n
-        self._update_outputs()
 
     def _read_contacts(self) -> None:
         """Sum the contact forces on the robot per leg (world frame)."""

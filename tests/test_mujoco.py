@@ -145,7 +145,6 @@ def test_make_plant_and_scenario_engine():
 
 def test_native_step_equals_python_step():
     """The C macro step (mj_step + contact sums in C) gives bit-identical outputs to the Python sub-steps."""
-    from cpgsim.harness.native import NativeUnavailable
 
     outs = {}
     for native in (True, False):

@@ -163,7 +163,7 @@ class MujocoHexapod(CoSimBlock):
             try:
                 from cpgsim.robots.mujoco_native import NativeMujocoStep
 
-                self._native = NativeMujocoStep(model, data, self._geom_code)
+                self._native = NativeMujocoStep(model, data, self._geom_code, force=self._force_world)
             except NativeUnavailable:  # no compiler or no libmujoco: Python sub-steps (slower, same results)
                 self._native = None
         for _ in range(int(round(self.settle / self.time_step))):
@@ -277,6 +277,49 @@ class MujocoHexapod(CoSimBlock):
         self._body_contact = body
         self._link_contact[:] = link
 
+    # -- the closed loop in C (cpgsim.harness.fused) ----------------------------------------------------
+    def closed_loop(self, commit_fn: int, ctx: int, nx: int, nz: int, u: np.ndarray, y: np.ndarray,
+                    u_map: list[tuple[slice, str]], inputs: dict[str, slice], yi: np.ndarray, dt: float):
+        """A :class:`~cpgsim.robots.mujoco_native.FusedLoop` running this plant with a controller's bound
+        compiled step (``commit_fn(ctx, t, nx, nz)``, the ``cpgsim_step_commit`` of
+        :mod:`cpgsim.harness.native`) in one C loop, or None when this plant cannot (no native step,
+        ``velocity_ff`` on, an input that is not ``q_target``).
+
+        ``u_map``: which slice of the controller's input vector ``u`` takes which output port; ``inputs``:
+        the slice of the controller's signals ``y`` feeding each input port; ``yi``: the recorded signals.
+        """
+        if (self._native is None or not isinstance(self._readout, NativeFunction) or self.values["velocity_ff"]
+                or set(inputs) != {"q_target"}):
+            return None
+        from cpgsim.robots.mujoco_native import FusedLoop
+
+        sl = inputs["q_target"]
+        qt_idx = np.arange(sl.start, sl.stop)
+        if qt_idx.size != 18:
+            return None
+        u_idx, o_idx = [], []
+        for u_sl, port in u_map:
+            o_sl = _PORT_DICT[port]
+            u_idx += list(range(u_sl.start, u_sl.stop))
+            o_idx += list(range(o_sl.start, o_sl.stop))
+        self._dt_bound = dt
+        self.output_slices = dict(_PORT_DICT)
+        return FusedLoop(self, self._native, commit_fn, ctx, nx, nz, u, y, np.array(u_idx), np.array(o_idx), qt_idx,
+                         np.asarray(yi))
+
+    def _after_fused(self, steps: int, t: float | None) -> None:
+        """Bring the Python side up to date after ``steps`` macro steps of the fused loop (ending at ``t``)."""
+        if steps <= 0:
+            return
+        self._t = t
+        self._n_steps += steps * self._steps_for(self._dt_bound)
+        self._q_target = np.array(self.data.ctrl)
+        self._q_target_prev = self._q_target
+        flags = self._native.flags
+        self._force_world[:] = self._native.force
+        self._body_contact = bool(flags[0])
+        self._link_contact[:] = flags[1:] > 0.5
+
     def _read_contacts(self) -> None:
         """Sum the contact forces on the robot per leg (world frame)."""
         model, data = self.model, self.data
@@ -361,3 +404,4 @@ _k = 0
 for _name, _size in OUTPUT_PORTS:
     _PORT_SLICES.append((_name, slice(_k, _k + _size)))
     _k += _size
+_PORT_DICT = dict(_PORT_SLICES)

@@ -190,3 +190,42 @@ def test_fused_closed_loop_equals_python_master(monkeypatch):
     assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
     np.testing.assert_array_equal(a.data, b.data)
     assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
+
+
+def test_mjcf_terrain_of_every_feature_has_the_terrains_heights():
+    """Steps, ditches, gaps, stairs and blocks: a ray cast down in MuJoCo meets the ground at height_at."""
+    feats = {
+        "b": {"type": "ditch", "depth": 0.04, "width": 0.1, "position_y": 0.4, "side": "left"},
+        "c": {"type": "gap", "width": 0.08, "position_y": 0.7, "side": "both"},
+        "e": {"type": "blocks", "position_y": 1.0, "length": 0.5, "half_width": 0.3, "size": 0.05,
+              "height_min": 0.0, "height_max": 0.03, "seed": 4, "side": "both"},
+        "d": {"type": "stairs", "rise": 0.02, "run": 0.1, "count": 3, "position_y": 1.8, "side": "left"},
+        "a": {"type": "step", "height": 0.03, "position_y": 1.8, "side": "right"},
+    }
+    terrain = tr.compose(feats, 1.0)
+    model = mujoco.MjModel.from_xml_string(mjcf(YU_SIM, terrain))
+    data = mujoco.MjData(model)
+    data.qpos[2] = 10.0  # the robot far above the rays
+    mujoco.mj_forward(model, data)
+    rng = np.random.default_rng(0)
+    geomid = np.zeros(1, dtype=np.int32)
+    hits = holes = 0
+    for x, y in zip(rng.uniform(-0.5, 0.5, 400), rng.uniform(0.0, 2.6, 400), strict=True):
+        d = mujoco.mj_ray(model, data, np.array([x, y, 1.0]), np.array([0.0, 0.0, -1.0]), None, 1, 1, geomid)
+        expected = terrain.height_at(x, y)
+        if np.isfinite(expected) and expected > -0.5:
+            assert d >= 0 and 1.0 - d == pytest.approx(expected, abs=1e-9), (x, y)
+            hits += 1
+        else:  # a bottomless gap: nothing (or only the far bottom of the world) below
+            assert d < 0 or 1.0 - d < -0.5, (x, y)
+            holes += 1
+    assert hits > 300 and holes > 0
+
+
+def test_fukuhara_scenarios_refuse_mujoco():
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.scenario import ScenarioError, builtin_names, load
+
+    name = next(n for n in builtin_names() if load(n).doc["controller"]["kind"] == "fukuhara")
+    with pytest.raises(ScenarioError, match="DART only"):
+        build_scenario(name, {"robot.engine": "mujoco"})

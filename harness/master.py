@@ -179,7 +179,16 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
             stage = (path, "setup")
             blk.setup(t_list[0])
             started.append(blk)
-        for k in range(n + 1):
+        k0 = 0
+        if commit and n > 0:
+            from cpgsim.harness.fused import fused_runner, run_fused
+
+            fused = fused_runner(plan, cs, step, u, y, x.size, z.size, dt)
+            if fused is not None:  # the block runs the loop with the compiled step in C (harness/fused.py)
+                stage = (next(iter(cs)), "do_step")
+                k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)
+                stage = None
+        for k in range(k0, n + 1):
             t = t_list[k]
             for path, get in getters:
                 stage = (path, "get_outputs")

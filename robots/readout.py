@@ -14,7 +14,9 @@ plant's output ports, concatenated in port order (``OUTPUT_PORTS``):
 
 The body rotation comes from the root ``FreeJoint`` coordinates ``pos[:3]``, a rotation vector
 (DART's ``FreeJoint.convertToTransform``: ``R = exp([w]x)``, Rodrigues' formula, with its Taylor
-series below 1e-6 rad so the function stays finite at ``w = 0``).
+series below 1e-6 rad so the function stays finite at ``w = 0``). With ``root="quat"`` (the MuJoCo plant)
+``pos`` is MuJoCo's ``qpos`` instead: the free joint's position, then its unit quaternion ``(w, x, y, z)``,
+then the 18 joints (25 values); ``vel`` is ``qvel`` (24 values, joints from index 6 as in DART).
 """
 
 from __future__ import annotations
@@ -39,21 +41,39 @@ def rotation_from_rotation_vector(w: ca.SX) -> ca.SX:
     return ca.SX.eye(3) + a * K + b * (K @ K)
 
 
-def readout_function(geometry: RobotGeometry) -> ca.Function:
-    """The readout of a hexapod built from ``geometry`` (see the module docstring)."""
-    pos, vel = ca.SX.sym("pos", 24), ca.SX.sym("vel", 24)
+def rotation_from_quaternion(quat: ca.SX) -> ca.SX:
+    """Rotation matrix of a unit quaternion ``(w, x, y, z)``."""
+    w, x, y, z = quat[0], quat[1], quat[2], quat[3]
+    return ca.vertcat(
+        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        ca.horzcat(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
+
+
+def readout_function(geometry: RobotGeometry, root: str = "rotvec") -> ca.Function:
+    """The readout of a hexapod built from ``geometry`` (see the module docstring); ``root`` is ``"rotvec"``
+    (DART's free joint coordinates) or ``"quat"`` (MuJoCo's ``qpos``)."""
+    if root not in ("rotvec", "quat"):
+        raise ValueError(f"root must be 'rotvec' or 'quat', got {root!r}")
+    pos, vel = ca.SX.sym("pos", 24 if root == "rotvec" else 25), ca.SX.sym("vel", 24)
     force_world, contact = ca.SX.sym("force_world", 18), ca.SX.sym("body_contact")
-    R = rotation_from_rotation_vector(pos[:3])
-    p = pos[3:6]
+    if root == "rotvec":
+        R = rotation_from_rotation_vector(pos[:3])
+        p = pos[3:6]
+    else:
+        R = rotation_from_quaternion(pos[3:7])
+        p = pos[0:3]
+    joints = pos[-18:]
     toe, feet = [], []
     for i, (mx, my) in enumerate(geometry.mounts):
-        alpha, beta, gamma = pos[6 + 3 * i], pos[7 + 3 * i], pos[8 + 3 * i]
+        alpha, beta, gamma = joints[3 * i], joints[3 * i + 1], joints[3 * i + 2]
         outward, forward, h = leg_fk(geometry.leg, alpha, beta, gamma)
         local = ca.vertcat(float(mx) + geometry.side(i) * outward, float(my) + forward, h)
         feet.append(p + R @ local)
         toe.append(R.T @ force_world[3 * i:3 * i + 3])
     pitch = ca.asin(ca.fmin(1.0, ca.fmax(-1.0, R[2, 1])))
     rpy = ca.vertcat(ca.atan2(-R[2, 0], R[2, 2]), pitch, ca.atan2(-R[0, 1], R[1, 1]))
-    out = ca.vertcat(pos[6:], vel[6:], *toe, p, rpy, *feet, contact)
-    return ca.Function("hexapod_readout", [pos, vel, force_world, contact], [ca.cse(out)],
+    out = ca.vertcat(joints, vel[6:], *toe, p, rpy, *feet, contact)
+    name = "hexapod_readout" if root == "rotvec" else "hexapod_readout_quat"
+    return ca.Function(name, [pos, vel, force_world, contact], [ca.cse(out)],
                        ["pos", "vel", "force_world", "body_contact"], ["out"])

@@ -9,6 +9,7 @@ A scenario file (the built-ins are ``harness/experiments/scenarios/*.toml``)::
 
     [robot]                           # a geometry preset plus overrides, and the plant's servo gains
     preset = "yu-sim"                 # yu-sim (Yu Table 3) | yu-prototype (Yu Table 4)
+    engine = "dart"                   # dart (default) | mujoco (docs/engines.md)
     stance_width = 0.075              # m; also body_mass, height, clearance, ...; kp, kd, friction
 
     [controller]
@@ -56,6 +57,7 @@ from cpgsim.components.core import ModelError, did_you_mean
 BUILTIN_PACKAGE = "cpgsim.harness.experiments.scenarios"
 CONTROLLER_KINDS = ("yu", "yu-open-loop", "fukuhara")
 ROBOT_PRESETS = ("yu-sim", "yu-prototype")
+ROBOT_ENGINES = ("dart", "mujoco")  # cpgsim.robots.engines.ENGINES (this layer does not import robots)
 
 
 class ScenarioError(ModelError):
@@ -116,6 +118,7 @@ SCHEMA: dict[str, Any] = {
     "seed": Field(int, 0, lo=0, doc="random seed"),
     "robot": {
         "preset": Field(str, "yu-sim", choices=ROBOT_PRESETS, doc="geometry preset"),
+        "engine": Field(str, "dart", choices=ROBOT_ENGINES, doc="physics engine of the plant (docs/engines.md)"),
         **{k: Field(float, **POSITIVE, doc="geometry override (m, kg)") for k in GEOMETRY_KEYS},
         "kp": Field(float, **POSITIVE, doc="joint servo stiffness N*m/rad"),
         "kd": Field(float, **POSITIVE, doc="joint servo damping N*m*s/rad"),

@@ -303,6 +303,9 @@ def build(scenario: Scenario) -> RunSetup:
     amputation (``controller.case``, 3.2), gap crossing (``criteria.cross`` names the gap, 3.3)."""
     doc = scenario.doc
     ctrl_table, crit = doc["controller"], doc["criteria"]
+    if doc["robot"].get("engine", "dart") != "dart":
+        raise ScenarioError(f"robot.engine = {doc['robot']['engine']!r}: the fukuhara scenarios (amputated legs) run "
+                            f"on DART only so far ({scenario.source})")
     geometry = robot_geometry(scenario)
     terrain = terrain_of(scenario, geometry)
     case = int(ctrl_table.get("case", 0))

@@ -85,6 +85,7 @@ from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
 from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from cpgsim.harness.results import Results
 from cpgsim.robots import terrain as tr
+from cpgsim.robots.engines import make_plant
 from cpgsim.robots.plant import DartHexapod
 
 CONTROLLER = "controller"
@@ -109,13 +110,14 @@ def initial_targets(controller: Graph) -> np.ndarray:
 
 def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[str, float],
                 sets: dict[str, float], clearance_elevator: float | None = None,
-                gait: int = 1) -> tuple[Graph, DartHexapod]:
-    """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``)."""
+                gait: int = 1, engine: str = "dart") -> tuple[Graph, DartHexapod]:
+    """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``);
+    ``engine`` picks the plant (:mod:`cpgsim.robots.engines`; same ports in every engine)."""
     ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator)
     for key, value in thresholds.items():
         ctrl.set_param(f"*.sensors.{key}", value)
-    robot = DartHexapod(ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2)
-    g = Graph("yu_closed_loop", f"Yu hexapod controller on the DART {geometry.name} robot")
+    robot = make_plant(engine, ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2)
+    g = Graph("yu_closed_loop", f"Yu hexapod controller on the {engine} {geometry.name} robot")
     g.add(ctrl)
     g.add(robot)
     g.connect(f"{ROBOT}.toe_force", f"{CONTROLLER}.toe_force")
@@ -245,11 +247,11 @@ def build(scenario: Scenario) -> RunSetup:
     plant = {f"{ROBOT}.{k}": float(doc["robot"][k]) for k in PLANT_KEYS if k in doc["robot"]}
     try:
         graph, _ = closed_loop(geometry, terrain, thresholds, {**params, **plant}, ctrl.get("clearance_elevator"),
-                               gait=int(ctrl.get("gait", 1)))
+                               gait=int(ctrl.get("gait", 1)), engine=doc["robot"].get("engine", "dart"))
     except ModelError as exc:
         raise ScenarioError(f"{scenario.name}: {exc}") from None
     info = {"terrain": terrain.describe(), "stance_width_m": geometry.stance_width, "parameters": params,
-            "controller_kind": ctrl["kind"], **feature_summary(terrain)}
+            "controller_kind": ctrl["kind"], "engine": doc["robot"].get("engine", "dart"), **feature_summary(terrain)}
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
                     thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
                     waiting=waiting_of, scenario=scenario, held=held_of, paper_hit_forces=YU_HIT_PEAKS_N)

@@ -1,0 +1,197 @@
+"""The hexapod and its terrain as a MuJoCo model (MJCF text), from the same description as the DART model.
+
+One source of truth: :func:`mjcf` reads the :class:`~cpgsim.components.geometry.RobotGeometry`, the
+:class:`~cpgsim.robots.hexapod.LinkSizes` and the :class:`~cpgsim.robots.terrain.Terrain` boxes that
+:func:`cpgsim.robots.hexapod.build_hexapod` and :meth:`Terrain.add_to` read, and builds the same bodies,
+frames, joint axes, shapes and masses (:mod:`cpgsim.robots.hexapod` explains them):
+
+- a free root joint carrying the body box; per leg the ``alpha`` (``side * z``), ``beta`` (``-y``) and
+  ``gamma`` (``+y``) hinges at the mount, coxa end and femur end, in a leg frame with ``x`` outward (the
+  left legs' frame is turned by pi about ``z``); box links, the tibia box stopping half a foot radius short
+  of the foot sphere at the tibia's end;
+- every body's mass, centre of mass and full inertia written out (``<inertial>``), computed here in closed
+  form (uniform solid box ``m/12 (b^2 + c^2)``, sphere ``2/5 m r^2``, parallel-axis sum) -- exactly what
+  DART's ``Shape.computeInertia`` and ``hexapod._set_inertia`` give (``tests/test_mujoco.py`` checks it);
+- joints unlimited, as in DART (the servos hold them); the servos are ``general`` actuators whose force
+  is DART's servo law (:class:`cpgsim.robots.mujoco_plant.MujocoHexapod` sets the gains);
+- terrain boxes as static world geoms. Only robot-terrain pairs collide (``contype``/``conaffinity``),
+  as in DART, where a skeleton does not collide with itself.
+
+Friction: DART takes the smaller of two touching shapes' coefficients, MuJoCo the larger unless one geom
+has a higher ``priority``; the terrain geoms get priority 1 and ``min(robot, terrain)`` friction, so the
+pair's coefficient is DART's. Contact parameters (:class:`ContactModel`) are documented in docs/engines.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cpgsim.components.geometry import LEG_NAMES, RobotGeometry
+from cpgsim.robots.terrain import Terrain
+
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class ContactModel:
+    """MuJoCo's contact and integration settings (docs/engines.md gives the measurements behind them).
+
+    - ``timestep``: 1 ms, DART's world step: one ``mj_step`` per control step (0.5 ms changed no
+      reflex of the 40 mm step and costs twice the time);
+    - ``solref``: ``(timeconst, dampratio)`` of the contact's spring-damper: 5 ms, critically damped.
+      MuJoCo needs ``timeconst >= 2 timestep``; its 20 ms default lets feet sink and bounce slowly, 5 ms
+      holds the standing robot with 0.09 mm of penetration and no bounce;
+    - ``solimp``: impedance ``(d0, dwidth, width)``: stiffening from 0.9 to 0.99 over 1 mm of penetration;
+    - ``condim``: 3 (normal + two tangential directions: Coulomb friction, no torsional/rolling friction,
+      as DART's contacts);
+    - ``cone``: ``'pyramidal'``, the friction pyramid DART's boxed LCP uses too (``'elliptic'`` is the
+      true Coulomb cone; it cost 1.6x per step here and changed no reflex);
+    - ``impratio``: 1 (MuJoCo's default; frictional and normal constraints equally soft).
+    """
+
+    timestep: float = 1e-3
+    solref: tuple[float, float] = (0.005, 1.0)
+    solimp: tuple[float, float, float] = (0.9, 0.99, 0.001)
+    condim: int = 3
+    cone: str = "pyramidal"
+    impratio: float = 1.0
+
+
+def box_inertia(mass: float, size: Sequence[float]) -> np.ndarray:
+    """Inertia (3x3, about the centre) of a uniform solid box of full edge lengths ``size``."""
+    a, b, c = (float(s) for s in size)
+    return mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+
+
+def sphere_inertia(mass: float, radius: float) -> np.ndarray:
+    """Inertia (3x3, about the centre) of a uniform solid sphere."""
+    return 0.4 * mass * radius * radius * np.eye(3)
+
+
+def combine(parts: Sequence[tuple[float, np.ndarray, np.ndarray]]) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(mass, com, inertia about com)`` of ``(mass, centre, inertia about centre)`` parts (parallel axes)."""
+    parts = [p for p in parts if p[0] > 0]
+    if not parts:
+        return 1e-6, np.zeros(3), 1e-9 * np.eye(3)
+    mass = sum(m for m, _, _ in parts)
+    com = sum(m * np.asarray(c, dtype=float) for m, c, _ in parts) / mass
+    inertia = np.zeros((3, 3))
+    for m, c, local in parts:
+        d = np.asarray(c, dtype=float) - com
+        inertia += local + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return mass, com, inertia
+
+
+@dataclass(frozen=True)
+class BodyMass:
+    """One body's mass properties in its own frame."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+
+
+def mass_properties(geometry: RobotGeometry, links=None) -> dict[str, BodyMass]:
+    """Mass, COM and inertia of every body (``body``, ``L1_coxa``, ``L1_femur``, ``L1_tibia``, ...)."""
+    from cpgsim.robots.hexapod import LinkSizes  # the DART module (dartpy) only for the link sizes' rule
+
+    leg = geometry.leg
+    links = links or LinkSizes.for_geometry(geometry)
+    out = {"body": BodyMass(*combine([(geometry.body_mass, np.zeros(3), box_inertia(
+        geometry.body_mass, (geometry.body_width, geometry.body_length, geometry.body_thickness)))]))}
+    shank_len = leg.shank - 0.5 * leg.foot_radius
+    for name in LEG_NAMES:
+        out[f"{name}_coxa"] = BodyMass(*combine([(leg.coxa_mass, np.array([leg.coxa / 2, 0, 0]), box_inertia(
+            leg.coxa_mass, (leg.coxa, links.coxa_width, links.coxa_width)))]))
+        out[f"{name}_femur"] = BodyMass(*combine([(leg.thigh_mass, np.array([leg.thigh / 2, 0, 0]), box_inertia(
+            leg.thigh_mass, (leg.thigh, links.femur_width, links.femur_width)))]))
+        out[f"{name}_tibia"] = BodyMass(*combine([
+            (leg.shank_mass, np.array([shank_len / 2, 0, 0]),
+             box_inertia(leg.shank_mass, (shank_len, links.tibia_width, links.tibia_width))),
+            (leg.foot_mass, np.array([leg.shank, 0, 0]), sphere_inertia(leg.foot_mass, leg.foot_radius))]))
+    return out
+
+
+def _v(values: Sequence[float]) -> str:
+    return " ".join(f"{float(x):.17g}" for x in values)
+
+
+def _inertial(bm: BodyMass) -> str:
+    I = bm.inertia  # noqa: E741
+    full = (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+    return f'<inertial pos="{_v(bm.com)}" mass="{bm.mass:.17g}" fullinertia="{_v(full)}"/>'
+
+
+ROBOT_COLLISION = 'contype="1" conaffinity="0"'
+TERRAIN_COLLISION = 'contype="0" conaffinity="1" priority="1"'
+
+
+def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
+         contact: ContactModel | None = None, links=None) -> str:
+    """The MJCF document of the hexapod on ``terrain`` (body at the world origin, joints at 0).
+
+    Actuators ``{leg}_{joint}_servo`` (one per hinge, leg-major) are ``general`` with unit gain and zero
+    bias; the plant writes the servo gains into ``actuator_gainprm``/``actuator_biasprm``.
+    """
+    from cpgsim.robots.hexapod import LinkSizes
+
+    contact = contact or ContactModel()
+    leg = geometry.leg
+    links = links or LinkSizes.for_geometry(geometry)
+    masses = mass_properties(geometry, links)
+    geom_common = f'condim="{contact.condim}" solref="{_v(contact.solref)}" solimp="{_v(contact.solimp)}"'
+    rgeom = f'{ROBOT_COLLISION} friction="{friction:.17g} 0 0" {geom_common}'
+    shank_len = leg.shank - 0.5 * leg.foot_radius
+    lines = [
+        f'<mujoco model="{geometry.name}">',
+        '  <compiler angle="radian" autolimits="true" inertiafromgeom="false"/>',
+        f'  <option timestep="{contact.timestep:.17g}" gravity="0 0 {-GRAVITY}" integrator="implicitfast" '
+        f'cone="{contact.cone}" impratio="{contact.impratio:.17g}"/>',
+        '  <size memory="4M"/>',
+        '  <worldbody>',
+    ]
+    ground_mu = min(friction, terrain.friction)
+    for k, b in enumerate(terrain.boxes):
+        half = (b.x1 - b.x0) / 2, (b.y1 - b.y0) / 2, b.thickness / 2
+        centre = (b.x0 + b.x1) / 2, (b.y0 + b.y1) / 2, b.top - b.thickness / 2
+        lines.append(f'    <geom name="ground_{k}" type="box" size="{_v(half)}" pos="{_v(centre)}" '
+                     f'{TERRAIN_COLLISION} friction="{ground_mu:.17g} 0 0" {geom_common}/>')
+    lines += ['    <body name="body" pos="0 0 0">', '      <freejoint name="root"/>',
+              f'      {_inertial(masses["body"])}',
+              f'      <geom name="body_box" type="box" size="'
+              f'{_v((geometry.body_width / 2, geometry.body_length / 2, geometry.body_thickness / 2))}" {rgeom}/>']
+    for i, (mx, my) in enumerate(geometry.mounts):
+        side = geometry.side(i)
+        name = LEG_NAMES[i]
+        quat = "1 0 0 0" if side > 0 else "0 0 0 1"  # left legs: leg frame turned by pi about z
+        cw, fw, tw = links.coxa_width / 2, links.femur_width / 2, links.tibia_width / 2
+        lines += [
+            f'      <body name="{name}_coxa" pos="{_v((mx, my, 0.0))}" quat="{quat}">',
+            f'        <joint name="{name}_alpha" type="hinge" axis="0 0 {float(side):g}"/>',
+            f'        {_inertial(masses[f"{name}_coxa"])}',
+            f'        <geom name="{name}_coxa_box" type="box" size="{_v((leg.coxa / 2, cw, cw))}" '
+            f'pos="{_v((leg.coxa / 2, 0, 0))}" {rgeom}/>',
+            f'        <body name="{name}_femur" pos="{_v((leg.coxa, 0, 0))}">',
+            f'          <joint name="{name}_beta" type="hinge" axis="0 -1 0"/>',
+            f'          {_inertial(masses[f"{name}_femur"])}',
+            f'          <geom name="{name}_femur_box" type="box" size="{_v((leg.thigh / 2, fw, fw))}" '
+            f'pos="{_v((leg.thigh / 2, 0, 0))}" {rgeom}/>',
+            f'          <body name="{name}_tibia" pos="{_v((leg.thigh, 0, 0))}">',
+            f'            <joint name="{name}_gamma" type="hinge" axis="0 1 0"/>',
+            f'            {_inertial(masses[f"{name}_tibia"])}',
+            f'            <geom name="{name}_tibia_box" type="box" size="{_v((shank_len / 2, tw, tw))}" '
+            f'pos="{_v((shank_len / 2, 0, 0))}" {rgeom}/>',
+            f'            <geom name="{name}_foot" type="sphere" size="{leg.foot_radius:.17g}" '
+            f'pos="{_v((leg.shank, 0, 0))}" {rgeom}/>',
+            '          </body>', '        </body>', '      </body>',
+        ]
+    lines += ['    </body>', '  </worldbody>', '  <actuator>']
+    for name in LEG_NAMES:
+        for j in ("alpha", "beta", "gamma"):
+            lines.append(f'    <general name="{name}_{j}_servo" joint="{name}_{j}" gainprm="1" biasprm="0 0 0" '
+                         f'biastype="affine"/>')
+    lines += ['  </actuator>', '</mujoco>']
+    return "\n".join(lines) + "\n"

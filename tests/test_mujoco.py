@@ -1,0 +1,231 @@
+"""The MuJoCo plant: its model is the DART model (masses, inertias, kinematics, terrain), its ports are the
+DART plant's, a standing robot carries its weight, and scenarios switch engines with ``robot.engine``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
+
+from cpgsim.components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM  # noqa: E402
+from cpgsim.robots import terrain as tr  # noqa: E402
+from cpgsim.robots.engines import make_plant  # noqa: E402
+from cpgsim.robots.hexapod import build_hexapod  # noqa: E402
+from cpgsim.robots.mjcf import mjcf  # noqa: E402
+from cpgsim.robots.mujoco_plant import MujocoHexapod  # noqa: E402
+from cpgsim.robots.plant import GRAVITY, DartHexapod, standing_posture  # noqa: E402
+
+
+def _mj_inertia(model, body_id: int) -> np.ndarray:
+    """Full inertia matrix (body frame, about the COM) from MuJoCo's principal moments and frame."""
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, model.body_iquat[body_id])
+    R = R.reshape(3, 3)
+    return R @ np.diag(model.body_inertia[body_id]) @ R.T
+
+
+@pytest.mark.parametrize("geometry", [YU_SIM, YU_PROTOTYPE], ids=["yu-sim", "yu-prototype"])
+def test_mjcf_mass_properties_equal_dart(geometry):
+    dart_model = build_hexapod(geometry)
+    model = mujoco.MjModel.from_xml_string(mjcf(geometry, tr.flat()))
+    names = ["body"] + [f"{leg}_{link}" for leg in LEG_NAMES for link in ("coxa", "femur", "tibia")]
+    assert model.nbody == 1 + len(names)
+    skel = dart_model.skeleton
+    for name in names:
+        bn = skel.getBodyNode(name)
+        b = model.body(name).id
+        assert model.body_mass[b] == pytest.approx(bn.getMass(), rel=1e-12), name
+        np.testing.assert_allclose(model.body_ipos[b], bn.getLocalCOM(), atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(_mj_inertia(model, b), bn.getInertia().getMoment(), rtol=1e-6, atol=1e-14,
+                                   err_msg=name)
+    assert model.body_mass[1:].sum() == pytest.approx(geometry.mass, rel=1e-12)
+
+
+def test_mjcf_joints_match_dart_kinematics():
+    """Same joint order, no limits (as in DART), and the same foot and link positions for random angles."""
+    geometry = YU_SIM
+    dart_model = build_hexapod(geometry)
+    model = mujoco.MjModel.from_xml_string(mjcf(geometry, tr.flat()))
+    data = mujoco.MjData(model)
+    hinge_names = [model.joint(j).name for j in range(1, model.njnt)]
+    assert hinge_names == [j.getName() for j in dart_model.joints]
+    assert not model.jnt_limited.any()
+    assert not any(j.areLimitsEnforced() for j in dart_model.joints)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = rng.uniform(-1.0, 1.0, 18)
+        dart_model.set_joint_angles(q)
+        dart_model.set_body_pose([0.1, -0.2, 0.3])
+        data.qpos[:3] = (0.1, -0.2, 0.3)
+        data.qpos[3:7] = (1, 0, 0, 0)
+        data.qpos[7:] = q
+        mujoco.mj_kinematics(model, data)
+        for i, leg in enumerate(LEG_NAMES):
+            np.testing.assert_allclose(data.geom_xpos[model.geom(f"{leg}_foot").id], dart_model.foot_positions()[i],
+                                       atol=1e-12)
+            for k, link in enumerate(("coxa", "femur", "tibia")):
+                T = dart_model.link_bodies[i][k].getWorldTransform()
+                np.testing.assert_allclose(data.xpos[model.body(f"{leg}_{link}").id], T.translation(), atol=1e-12)
+                np.testing.assert_allclose(data.xmat[model.body(f"{leg}_{link}").id].reshape(3, 3), T.rotation(),
+                                           atol=1e-12)
+
+
+def test_mjcf_terrain_boxes_and_friction():
+    terrain = tr.step(height=0.04, position_y=0.355, side="right", friction=0.6)
+    model = mujoco.MjModel.from_xml_string(mjcf(YU_SIM, terrain, friction=0.9))
+    for k, b in enumerate(terrain.boxes):
+        g = model.geom(f"ground_{k}")
+        assert g.pos[2] + g.size[2] == pytest.approx(b.top)
+        assert g.pos[0] - g.size[0] == pytest.approx(b.x0) and g.pos[1] + g.size[1] == pytest.approx(b.y1)
+        assert g.friction[0] == pytest.approx(0.6)  # DART's rule: the smaller of the two coefficients
+    assert model.geom("L1_foot").friction[0] == pytest.approx(0.9)
+    assert model.geom("L1_foot").size[0] == pytest.approx(YU_SIM.leg.foot_radius)
+
+
+def test_ports_and_parameters_equal_dart():
+    m, d = MujocoHexapod(), DartHexapod()
+    assert list(m.inputs) == list(d.inputs) and list(m.outputs) == list(d.outputs)
+    for a, b in [(m.inputs, d.inputs), (m.outputs, d.outputs), (m.parameters, d.parameters)]:
+        for key in b:
+            assert repr(a[key]) == repr(b[key]), key
+
+
+def test_standing_robot_carries_its_weight():
+    plant = MujocoHexapod(settle=0.5)
+    plant.setup(0.0)
+    for k in range(200):
+        plant.set_inputs({"q_target": plant.q0})
+        plant.do_step(k * 1e-3, 1e-3)
+    out = plant.get_outputs()
+    fw = plant.toe_force_world()
+    weight = YU_SIM.mass * GRAVITY
+    assert fw[:, 2].sum() == pytest.approx(weight, rel=0.01)
+    assert np.all(fw[:, 2] > 0.1 * weight / 6)  # every foot stands
+    assert np.abs(fw[:, :2]).max() < 0.05 * weight  # no sliding
+    assert out["toe_force"].reshape(6, 3)[:, 2].sum() == pytest.approx(weight, rel=0.01)  # body frame, level
+    np.testing.assert_allclose(out["q"], standing_posture(YU_SIM), atol=0.03)
+    assert abs(out["body_rpy"]).max() < 1e-3
+    assert not plant.fell() and out["body_contact"][0] == 0.0
+    # the readout's foot centres are MuJoCo's own (xpos after mj_step is of the step's start: recompute)
+    mujoco.mj_kinematics(plant.model, plant.data)
+    feet = np.array([plant.data.geom_xpos[plant.model.geom(f"{leg}_foot").id] for leg in LEG_NAMES])
+    np.testing.assert_allclose(out["foot_position"].reshape(6, 3), feet, atol=1e-9)
+    # and they stand on the ground (penetration of the soft contact below 1 mm)
+    assert np.abs(feet[:, 2] - YU_SIM.leg.foot_radius).max() < 1e-3
+
+
+def test_servo_law_is_darts():
+    """The actuator force is DART's ``-kp (q + h qd - q_target) - kd qd``."""
+    plant = MujocoHexapod(kp=50.0, kd=0.7)
+    plant.setup(0.0)
+    data, model = plant.data, plant.model
+    target = plant.q0 + 0.1
+    plant.set_inputs({"q_target": target})
+    plant._update_ctrl(1e-3)
+    data.qvel[6:] = np.linspace(-1, 1, 18)
+    mujoco.mj_forward(model, data)
+    q, qd, h = data.qpos[7:], data.qvel[6:], plant.time_step
+    np.testing.assert_allclose(data.actuator_force, -50.0 * (q + h * qd - target) - 0.7 * qd, rtol=1e-12)
+
+
+def test_make_plant_and_scenario_engine():
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.scenario import ScenarioError
+
+    assert isinstance(make_plant("mujoco", "robot"), MujocoHexapod)
+    assert isinstance(make_plant("dart", "robot"), DartHexapod)
+    setup = build_scenario("step", {"robot.engine": "mujoco"})
+    assert isinstance(setup.graph.blocks["robot"], MujocoHexapod)
+    assert setup.info["engine"] == "mujoco"
+    assert isinstance(build_scenario("step").graph.blocks["robot"], DartHexapod)  # DART stays the default
+    with pytest.raises(ScenarioError, match="robot.engine must be one of dart, mujoco"):
+        build_scenario("step", {"robot.engine": "bullet"})
+
+
+def test_native_step_equals_python_step():
+    """The C macro step (mj_step + contact sums in C) gives bit-identical outputs to the Python sub-steps."""
+
+    outs = {}
+    for native in (True, False):
+        plant = MujocoHexapod(settle=0.1, native=native, time_step=5e-4,
+                              terrain=tr.step(height=0.04, position_y=0.2, side="right"))
+        plant.setup(0.0)
+        if native and plant._native is None:
+            pytest.skip("no C compiler or no libmujoco for the native step")
+        assert (plant._native is not None) == native
+        for k in range(150):
+            q = plant.q0.copy()
+            q[9::3] += 0.3 * np.sin(0.02 * k)  # R-legs swing: contacts come and go
+            plant.set_inputs({"q_target": q})
+            plant.do_step(k * 1e-3, 1e-3)  # two MuJoCo steps per macro step: averaging too
+        outs[native] = plant.get_outputs()
+    for key, value in outs[True].items():
+        np.testing.assert_array_equal(value, outs[False][key], err_msg=key)
+    assert np.abs(outs[True]["toe_force"]).sum() > 1.0
+
+
+def test_fused_closed_loop_equals_python_master(monkeypatch):
+    """The controller + MuJoCo loop in C (harness/fused.py) records the same numbers as the Python master."""
+    import cpgsim.harness.fused as fused
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.simulate import Simulator
+
+    runs, used = {}, {}
+    original = fused.fused_runner
+    for allow in (True, False):
+        def runner(*args, allow=allow):
+            r = original(*args) if allow else None
+            used[allow] = r is not None
+            return r
+
+        monkeypatch.setattr(fused, "fused_runner", runner)
+        setup = build_scenario("step", {"robot.engine": "mujoco"})
+        sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=False).prepare()
+        runs[allow] = sim.run(1.25)  # a chunk boundary inside, a partial last chunk
+    if not used[True]:
+        pytest.skip("no fused loop here (no C compiler or no libmujoco)")
+    assert used == {True: True, False: False}
+    a, b = runs[True], runs[False]
+    assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
+    np.testing.assert_array_equal(a.data, b.data)
+    assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
+
+
+def test_mjcf_terrain_of_every_feature_has_the_terrains_heights():
+    """Steps, ditches, gaps, stairs and blocks: a ray cast down in MuJoCo meets the ground at height_at."""
+    feats = {
+        "b": {"type": "ditch", "depth": 0.04, "width": 0.1, "position_y": 0.4, "side": "left"},
+        "c": {"type": "gap", "width": 0.08, "position_y": 0.7, "side": "both"},
+        "e": {"type": "blocks", "position_y": 1.0, "length": 0.5, "half_width": 0.3, "size": 0.05,
+              "height_min": 0.0, "height_max": 0.03, "seed": 4, "side": "both"},
+        "d": {"type": "stairs", "rise": 0.02, "run": 0.1, "count": 3, "position_y": 1.8, "side": "left"},
+        "a": {"type": "step", "height": 0.03, "position_y": 1.8, "side": "right"},
+    }
+    terrain = tr.compose(feats, 1.0)
+    model = mujoco.MjModel.from_xml_string(mjcf(YU_SIM, terrain))
+    data = mujoco.MjData(model)
+    data.qpos[2] = 10.0  # the robot far above the rays
+    mujoco.mj_forward(model, data)
+    rng = np.random.default_rng(0)
+    geomid = np.zeros(1, dtype=np.int32)
+    hits = holes = 0
+    for x, y in zip(rng.uniform(-0.5, 0.5, 400), rng.uniform(0.0, 2.6, 400), strict=True):
+        d = mujoco.mj_ray(model, data, np.array([x, y, 1.0]), np.array([0.0, 0.0, -1.0]), None, 1, 1, geomid)
+        expected = terrain.height_at(x, y)
+        if np.isfinite(expected) and expected > -0.5:
+            assert d >= 0 and 1.0 - d == pytest.approx(expected, abs=1e-9), (x, y)
+            hits += 1
+        else:  # a bottomless gap: nothing (or only the far bottom of the world) below
+            assert d < 0 or 1.0 - d < -0.5, (x, y)
+            holes += 1
+    assert hits > 300 and holes > 0
+
+
+def test_fukuhara_scenarios_refuse_mujoco():
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.scenario import ScenarioError, builtin_names, load
+
+    name = next(n for n in builtin_names() if load(n).doc["controller"]["kind"] == "fukuhara")
+    with pytest.raises(ScenarioError, match="DART only"):
+        build_scenario(name, {"robot.engine": "mujoco"})

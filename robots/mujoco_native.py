@@ -19,9 +19,9 @@ import ctypes
 import os
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
-import mujoco
 from cpgsim.harness.native import NativeUnavailable, compile_source, optimization_flags
 
 SOURCE = r"""

@@ -25,9 +25,9 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+import mujoco
 import numpy as np
 
-import mujoco
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.harness.native import NativeFunction, NativeUnavailable

@@ -139,7 +139,7 @@ def failure_reasons(trials: list[dict[str, Any]]) -> dict[str, int]:
         if t["status"] != "ok":
             reasons["crashed"] = reasons.get("crashed", 0) + 1
         elif not t["outcome"].get("success"):
-            for c in t["outcome"].get("criteria_failed", []) or ["unknown"]:
+            for c in t["outcome"].get("criteria_failed", []) or ["no criterion recorded"]:
                 reasons[c] = reasons.get(c, 0) + 1
     return reasons
 

@@ -160,3 +160,73 @@ def test_diagram_tooltip_shows_the_conversion():
     g = _wire("mm", "m")
     svg = _svg(g, layout_graph(g), "g")
     assert "c.y -&gt; k.u [mm], converted to [m]: x 0.001</title>" in svg
+
+
+# Every symbol cpgsim knows, transcribed here from the SI brochure (BIPM, 9th ed., tables 2, 4, 8 and
+# the prefixes of table 7), independently of components/units.py: (factor to SI, exponents, offset).
+SI_TABLE = {
+    "kg": (1.0, {"kg": 1}, 0.0), "g": (1e-3, {"kg": 1}, 0.0), "mg": (1e-6, {"kg": 1}, 0.0),
+    "m": (1.0, {"m": 1}, 0.0), "km": (1e3, {"m": 1}, 0.0), "cm": (1e-2, {"m": 1}, 0.0),
+    "mm": (1e-3, {"m": 1}, 0.0), "um": (1e-6, {"m": 1}, 0.0),
+    "s": (1.0, {"s": 1}, 0.0), "ms": (1e-3, {"s": 1}, 0.0), "us": (1e-6, {"s": 1}, 0.0),
+    "min": (60.0, {"s": 1}, 0.0), "h": (3600.0, {"s": 1}, 0.0),
+    "A": (1.0, {"A": 1}, 0.0), "mA": (1e-3, {"A": 1}, 0.0),
+    "K": (1.0, {"K": 1}, 0.0), "degC": (1.0, {"K": 1}, 273.15),
+    "mol": (1.0, {"mol": 1}, 0.0), "cd": (1.0, {"cd": 1}, 0.0),
+    "rad": (1.0, {"rad": 1}, 0.0), "deg": (math.pi / 180, {"rad": 1}, 0.0),
+    "Hz": (1.0, {"s": -1}, 0.0), "kHz": (1e3, {"s": -1}, 0.0),
+    "N": (1.0, {"kg": 1, "m": 1, "s": -2}, 0.0), "mN": (1e-3, {"kg": 1, "m": 1, "s": -2}, 0.0),
+    "kN": (1e3, {"kg": 1, "m": 1, "s": -2}, 0.0),
+    "Pa": (1.0, {"kg": 1, "m": -1, "s": -2}, 0.0), "kPa": (1e3, {"kg": 1, "m": -1, "s": -2}, 0.0),
+    "J": (1.0, {"kg": 1, "m": 2, "s": -2}, 0.0), "W": (1.0, {"kg": 1, "m": 2, "s": -3}, 0.0),
+    "V": (1.0, {"kg": 1, "m": 2, "s": -3, "A": -1}, 0.0),
+}
+
+
+@pytest.mark.parametrize("symbol", sorted(SI_TABLE))
+def test_every_symbol_against_the_si_brochure(symbol):
+    factor, exponents, offset = SI_TABLE[symbol]
+    d = parse_unit(symbol)
+    assert d.known and d.exponents == exponents and d.offset == offset
+    assert d.factor == pytest.approx(factor, rel=1e-15)
+    # and the same symbol squared, in a denominator, and behind "1*": exponents and factor follow
+    sq, inv, one = parse_unit(f"{symbol}2"), parse_unit(f"1/{symbol}"), parse_unit(f"1*{symbol}")
+    assert sq.exponents == {b: 2 * e for b, e in exponents.items()} and sq.factor == pytest.approx(factor ** 2)
+    assert inv.exponents == {b: -e for b, e in exponents.items()} and inv.factor == pytest.approx(1 / factor)
+    assert one.exponents == exponents and one.factor == pytest.approx(factor) and one.offset == offset
+
+
+def test_the_table_is_complete():
+    from cpgsim.components.units import SYMBOLS
+
+    assert set(SYMBOLS) == set(SI_TABLE)
+
+
+def test_dimension_text_and_defaults():
+    assert parse_unit("N").dimension() == "kg m s-2"
+    assert parse_unit("m/s").dimension() == "m s-1"
+    assert parse_unit("1").dimension() == "1" and parse_unit("s/s").dimension() == "1"
+    assert parse_unit("furlong").dimension() == "?"
+    # FMI's <BaseUnit> defaults (factor 1, offset 0) for a unit without base units
+    unknown = parse_unit("furlong")
+    assert (unknown.factor, unknown.offset, unknown.exponents) == (1.0, 0.0, {})
+    assert parse_unit("").name == "1" and parse_unit(" - ").name == "1" and parse_unit("m / s").name == "m/s"
+
+
+def test_conversion_identity_and_shift_worked_by_hand():
+    assert conversion("m", "m").identity and conversion("1", "s/s").identity
+    assert not conversion("mm", "m").identity and not conversion("degC", "K").identity
+    # degF is not a symbol; degC -> mK: value_SI = v + 273.15, v_mK = 1000 * value_SI
+    c = conversion("degC", "K")
+    assert (c.scale, c.shift) == (1.0, 273.15)
+    h = conversion("h", "min")  # 1 h = 60 min exactly
+    assert h.scale == 60.0 and h.shift == 0.0
+    # a ratio that is 1 up to rounding (1e-3 / 1e-3 through different symbols) is exactly the identity
+    assert conversion("mm/ms", "m/s").identity
+    assert conversion("kN*mm", "J").identity
+
+
+def test_empty_or_malformed_parts_are_not_known():
+    for bad in ("m//s", "/", "m/s/", "*", "m*", ".m"):
+        assert not parse_unit(bad).known, bad
+    assert parse_unit("m*1").known and parse_unit("1/s").exponents == {"s": -1}

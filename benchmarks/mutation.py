@@ -1,0 +1,120 @@
+"""Mutation testing of the modules that hold rules and conversions, with cosmic-ray (a maintained
+mutation tool: each mutant is one operator applied at one place, the module's tests run against it, and a
+mutant is *killed* when they fail).
+
+    python benchmarks/mutation.py                     # every module below
+    python benchmarks/mutation.py --module units      # one of them
+    python benchmarks/mutation.py --list
+
+It never mutates this checkout: the current commit is checked out into a temporary git worktree, whose
+root is made importable as the package ``cpgsim`` through a symlink put first on ``PYTHONPATH`` (the
+installed editable package is a later import finder), and cosmic-ray mutates the files there. Slow (each
+mutant runs the module's tests, 2-5 s), so it is not part of the test run. Prints one row per module
+(mutants, killed, survived, score) and, with ``--survivors``, each surviving mutant's diff, to judge
+whether it is equivalent (cannot change behaviour) or shows a missing test. Needs ``pip install
+cosmic-ray`` (not a dependency of the project). docs/testing.md holds the latest table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# module (repository path) -> the tests that specify it (quick ones, no robot runs)
+MODULES: dict[str, tuple[str, list[str]]] = {
+    "units": ("components/units.py", ["tests/test_units.py"]),
+    "outcomes": ("harness/experiments/outcomes.py", ["tests/test_scenarios.py"]),
+    "importer-values": ("fmus/importer/description.py", ["tests/test_fmu_import.py"]),
+    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenarios.py"]),
+}
+
+
+def _config(module_path: str, tests: list[str], timeout: float) -> str:
+    return (f'[cosmic-ray]\nmodule-path = "{module_path}"\ntimeout = {timeout}\nexcluded-modules = []\n'
+            f'test-command = "{sys.executable} -m pytest -x -q -p no:cacheprovider {" ".join(tests)}"\n\n'
+            '[cosmic-ray.distributor]\nname = "local"\n')
+
+
+def _counts(session: Path) -> dict[str, int]:
+    con = sqlite3.connect(session)
+    try:
+        rows = con.execute("SELECT test_outcome, COUNT(*) FROM work_results GROUP BY test_outcome").fetchall()
+        total = con.execute("SELECT COUNT(*) FROM work_items").fetchone()[0]
+    finally:
+        con.close()
+    out = {str(k).split(".")[-1].lower(): int(v) for k, v in rows}
+    out["total"] = int(total)
+    return out
+
+
+def run_module(name: str, work: Path, timeout: float, survivors: bool) -> dict[str, object]:
+    module_path, tests = MODULES[name]
+    cfg = work / f"{name}.toml"
+    cfg.write_text(_config(module_path, tests, timeout))
+    session = work / f"{name}.sqlite"
+    # no bytecode cache: a mutant written within the same second as the original, with the same size, would
+    # otherwise be run from the original's .pyc
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", CPGSIM_CACHE=str(work.parent / "cache"),
+               PYTHONPATH=os.pathsep.join([str(work.parent / "import-root"), os.environ.get("PYTHONPATH", "")]))
+    t0 = time.perf_counter()
+    for step in (["init", str(cfg), str(session)], ["exec", str(cfg), str(session)]):
+        subprocess.run(["cosmic-ray", *step], cwd=work, env=env, check=True, capture_output=True, text=True)
+    counts = _counts(session)
+    killed, survived = counts.get("killed", 0), counts.get("survived", 0)
+    timeouts, incompetent = counts.get("timeout", 0), counts.get("incompetent", 0)
+    done = killed + survived + timeouts + incompetent
+    row = {"module": module_path, "mutants": counts["total"], "killed": killed + timeouts, "survived": survived,
+           "incompetent": incompetent, "score": (killed + timeouts) / max(1, done - incompetent),
+           "wall_s": round(time.perf_counter() - t0, 1)}
+    if survivors and survived:
+        dump = subprocess.run(["cosmic-ray", "dump", str(session)], cwd=work, capture_output=True, text=True).stdout
+        row["survivors"] = [json.loads(line) for line in dump.splitlines() if '"survived"' in line.lower()]
+    return row
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--module", action="append", choices=sorted(MODULES), help="only these modules")
+    ap.add_argument("--timeout", type=float, default=120.0, help="seconds per mutant's test run")
+    ap.add_argument("--survivors", action="store_true", help="print each surviving mutant")
+    ap.add_argument("--list", action="store_true")
+    args = ap.parse_args()
+    if args.list:
+        for k, (path, tests) in MODULES.items():
+            print(f"{k:16s} {path:40s} {' '.join(tests)}")
+        return 0
+    if shutil.which("cosmic-ray") is None:
+        print("mutation.py needs cosmic-ray: pip install cosmic-ray", file=sys.stderr)
+        return 2
+    base = Path(tempfile.mkdtemp(prefix="cpgsim-mutation-"))
+    work = base / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(work), "HEAD"], check=True,
+                   capture_output=True)
+    try:
+        (base / "import-root").mkdir()
+        (base / "import-root" / "cpgsim").symlink_to(work, target_is_directory=True)
+        rows = [run_module(name, work, args.timeout, args.survivors) for name in (args.module or MODULES)]
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(work)], capture_output=True)
+        shutil.rmtree(base, ignore_errors=True)
+    print(f"{'module':40s} {'mutants':>8s} {'killed':>7s} {'survived':>9s} {'score':>7s} {'wall':>7s}")
+    for r in rows:
+        print(f"{r['module']:40s} {r['mutants']:8d} {r['killed']:7d} {r['survived']:9d} {r['score']:7.1%} "
+              f"{r['wall_s']:6.0f}s")
+        for s in r.get("survivors", []):
+            print("   survivor:", json.dumps(s)[:400])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

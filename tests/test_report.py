@@ -112,3 +112,14 @@ def test_replay_follows_the_wall_clock(run_dir, tmp_path):
     # what is drawn is bounded whatever the run's length: at most 1,500 samples per plot trace
     plots = json.loads(re.search(r"const D = (\{.*?\});\n", page).group(1))["plots"]
     assert max(len(tr["x"]) for tr in plots["data"] if tr["type"] == "scatter") <= 1500
+
+
+def test_nan_in_what_is_drawn_becomes_a_gap_not_an_error():
+    """Found from outside: `cpgsim run fukuhara-amputation` ended in an internal error when a signal had
+    NaN samples (an amputated leg's trace): JSON has no NaN, so the page writer refused it."""
+    from cpgsim.harness.experiments.report import _json_safe, _page
+
+    plots = {"data": [{"x": [0.0, 1.0], "y": [float("nan"), np.float64("inf")]}], "layout": {}}
+    assert _json_safe(plots)["data"][0]["y"] == [None, None]
+    page = _page("amputated", {"success": True}, {"data": [], "layout": {}, "frames": []}, plots, [0.0], 20)
+    assert '"y":[null,null]' in page

@@ -240,9 +240,26 @@ def _summary_html(summary: dict) -> str:
     return f"<table>{''.join(rows)}</table><h3>reflex events</h3><ul>{ev or '<li>none</li>'}</ul>"
 
 
+def _json_safe(obj: Any) -> Any:
+    """``obj`` with every NaN or infinity replaced by ``None`` (JSON has no such numbers; plotly draws a gap):
+    a signal that was not recorded for a leg (all NaN) or a phase lag that has no value."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _json_safe(obj.tolist())
+    if isinstance(obj, np.floating):
+        return _json_safe(float(obj))
+    return obj
+
+
 def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
     from plotly.offline import get_plotlyjs
 
+    viewer, plots = _json_safe(viewer), _json_safe(plots)
     data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps, "legs": list(LEG_NAMES),
                        "viewerTraces": VIEWER_TRACES}, separators=(",", ":"),
                       allow_nan=False, default=float).replace("</", "<\\/")

@@ -207,6 +207,19 @@ FEATURES: dict[str, dict[str, str]] = {
 """Terrain features :func:`compose` builds, with their fields (every field is required)."""
 
 
+def far_edge_y(f: dict) -> float:
+    """Where a robot has crossed a feature (``criteria.cross``): the far edge of a ditch, gap or block
+    patch, the top edge of the last stair, the riser of a step (the body past it stands on the step)."""
+    t, y = f["type"], float(f["position_y"])
+    if t in ("ditch", "gap"):
+        return y + float(f["width"])
+    if t == "blocks":
+        return y + float(f["length"])
+    if t == "stairs":
+        return y + int(f["count"]) * float(f["run"])
+    return y
+
+
 def _y_range(f: dict, ext: Extent) -> tuple[float, float]:
     t = f["type"]
     y = f["position_y"]

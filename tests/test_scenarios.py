@@ -231,3 +231,88 @@ def test_misspelt_graph_parameter_gets_a_suggestion():
     outer.add(g)
     with pytest.raises(ParameterError, match=re.escape("did you mean 'network.*.eps'?")):
         outer.set_param("network.epss", 0.2)  # a parameter name of the blocks inside the graph
+
+
+# -- every criterion for every controller kind ------------------------------------------------------
+
+KIND_SCENARIOS = {"yu": ("step", {}), "yu-open-loop": ("step", {"controller.kind": "yu-open-loop"}),
+                  "fukuhara": ("fukuhara-gaits", {"terrain.step.type": "step", "terrain.step.height": 0.02,
+                                                  "terrain.step.position_y": 0.5, "terrain.step.side": "both"})}
+
+
+def _judged(kind: str, criteria: dict, y, roll_deg=0.0):
+    from types import SimpleNamespace
+
+    from cpgsim.harness.experiments.runner import judge
+
+    name, sets = KIND_SCENARIOS[kind]
+    sc = load(name, {**sets, **{f"criteria.{k}": v for k, v in criteria.items()}})
+    setup = SimpleNamespace(scenario=sc, robot="robot", waiting=None,
+                            terrain=SimpleNamespace(params={"features": sc.features()}))
+    return judge(setup, _run(y, roll_deg))
+
+
+@pytest.mark.parametrize("kind", sorted(KIND_SCENARIOS))
+@pytest.mark.parametrize("criterion, settings, trace, fails", [
+    # each row: a trace that breaks exactly this criterion (by hand: 0.02 m/s for 20 s = 0.4 m)
+    ("no_fall", {}, dict(roll_deg=np.where(np.arange(2000) > 600, 50.0, 0.0)), "fell"),
+    ("max_tilt_deg", {"max_tilt_deg": 10.0}, dict(roll_deg=np.where(np.arange(2000) > 600, 12.0, 0.0)),
+     "max_tilt_deg"),
+    ("no_stall", {}, dict(y=np.minimum(0.02 * np.arange(2000) * 0.01, 0.1)), "stalled"),
+    ("min_distance_m", {"min_distance_m": 0.5}, {}, "min_distance_m"),
+    ("cross", {"cross": "step", "cross_margin_m": 0.25}, {}, "cross"),  # 0.4 m < step at 0.5 + 0.25
+])
+def test_every_criterion_is_evaluated_for_every_controller_kind(kind, criterion, settings, trace, fails):
+    """Found from outside: criteria.cross was accepted for the Yu controller and ignored (success with the
+    body 0.09 m from the start). Every criterion the schema accepts is judged by one code path for every
+    controller kind; a trace that breaks it fails it, the same trace without the criterion passes."""
+    base = {"y": 0.02 * np.arange(2000) * 0.01, "roll_deg": 0.0}
+    run = {**base, **trace}
+    if criterion == "cross":
+        sc = load(*KIND_SCENARIOS[kind])
+        assert "step" in sc.features()
+    out = _judged(kind, {"min_distance_m": 0.0, **settings}, run["y"], run["roll_deg"])
+    assert fails in out["criteria_failed"] and not out["success"], out["criteria_failed"]
+    relaxed = {"no_fall": {"no_fall": False, "max_tilt_deg": 90.0}, "no_stall": {"no_stall": False}}.get(criterion, {})
+    ok = _judged(kind, {"min_distance_m": 0.0, **relaxed}, run["y"], run["roll_deg"])
+    assert fails not in ok["criteria_failed"]
+
+
+def test_crossing_a_step_by_hand():
+    """Body at 0.02 m/s from y = 0: a step whose riser is at 0.5 m with a 0.25 m margin is crossed when the
+    body reaches 0.75 m, at 37.5 s; within 20 s it is not."""
+    from cpgsim.harness.experiments.outcomes import crossing
+
+    t = np.arange(5000) * 0.01
+    out = crossing(_run(0.02 * t), "robot", far_edge=0.5, margin=0.25)
+    assert out["success"] and out["crossed_time_s"] == pytest.approx(37.5, abs=0.011) and out["goal_y_m"] == 0.75
+    assert not crossing(_run(0.02 * t[:2000]), "robot", 0.5, 0.25)["success"]
+    fallen = crossing(_run(0.02 * t, roll_deg=np.where(t > 30, 60.0, 0.0)), "robot", 0.5, 0.25)
+    assert not fallen["success"]  # fell at 30 s, before reaching the goal
+
+
+def test_far_edges_of_every_feature():
+    from cpgsim.robots.terrain import far_edge_y
+
+    assert far_edge_y({"type": "step", "position_y": 0.4}) == 0.4
+    assert far_edge_y({"type": "ditch", "position_y": 0.4, "width": 0.1}) == pytest.approx(0.5)
+    assert far_edge_y({"type": "gap", "position_y": 0.4, "width": 0.05}) == pytest.approx(0.45)
+    assert far_edge_y({"type": "stairs", "position_y": 0.35, "run": 0.1, "count": 3}) == pytest.approx(0.65)
+    assert far_edge_y({"type": "blocks", "position_y": 0.3, "length": 0.6}) == pytest.approx(0.9)
+
+
+def test_expected_gait_is_refused_for_the_yu_controller():
+    with pytest.raises(ScenarioError, match="criteria.expected_gait applies to fukuhara scenarios"):
+        build_scenario("step", {"criteria.expected_gait": "tripod"})
+
+
+@pytest.mark.slow
+def test_cross_on_the_yu_controller_end_to_end(tmp_path):
+    """The reproduction from outside: 3 s of the step scenario with criteria.cross = step (the riser is
+    0.4-0.5 m ahead) cannot be a success: the body walks about 0.1 m."""
+    from cpgsim.harness.experiments.runner import run_scenario
+
+    sc = load("step", {"t_end": 3.0, "criteria.cross": "step", "criteria.min_distance_m": 0.0})
+    summary = run_scenario(sc, tmp_path / "run", progress=False, plots=False)
+    assert not summary["success"] and "cross" in summary["criteria_failed"]
+    assert summary["max_y_m"] < summary["goal_y_m"] and summary["crossed_time_s"] is None

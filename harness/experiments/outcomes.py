@@ -63,6 +63,18 @@ def stall(time: np.ndarray, y: np.ndarray, waiting: np.ndarray, window: float,
     return (True, float(tt[bad[0]])) if len(bad) else (False, None)
 
 
+def crossing(res: Results, robot: str, far_edge: float, margin: float, fall_tilt_deg: float = 45.0) -> dict[str, Any]:
+    """The ``criteria.cross`` check, for every controller: the body centre reaches ``far_edge + margin``
+    (forward, y) before any fall. ``success`` plus ``crossed_time_s``, ``goal_y_m`` and ``max_y_m``."""
+    fell, fell_t, _ = fall(res, robot, fall_tilt_deg)
+    y = res[f"{robot}.body_position"][:, 1]
+    goal = far_edge + margin
+    reached = np.flatnonzero(y >= goal)
+    t_cross = float(res.time[reached[0]]) if len(reached) else None
+    success = t_cross is not None and (not fell or fell_t > t_cross)
+    return {"success": bool(success), "crossed_time_s": t_cross, "goal_y_m": goal, "max_y_m": float(np.max(y))}
+
+
 def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.ndarray | None = None,
              scenario_checks: Mapping[str, bool] | None = None) -> dict[str, Any]:
     """The honest outcome keys of a run's summary (module docstring); ``scenario_checks`` are the

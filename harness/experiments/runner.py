@@ -116,7 +116,17 @@ def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = Non
     a ``speed_m_s`` already in ``keep`` (a scenario's own, e.g. after a gait transient) is kept."""
     criteria = setup.scenario.doc["criteria"] if setup.scenario is not None else {}
     waiting = setup.waiting(res) if setup.waiting is not None else None
+    checks = dict(checks or {})
+    crossed: dict[str, Any] = {}
+    if criteria.get("cross") and "cross" not in checks:  # every controller kind (a scenario may do its own)
+        from cpgsim.robots.terrain import far_edge_y
+
+        feature = setup.terrain.params["features"][criteria["cross"]]
+        crossed = outcomes.crossing(res, setup.robot, far_edge_y(feature), float(criteria.get("cross_margin_m", 0.0)),
+                                    float(criteria.get("fall_tilt_deg", 45.0)))
+        checks["cross"] = crossed.pop("success")
     result = outcomes.evaluate(res, setup.robot, criteria, waiting, checks)
+    result.update(crossed)
     if keep and "speed_m_s" in keep:
         result.pop("speed_m_s")
     if not res.complete:

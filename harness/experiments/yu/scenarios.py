@@ -236,6 +236,10 @@ def build(scenario: Scenario) -> RunSetup:
     terrain = terrain_of(scenario, geometry)
     thresholds = {k: float(ctrl.get(k, d)) for k, d in THRESHOLDS.items()}
     params = {f"{CONTROLLER}.{k}": float(v) for k, v in ctrl["params"].items()}
+    if doc["criteria"].get("expected_gait"):
+        raise ScenarioError(f"{scenario.name}: criteria.expected_gait applies to fukuhara scenarios (their gait "
+                            f"emerges from the legs' rules); the Yu controller's gait is set by its FSM "
+                            f"(controller.gait: 1 tripod, 2 tetrapod, 3 wave)")
     for k in ctrl["params"]:  # a misspelt threshold (controller.Fcxx) lands among the graph parameters
         hint = did_you_mean(k, THRESHOLDS) if "." not in k and "*" not in k else ""
         if hint:

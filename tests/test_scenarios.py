@@ -195,7 +195,8 @@ def test_large_tilt_without_a_fall_and_a_fall():
     t = np.arange(1000) * 0.01
     tilted = evaluate(_run(0.02 * t, roll_deg=np.where(t > 5, 36.0, 0.0)), "robot", CRITERIA)
     assert not tilted["fell"] and tilted["max_tilt_deg"] == pytest.approx(36.0)
-    assert not tilted["success"] and tilted["criteria_failed"] == ["max_tilt_deg"]
+    # still 36 deg at the end: the end-state limit (15 deg) fails too
+    assert not tilted["success"] and tilted["criteria_failed"] == ["max_tilt_deg", "end_tilt_deg"]
     fallen = evaluate(_run(0.02 * t, roll_deg=np.where(t > 6, 50.0, 0.0)), "robot", CRITERIA)
     assert fallen["fell"] and fallen["fell_time_s"] == pytest.approx(6.01) and fallen["fell_reason"] == "tilted 50 deg"
     contact = evaluate(_run(0.02 * t, contact=(t > 7).astype(float)), "robot", CRITERIA)
@@ -316,3 +317,62 @@ def test_cross_on_the_yu_controller_end_to_end(tmp_path):
     summary = run_scenario(sc, tmp_path / "run", progress=False, plots=False)
     assert not summary["success"] and "cross" in summary["criteria_failed"]
     assert summary["max_y_m"] < summary["goal_y_m"] and summary["crossed_time_s"] is None
+
+
+
+# -- the end state ------------------------------------------------------------------------------------
+
+def _with_feet(res: Results, feet_xy: np.ndarray, loaded: np.ndarray) -> Results:
+    """``res`` plus ``robot.foot_position`` (world, z = 0) and ``robot.toe_force`` (Fz 10 N on loaded feet)."""
+    n = len(res.time)
+    feet = np.zeros((n, 6, 3))
+    feet[:, :, :2] = feet_xy
+    force = np.zeros((n, 6, 3))
+    force[:, :, 2] = np.where(loaded, 10.0, 0.0)
+    cols = [f"robot.foot_position[{i}]" for i in range(18)] + [f"robot.toe_force[{i}]" for i in range(18)]
+    return Results(res.time, res.columns + cols, res.units + ["m"] * 18 + ["N"] * 18,
+                   np.column_stack([res.data, feet.reshape(n, 18), force.reshape(n, 18)]))
+
+
+# feet around a body at (0, y): a tripod L1, L3, R2 holds it; L1, L2, L3 (one side) does not
+def _feet(y: np.ndarray) -> np.ndarray:
+    xs = np.array([-0.15, -0.15, -0.15, 0.15, 0.15, 0.15])
+    ys = np.array([0.12, 0.0, -0.12, 0.12, 0.0, -0.12])
+    return np.stack([np.broadcast_to(xs, (len(y), 6)), y[:, None] + ys], axis=2)
+
+
+def test_sliding_back_at_the_end_fails_even_after_walking_far():
+    """The stairs case found from outside: walked 0.6 m, then in the last seconds slid back 8 cm: a success
+    before (the stall rule needs 5 s of walking time), not now. By hand: backslide = 0.6 - 0.52 = 0.08 m."""
+    t = np.arange(3500) * 0.01
+    y = np.where(t < 32, 0.6 * t / 32, 0.6 - 0.08 * np.clip((t - 32) / 1.0, 0, 1))
+    waiting = (t > 27) & (t < 33)  # reflex waits before the slip: less than 5 s of walking time after them
+    out = evaluate(_run(y), "robot", CRITERIA, waiting=waiting)
+    assert out["end_backslide_m"] == pytest.approx(0.08, abs=1e-9) and "end_backslide_m" in out["criteria_failed"]
+    assert not out["stalled"] and not out["success"]
+    calm = evaluate(_run(0.6 * t / 35), "robot", CRITERIA)
+    assert calm["end_backslide_m"] == 0.0 and calm["success"]
+
+
+def test_support_at_the_end_needs_three_loaded_feet_around_the_body():
+    t = np.arange(1000) * 0.01
+    y = 0.02 * t
+    tripod = np.array([True, False, True, False, True, False])
+    one_side = np.array([True, True, True, False, False, False])
+    two = np.array([True, False, False, False, True, False])
+    ok = evaluate(_with_feet(_run(y), _feet(y), tripod), "robot", CRITERIA)
+    assert ok["end_support_share"] == 1.0 and ok["success"]
+    for loaded in (one_side, two):
+        bad = evaluate(_with_feet(_run(y), _feet(y), loaded), "robot", CRITERIA)
+        assert bad["end_support_share"] == 0.0 and bad["criteria_failed"] == ["end_support"]
+    assert evaluate(_with_feet(_run(y), _feet(y), two), "robot", {**CRITERIA, "end_support": False})["success"]
+
+
+def test_static_stability_by_hand():
+    from cpgsim.harness.experiments.outcomes import statically_stable
+
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    assert statically_stable(tri, np.array([0.2, 0.2])) and not statically_stable(tri, np.array([0.6, 0.6]))
+    assert statically_stable(tri, np.array([0.5, 0.0]))  # on an edge: still held
+    assert not statically_stable(tri[:2], np.array([0.5, 0.0]))  # two feet are a line
+    assert not statically_stable(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]), np.array([1.0, 0.0]))

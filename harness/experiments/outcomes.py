@@ -9,9 +9,17 @@
 - ``stalled``: within some window of ``stall_window_s`` of walking time (reflex waits left out) the body
   advanced less than ``stall_progress_m``; ``stalled_from_s`` is where the first such window starts.
 - ``distance_m`` (forward, body origin), ``speed_m_s`` (over the whole run).
+- The end state, over the final ``end_window_s`` (default 5 s, reflex waits included): ``end_backslide_m``
+  (how far the body came back from its furthest forward point in that window; a robot that slips off a
+  stair slides back), ``end_tilt_deg`` (the tilt at the last sample) and ``end_support_share`` (the share
+  of the last second in which a statically stable support holds the body: at least three loaded feet,
+  vertical toe force above 1 N, whose convex hull contains the body centre's ground projection; ``None``
+  when feet and forces were not recorded). Criteria ``end_backslide_m`` (default 0.03 m), ``end_tilt_deg``
+  (default 15 deg) and ``end_support`` (default on: the share must be at least one half).
 - ``success``: every criterion of the scenario's ``[criteria]`` table holds; ``criteria_failed`` lists the
-  ones that did not (``"fell"``, ``"stalled"``, ``"max_tilt_deg"``, ``"min_distance_m"``, plus the
-  scenario's own, e.g. ``"expected_gait"`` or ``"cross"``).
+  ones that did not (``"fell"``, ``"stalled"``, ``"max_tilt_deg"``, ``"min_distance_m"``,
+  ``"end_backslide_m"``, ``"end_tilt_deg"``, ``"end_support"``, plus the scenario's own, e.g.
+  ``"expected_gait"`` or ``"cross"``).
 """
 
 from __future__ import annotations
@@ -63,6 +71,63 @@ def stall(time: np.ndarray, y: np.ndarray, waiting: np.ndarray, window: float,
     return (True, float(tt[bad[0]])) if len(bad) else (False, None)
 
 
+SUPPORT_FORCE_N = 1.0  # a foot carries load above this vertical toe force
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull of 2D points, counter-clockwise (Andrew's monotone chain)."""
+    pts = sorted(map(tuple, points))
+    if len(pts) < 3:
+        return np.array(pts)
+
+    def cross(o, a, b) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list = []
+    upper: list = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def statically_stable(feet_xy: np.ndarray, centre_xy: np.ndarray) -> bool:
+    """At least three feet whose convex hull (a polygon, not a line) contains ``centre_xy``."""
+    if len(feet_xy) < 3:
+        return False
+    hull = _hull(feet_xy)
+    if len(hull) < 3:
+        return False
+    edges = np.roll(hull, -1, axis=0) - hull
+    rel = centre_xy - hull
+    return bool(np.all(edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0] >= 0.0))
+
+
+def end_state(res: Results, robot: str, window_s: float = 5.0) -> dict[str, Any]:
+    """``end_backslide_m``, ``end_tilt_deg`` and ``end_support_share`` of the run's final window (module
+    docstring)."""
+    t = res.time
+    y = res[f"{robot}.body_position"][:, 1]
+    k0 = int(np.searchsorted(t, t[-1] - window_s)) if len(t) else 0
+    tilt = tilt_deg(res, robot)
+    out: dict[str, Any] = {"end_backslide_m": float(np.max(y[k0:]) - y[-1]) if len(t) else 0.0,
+                           "end_tilt_deg": float(tilt[-1]) if len(t) else math.nan, "end_support_share": None}
+    feet_key, force_key = f"{robot}.foot_position", f"{robot}.toe_force"
+    if feet_key in res and force_key in res and len(t):
+        k1 = int(np.searchsorted(t, t[-1] - 1.0))
+        feet = res[feet_key].reshape(len(t), 6, 3)
+        fz = res[force_key].reshape(len(t), 6, 3)[:, :, 2]
+        centre = res[f"{robot}.body_position"][:, :2]
+        stable = [statically_stable(feet[k, fz[k] > SUPPORT_FORCE_N, :2], centre[k]) for k in range(k1, len(t))]
+        out["end_support_share"] = float(np.mean(stable)) if stable else None
+    return out
+
+
 def crossing(res: Results, robot: str, far_edge: float, margin: float, fall_tilt_deg: float = 45.0) -> dict[str, Any]:
     """The ``criteria.cross`` check, for every controller: the body centre reaches ``far_edge + margin``
     (forward, y) before any fall. ``success`` plus ``crossed_time_s``, ``goal_y_m`` and ``max_y_m``."""
@@ -98,6 +163,14 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
         failed.append("max_tilt_deg")
     if distance < float(criteria.get("min_distance_m", 0.0)):
         failed.append("min_distance_m")
+    end = end_state(res, robot, float(criteria.get("end_window_s", 5.0)))
+    if end["end_backslide_m"] > float(criteria.get("end_backslide_m", 0.03)):
+        failed.append("end_backslide_m")
+    if not end["end_tilt_deg"] <= float(criteria.get("end_tilt_deg", 15.0)):
+        failed.append("end_tilt_deg")
+    if criteria.get("end_support", True) and end["end_support_share"] is not None \
+            and end["end_support_share"] < 0.5:
+        failed.append("end_support")
     failed += [name for name, met in (scenario_checks or {}).items() if not met]
     return {
         "fell": fell, "fell_time_s": fell_t, "fell_reason": reason,
@@ -107,6 +180,7 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
         "stalled": stalled, "stalled_from_s": stall_t,
         "distance_m": distance,
         "speed_m_s": distance / duration if duration > 0 else math.nan,
+        **end,
         "success": not failed, "criteria_failed": failed,
         "criteria": dict(criteria),
     }

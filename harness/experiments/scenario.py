@@ -154,6 +154,10 @@ SCHEMA: dict[str, Any] = {
         "expected_gait": Field(str, "", doc="success needs this gait label ('' none, 'auto': by setting)"),
         "cross": Field(str, "", doc="success needs the body past this terrain feature's far edge + cross_margin_m"),
         "cross_margin_m": Field(float, 0.25, lo=0.0),
+        "end_window_s": Field(float, 5.0, **POSITIVE, doc="the run's final window, reflex waits included"),
+        "end_backslide_m": Field(float, 0.03, lo=0.0, doc="success needs the body not to slide back more in it"),
+        "end_tilt_deg": Field(float, 15.0, lo=0.0, doc="success needs the tilt at the end below this"),
+        "end_support": Field(bool, True, doc="success needs a statically stable support in the last second"),
     },
     "aliases": Field(dict, {}, doc="short --set keys: alias = 'full.key'"),
 }

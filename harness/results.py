@@ -216,35 +216,6 @@ def atomic_write(path: Path, writer, text: bool) -> None:
         raise
 
 
-RUN_MARKER = ".cpgsim-run"
-
-
-def prepare_run_directory(path: str | Path) -> Path:
-    """Make ``path`` an empty run directory, replacing a previous run there as a whole.
-
-    A missing or empty directory is used as it is; one that holds a previous run (its ``.cpgsim-run``
-    marker, or ``summary.json`` / ``results.meta.json`` of an older run) is emptied first, so old and
-    new files never mix; any other non-empty directory is refused with a :class:`ResultsError`.
-    """
-    import shutil
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ResultsError(f"output {path} exists and is not a directory")
-    if path.is_dir() and any(path.iterdir()):
-        if not any((path / n).exists() for n in (RUN_MARKER, "summary.json", "results.meta.json")):
-            raise ResultsError(f"output directory {path} is not empty and holds no cpgsim run: "
-                               f"choose another -o or empty it")
-        for entry in list(path.iterdir()):
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
-    path.mkdir(parents=True, exist_ok=True)
-    (path / RUN_MARKER).write_text("a cpgsim run directory: the next run into it replaces its contents\n")
-    return path
-
-
 def result_files(path: str | Path) -> list[Path]:
     """Every file a results target ``FILE.csv`` / ``FILE.npz`` consists of (existing or not)."""
     path = Path(path)

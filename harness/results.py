@@ -228,8 +228,10 @@ def result_files(path: str | Path) -> list[Path]:
 class ResultsWriter:
     """Stream results to ``path`` (``.csv`` or ``.npz``) while a run goes on (see the module docstring).
 
-    ``open(columns, units, meta)`` replaces the target as a whole (an old file of the same name and its
-    sidecars are removed first), ``append(time, rows)`` adds rows (written at ``flush()``, or by
+    ``open(columns, units, meta)`` starts the stream: into the target itself when it does not exist, else
+    (a rerun) into ``FILE.partial.csv`` beside it, which replaces the old file and sidecar only when the
+    run ends (a rerun killed midway leaves the previous results whole and the partial ones beside them);
+    ``append(time, rows)`` adds rows (written at ``flush()``, or by
     ``maybe_flush()`` when ``flush_seconds`` of wall time have passed), ``close(results)`` writes the
     final files (``complete`` and ``message`` from ``results``) and returns them. A run that recorded no
     row leaves no file.
@@ -255,9 +257,13 @@ class ResultsWriter:
 
     def open(self, columns: Sequence[str], units: Sequence[str], meta: dict | None = None) -> ResultsWriter:
         self.columns, self.units, self.meta = list(columns), list(units), dict(meta or {})
-        for f in result_files(self.path):
-            if f.exists():
-                f.unlink()
+        if self.path.suffix == ".csv" and self.path.exists():  # a rerun (--force): the old file stays till the end
+            self.stream_path = self.path.with_suffix(".partial.csv")
+        for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+            if f != self.path and f.exists():
+                f.unlink()  # a stream of an earlier run that did not finish
+        if self.stream_path == self.path and self.path.with_suffix(".meta.json").exists():
+            self.path.with_suffix(".meta.json").unlink()  # a sidecar without its CSV
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path.parent)
         self._write_meta(False, "incomplete: the run had not finished when this file was last written", None)
@@ -305,7 +311,7 @@ class ResultsWriter:
             self._file = None
         self.meta = {**self.meta, **results.meta}
         if self._rows == 0:
-            for f in result_files(self.path):
+            for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
                 if f.exists():
                     f.unlink()
             return []
@@ -316,6 +322,10 @@ class ResultsWriter:
                     f.unlink()
             return written
         self._write_meta(results.complete, results.message, self._rows)
+        if self.stream_path != self.path:  # the rerun is whole: it replaces the previous file and sidecar
+            os.replace(self.stream_path, self.path)
+            os.replace(self.stream_path.with_suffix(".meta.json"), self.path.with_suffix(".meta.json"))
+            self.stream_path = self.path
         return [self.path, self.path.with_suffix(".meta.json")]
 
     def abandon(self) -> None:

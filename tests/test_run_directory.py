@@ -136,3 +136,36 @@ def test_cli_rerun_replaces_the_run_and_failed_criteria_exit_1(tmp_path, monkeyp
     assert json.loads((out / "summary.json").read_text())["t_end"] == pytest.approx(0.2, abs=2e-3)
     assert not partial_path(out).exists() and not (out / "stale.png").exists()
     assert [p.name for p in tmp_path.glob("r.kept-*/*")] == ["stale.png"]
+
+
+def test_simulate_into_an_output_in_use_is_refused(tmp_path, capsys):
+    out = tmp_path / "same.csv"
+    with output_lock(out):
+        assert main(["simulate", "damped-oscillator", "--t-end", "0.1", "-o", str(out)]) == 2
+    assert "is in use by another cpgsim run" in capsys.readouterr().err and not out.exists()
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.1", "-o", str(out)]) == 0
+
+
+def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
+    from cpgsim.harness.results import Results
+
+    out = tmp_path / "r.csv"
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.5", "--dt", "0.01", "-o", str(out)]) == 0
+    before = out.read_bytes(), out.with_suffix(".meta.json").read_bytes()
+    rng = random.Random(8)
+    for _ in range(3):
+        proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "damped-oscillator",
+                                 "--t-end", "1e5", "--dt", "0.001", "-o", str(out), "--force"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        partial = tmp_path / "r.partial.csv"
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 5000):
+            time.sleep(0.1)
+        time.sleep(rng.uniform(0, 0.3))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert (out.read_bytes(), out.with_suffix(".meta.json").read_bytes()) == before
+        res = Results.load(partial)
+        assert not res.complete and len(res.time) > 10
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.2", "--dt", "0.01", "-o", str(out), "--force"]) == 0
+    assert len(Results.load(out).time) == 21 and not (tmp_path / "r.partial.csv").exists()

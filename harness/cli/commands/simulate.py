@@ -92,6 +92,14 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
+    from cpgsim.harness.rundir import output_lock
+
+    with output_lock(out):  # one writer per output: a second run into it now is refused ("in use")
+        return _run_into(args, out)
+
+
+def _run_into(args: argparse.Namespace, out: Path) -> int:
+    """The run of ``simulate`` into ``out`` (its lock held)."""
     from cpgsim.harness.results import result_files
 
     existing = [f for f in result_files(out) if f.exists()]

@@ -210,9 +210,11 @@ def atomic_write(path: Path, writer, text: bool) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and not exc.filename:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
 
 
@@ -298,9 +300,12 @@ class ResultsWriter:
 
         buf = io.StringIO()
         np.savetxt(buf, table, delimiter=",", fmt="%.17g")
-        self._file.write(buf.getvalue())
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        try:
+            self._file.write(buf.getvalue())
+            self._file.flush()
+            os.fsync(self._file.fileno())
+        except OSError as exc:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(self.stream_path)) from exc
         self._rows += len(table)
 
     def close(self, results: Results) -> list[Path]:

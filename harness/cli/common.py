@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 from typing import Any
 
 
@@ -39,6 +40,9 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
         return 2, msg
     if type(exc).__name__ in ("FmuRuntimeError", "FmuCrashedError", "FmuTimeoutError"):
         return 1, msg
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        return 1, one_line(f"writing failed: {where}{exc.strerror or exc} (the run's results are incomplete)")
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         return 2, one_line(f"{where}{exc.strerror or exc}")

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
 from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.harness.errors import interruption
 from cpgsim.harness.experiments.scenario import builtin_descriptions, load
 from cpgsim.harness.simulate import SimulationError
 
@@ -66,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress)
         except SimulationError as exc:
+            if interruption(exc) is not None:
+                print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")
+                raise
             if not (work / "summary.json").exists():
                 raise CliError(str(exc), code=1) from exc
             failure = exc  # a finished run that failed: it replaces the previous one, marked complete=false

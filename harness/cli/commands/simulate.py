@@ -49,7 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     iso = p.add_mutually_exclusive_group()
     iso.add_argument("--isolate", dest="isolate", action="store_const", const=True, default=None,
                      help="run every FMU in a child process (a crashing FMU ends the run with partial results; "
-                          "default: only FMUs that cpgsim did not build)")
+                          "default: every FMU but those whose binary this user exported with cpgsim, "
+                          "whatever the FMU claims about its generation tool)")
     iso.add_argument("--no-isolate", dest="isolate", action="store_const", const=False,
                      help="run every FMU in this process (faster; a hanging FMU hangs cpgsim)")
     p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
@@ -68,13 +69,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> int:
-    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) those whose
-    modelDescription does not name cpgsim as the generation tool. Returns how many are isolated."""
+    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) all but those whose
+    binary is byte for byte one this user exported (:func:`cpgsim.fmus.trust.exported_here`; the FMU's own
+    ``generationTool`` claim decides nothing). Returns how many are isolated."""
+    from cpgsim.fmus import trust
     from cpgsim.fmus.importer.block import fmu_blocks
 
     n = 0
     for blk in fmu_blocks(graph):
-        built_here = blk.info.generation_tool.startswith("cpgsim ")
+        built_here = trust.exported_here(blk.info.path, blk.info.binary_member(blk.kind))
         blk.isolate = bool(isolate) if isolate is not None else not built_here
         if blk.isolate and timeout is not None:
             blk.timeout = timeout

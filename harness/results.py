@@ -302,11 +302,11 @@ class ResultsWriter:
         np.savetxt(buf, table, delimiter=",", fmt="%.17g")
         try:
             self._file.write(buf.getvalue())
+            self._rows += len(table)  # counted before the flush: a signal during fsync must not lose them
             self._file.flush()
             os.fsync(self._file.fileno())
         except OSError as exc:  # a full disk: say which file
             raise OSError(exc.errno, exc.strerror, str(self.stream_path)) from exc
-        self._rows += len(table)
 
     def close(self, results: Results) -> list[Path]:
         """Finish the stream with the run's ``results`` (their rows are those appended); returns the files."""

@@ -45,6 +45,7 @@ def test_simulate_ends_on_a_signal_with_its_code_and_one_line(tmp_path, sig, cod
     assert not res.complete and len(res.time) > 50
 
 
+@pytest.mark.slow  # a robot run in a subprocess (about 8 s)
 def test_robot_run_interrupted_keeps_the_previous_run_and_marks_the_partial_one(tmp_path):
     out = tmp_path / "r"
     env = dict(os.environ)

@@ -20,7 +20,7 @@ side = "both"
 """
 
 
-@pytest.mark.parametrize("count, ok", [(1_000_000_000, False), (1001, False), (1000, True), (3, True)])
+@pytest.mark.parametrize("count, ok", [(1_000_000_000, False), (1001, False), (1000, True)])
 def test_stairs_count_is_limited(tmp_path, capsys, count, ok):
     f = tmp_path / "s.toml"
     f.write_text(STAIRS.format(count=count))

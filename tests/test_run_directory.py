@@ -146,6 +146,7 @@ def test_simulate_into_an_output_in_use_is_refused(tmp_path, capsys):
     assert main(["simulate", "damped-oscillator", "--t-end", "0.1", "-o", str(out)]) == 0
 
 
+@pytest.mark.slow  # three killed subprocess runs (about 8 s)
 def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
     from cpgsim.harness.results import Results
 

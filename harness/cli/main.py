@@ -74,10 +74,21 @@ def debug_enabled(args: argparse.Namespace | None = None) -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``cpgsim`` command; returns the exit status (see the module docstring for the policy)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    previous = _terminate_on_sigterm()  # before the command's imports: SIGTERM is one line from here on
+    try:
+        return _main(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str]) -> int:
+    try:
+        parser = build_parser(argv)
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM while the command's modules load
+        return _interrupted(None, next((a for a in argv if not a.startswith("-")), ""), exc, None)
     command = getattr(args, "command", None) or "cpgsim"
-    previous = _terminate_on_sigterm()
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()
@@ -96,9 +107,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             code = 1
         _report(args, f"cpgsim {command}: error: {message}", exc)
         return code
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 def _raise_terminated(signum: int, frame: object) -> None:
@@ -113,15 +121,16 @@ def _terminate_on_sigterm() -> object | None:
     return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
-def _interrupted(args: argparse.Namespace, command: str, intr: BaseException, exc: BaseException | None) -> int:
+def _interrupted(args: argparse.Namespace | None, command: str, intr: BaseException, exc: BaseException | None) -> int:
     """One line for Ctrl-C (exit 130) or SIGTERM (exit 143); ``exc``: the run's own error, if it made one."""
     what = "terminated (SIGTERM)" if isinstance(intr, Terminated) else "interrupted"
     detail = f": {one_line(exc)}" if exc is not None and one_line(exc) else ""
-    _report(args, f"cpgsim {command}: {what}{detail}; results so far are kept, marked incomplete")
+    prefix = f"cpgsim {command}" if command and command != "cpgsim" else "cpgsim"
+    _report(args, f"{prefix}: {what}{detail}; results so far are kept, marked incomplete")
     return 143 if isinstance(intr, Terminated) else 130
 
 
-def _report(args: argparse.Namespace, line: str, exc: BaseException | None = None) -> None:
+def _report(args: argparse.Namespace | None, line: str, exc: BaseException | None = None) -> None:
     try:
         sys.stdout.flush()
     except (BrokenPipeError, OSError, ValueError):

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from cpgsim.harness.errors import interruption
 from cpgsim.harness.experiments import outcomes
 from cpgsim.harness.experiments import plots as plots_run
 from cpgsim.harness.experiments.fukuhara import scenarios as fukuhara
@@ -28,7 +29,6 @@ from cpgsim.harness.experiments.scenario import Scenario, builtin_names, load
 from cpgsim.harness.experiments.setup import RunSetup
 from cpgsim.harness.experiments.yu import scenarios as yu
 from cpgsim.harness.results import Results, atomic_write
-from cpgsim.harness.errors import interruption
 from cpgsim.harness.simulate import SimulationError, Simulator
 
 

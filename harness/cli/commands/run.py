@@ -21,8 +21,8 @@ import argparse
 from pathlib import Path
 
 from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
-from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.errors import interruption
+from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.experiments.scenario import builtin_descriptions, load
 from cpgsim.harness.simulate import SimulationError
 

@@ -86,6 +86,21 @@ def remove_run(path: Path) -> None:
         pass
 
 
+def _remove_unfinished_start(folder: Path) -> None:
+    """Remove a run folder killed while it was being created: it may hold only its manifest and temporaries."""
+    try:
+        names = [p.name for p in folder.iterdir()]
+    except OSError:
+        return
+    if all(n == MANIFEST or n.startswith(_TMP_PREFIX) for n in names):
+        for n in names:
+            (folder / n).unlink(missing_ok=True)
+        try:
+            folder.rmdir()
+        except OSError:
+            pass
+
+
 def _exchange(a: Path, b: Path) -> bool:
     """Swap two directories in one step (Linux ``renameat2(RENAME_EXCHANGE)``); False when unsupported."""
     try:
@@ -148,8 +163,13 @@ def run_directory(path: str | Path, expected: list[str]) -> Iterator[Path]:
         remove_run(work)
         if work.exists():
             raise ResultsError(f"{work} holds files cpgsim did not write: move them away")
-        work.mkdir(parents=True)
-        write_manifest(work, complete=False, files=sorted(expected))
+        for stale in path.parent.glob(f".{path.name}.partial-new.*"):
+            _remove_unfinished_start(stale)
+        fresh = path.with_name(f".{path.name}.partial-new.{os.getpid()}")
+        _remove_unfinished_start(fresh)
+        fresh.mkdir(parents=True)
+        write_manifest(fresh, complete=False, files=sorted(expected))
+        os.rename(fresh, work)  # the partial run appears with its manifest, never without
         try:
             yield work
         except BaseException:

@@ -96,8 +96,11 @@ def test_killed_reruns_never_lose_the_previous_complete_run(tmp_path):
         assert summary == "first" or (summary.startswith("run") and proc.returncode == 0)
         assert read_manifest(run)["complete"] is True
         part = partial_path(run)
-        if part.exists():
-            assert read_manifest(part)["complete"] is False and (part / MANIFEST).exists()
+        if part.exists():  # a partial run is never without its manifest (complete only if killed while swapping)
+            assert (part / MANIFEST).exists() and read_manifest(part) is not None
+    make_run(run, {"summary.json": "last"})  # whatever the kills left, the next run goes through
+    assert (run / "summary.json").read_text() == "last" and not partial_path(run).exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.cpgsim-lock", "run", "w.py"]
 
 
 def test_one_writer_per_output(tmp_path):

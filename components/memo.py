@@ -16,34 +16,44 @@ import hashlib
 import json
 import os
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from cpgsim.components import private_store
+
+_chosen: dict[tuple[str, ...], Path] = {}
+
 
 def cache_root() -> Path:
-    """The per-user cache folder (created on first use).
+    """The per-user cache folder (created 0700 on first use).
 
-    ``CPGSIM_CACHE`` if set, else ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``; when that cannot be
-    created or written (a read-only home), a folder of this user's own in the temporary directory.
+    ``CPGSIM_CACHE`` if set, else ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``. A folder that cannot be
+    created or written, or that someone else could have written into (see
+    :func:`cpgsim.components.private_store.untrusted_reason`), is refused with a one-line warning, and this
+    process uses a fresh private folder made by :func:`tempfile.mkdtemp` instead (never a predictable name
+    another user could have made first).
     """
-    env = os.environ.get("CPGSIM_CACHE")
-    if env:
-        root = Path(env)
-        root.mkdir(parents=True, exist_ok=True)
-        return root
+    env = os.environ.get("CPGSIM_CACHE", "")
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    root = Path(base) / "cpgsim"
+    key = (env, base, tempfile.gettempdir())
+    chosen = _chosen.get(key)
+    if chosen is not None and chosen.is_dir():
+        return chosen
+    root = Path(env) if env else Path(base) / "cpgsim"
     try:
-        root.mkdir(parents=True, exist_ok=True)
-        if os.access(root, os.W_OK):
-            return root
-    except OSError:
-        pass
-    import tempfile
-
-    root = Path(tempfile.gettempdir()) / f"cpgsim-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
-    root.mkdir(mode=0o700, exist_ok=True)
+        root.mkdir(mode=0o700, parents=True, exist_ok=True)
+        reason = private_store.untrusted_reason(root)
+        if reason is None and not os.access(root, os.W_OK):
+            reason = "it is not writable"
+    except OSError as exc:
+        reason = f"it cannot be created ({exc.strerror})"
+    if reason is not None:
+        fallback = Path(tempfile.mkdtemp(prefix="cpgsim-cache-"))
+        private_store.warn_once(f"cache folder {root} not used: {reason}; using the private folder {fallback}")
+        root = fallback
+    _chosen[key] = root
     return root
 
 
@@ -71,15 +81,14 @@ def disk_memo(to_dict: Callable[[Any], dict[str, float]], from_dict: Callable[[d
             key = hashlib.sha256(repr((fn.__module__, fn.__qualname__, args, code)).encode()).hexdigest()[:32]
             path = cache_root() / "memo" / f"{key}.json"
             try:
-                return from_dict(json.loads(path.read_text()))
+                stored = private_store.read_entry(path)
+                if stored is not None:
+                    return from_dict(json.loads(stored))
             except (OSError, ValueError, TypeError, KeyError):
                 pass
             result = fn(*args)
             try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_name(f".{key}.{os.getpid()}.tmp")
-                tmp.write_text(json.dumps(to_dict(result)))
-                os.replace(tmp, path)
+                private_store.write_entry(path, json.dumps(to_dict(result)).encode())
             except OSError:
                 pass
             return result

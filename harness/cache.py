@@ -7,7 +7,9 @@ co-simulation ports, ``dt``, ``substeps``, the grouping, the compiler's own sour
 version. Parameter values and start values are not part of it: they are data (the parameter
 vector, the initial state), rebuilt from the graph on every load. An entry is one JSON file
 (CasADi's own serialization of the four functions, the grouped step's C source, each block's direct
-feedthrough), written atomically; an unreadable entry is recompiled and replaced. The C libraries
+feedthrough) with the SHA-256 of its content, written atomically in the cache folder itself
+(:mod:`cpgsim.components.private_store`); an unreadable entry, or one that fails its check, is recompiled
+and replaced. The C libraries
 built from a model are cached separately by the hash of their source (:mod:`cpgsim.harness.native`).
 
 ``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
@@ -19,17 +21,16 @@ from __future__ import annotations
 import hashlib
 import inspect
 import json
-import os
 import sys
 from collections.abc import Mapping
 from typing import Any
 
 import casadi as ca
 
-from cpgsim.components import memo
+from cpgsim.components import memo, private_store
 from cpgsim.components.graph import FlatGraph
 
-FORMAT = 1
+FORMAT = 2
 
 
 def _class_source(cls: type) -> str:
@@ -81,7 +82,10 @@ def load(key: str) -> dict[str, Any] | None:
         return None
     path = memo.cache_root() / "models" / f"{key}.json"
     try:
-        entry = json.loads(path.read_text())
+        stored = private_store.read_entry(path)
+        if stored is None:
+            return None
+        entry = json.loads(stored)
         if entry.get("format") != FORMAT:
             return None
         entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
@@ -100,12 +104,9 @@ def store(key: str, functions: dict[str, ca.Function], c_source: str | None,
         return
     folder = memo.cache_root() / "models"
     try:
-        folder.mkdir(parents=True, exist_ok=True)
         entry = {"format": FORMAT, "grouping": grouping, "c_source": c_source,
                  "functions": {k: f.serialize() for k, f in functions.items()},
                  "feed": {p: {o: sorted(ins) for o, ins in d.items()} for p, d in feed.items()}}
-        tmp = folder / f".{key}.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(entry))
-        os.replace(tmp, folder / f"{key}.json")
+        private_store.write_entry(folder / f"{key}.json", json.dumps(entry).encode())
     except OSError:
         pass

@@ -35,3 +35,18 @@ class StopRequested(Exception):  # noqa: N818 - a request, not an error
     def __init__(self, message: str, time: float) -> None:
         super().__init__(message)
         self.time = float(time)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived (the CLI turns the signal into this exception, so runs end as on Ctrl-C)."""
+
+
+def interruption(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """The Ctrl-C / SIGTERM behind ``exc`` (itself, or its cause / context chain), or None."""
+    seen = 0
+    while exc is not None and seen < 20:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None

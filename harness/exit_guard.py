@@ -3,7 +3,8 @@
 An FMU runs in-process as a shared library; if it calls ``exit(0)`` inside ``doStep``, the C library
 ends the process: Python's exception handling, ``finally`` blocks and ``atexit`` never run and the
 exit status would be 0. :func:`guard_run` arms a C exit handler (``on_exit``, from a few lines of C
-compiled once into the cache, see :mod:`cpgsim.harness.native`) for the duration of a run: if the process
+compiled once into the cache and checked against its digest before every load like any cached
+library, see :func:`cpgsim.harness.native.cached_library`) for the duration of a run: if the process
 exits while it is armed, the handler prints one line naming the run (and where its partial results
 are, marked incomplete) and ends the process with status 1 instead. While armed, the fatal signals
 of a crash in native code (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) are reported the same way
@@ -20,9 +21,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
-import shutil
 import subprocess
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -92,23 +91,25 @@ def _load() -> ctypes.CDLL | None:
     if _tried:
         return _lib
     _tried = True
-    from cpgsim.harness.native import cache_dir, compiler
+    from cpgsim.harness.native import NativeUnavailable, cached_library, compiler
 
     cc = compiler()
     if cc is None:
         return None
     digest = hashlib.sha256(_SOURCE.encode()).hexdigest()[:16]
-    lib = cache_dir() / f"cpgsim_exit_guard_{digest}.so"
-    if not lib.exists():
-        with tempfile.TemporaryDirectory() as tmp:
-            src = Path(tmp) / "guard.c"
-            src.write_text(_SOURCE)
-            out = Path(tmp) / lib.name
-            proc = subprocess.run([cc, "-shared", "-fPIC", "-O1", str(src), "-o", str(out)],
-                                  capture_output=True, text=True)
-            if proc.returncode != 0:
-                return None
-            shutil.move(str(out), lib)
+
+    def build(out: Path) -> None:
+        src = out.with_name("guard.c")
+        src.write_text(_SOURCE)
+        proc = subprocess.run([cc, "-shared", "-fPIC", "-O1", str(src), "-o", str(out)],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise NativeUnavailable("the exit guard did not compile")
+
+    try:
+        lib = cached_library(f"cpgsim_exit_guard_{digest}.so", build)
+    except NativeUnavailable:
+        return None
     try:
         handle = ctypes.CDLL(str(lib))
     except OSError:

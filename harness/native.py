@@ -3,7 +3,8 @@
 CasADi's ``mapaccum`` keeps a Python-free horizon but its generic map machinery costs about
 1-2 us per step. For long equation-only horizons we generate the step function's C code with
 ``casadi.CodeGenerator``, add a small loop driver (below), compile it with the system C compiler
-and call it once through :mod:`ctypes`. Compiled libraries are cached by content hash.
+and call it once through :mod:`ctypes`. Compiled libraries are cached by content hash, each checked
+against its recorded SHA-256 before it is loaded (:func:`cached_library`).
 """
 
 from __future__ import annotations
@@ -15,12 +16,13 @@ import re
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from cpgsim.components import memo
+from cpgsim.components import memo, private_store
 
 DRIVER = r"""
 #include <math.h>
@@ -282,17 +284,43 @@ def compile_source(source: str, tag: str, flags: tuple[str, ...] | None = None) 
     flags = flags or optimization_flags(source)
     options = ["-shared", "-fPIC", "-fno-semantic-interposition", "-pthread", "-Wl,-Bsymbolic", *flags]
     digest = hashlib.sha256((source + " ".join(options)).encode()).hexdigest()[:16]
-    lib = cache_dir() / f"{tag}_{digest}.so"
-    if lib.exists():
-        return lib
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / f"{tag}_full.c"
+
+    def build(out: Path) -> None:
+        src = out.with_name(f"{tag}_full.c")
         src.write_text(source)
-        out = Path(tmp) / lib.name
         proc = subprocess.run([cc, *options, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
         if proc.returncode != 0:
             raise NativeUnavailable(f"C compiler failed: {proc.stderr.strip()[:500]}")
-        shutil.move(str(out), lib)  # same filesystem in the common case; atomic enough for a cache
+
+    return cached_library(f"{tag}_{digest}.so", build)
+
+
+def cached_library(name: str, build: Callable[[Path], None]) -> Path:
+    """The library ``name`` in the cache, checked against its digest; built by ``build(out)`` when missing.
+
+    A library that fails its check (someone else's file, writable by others, content not matching the
+    digest recorded beside it) is reported once and rebuilt, never returned, so it is never ``dlopen()``ed.
+    Building holds a lock per name, and the result is written to a temporary file in the cache folder,
+    fsynced and renamed: any number of processes asking at once all get the one complete library.
+    Raises :class:`NativeUnavailable` when the build fails or the library cannot be stored.
+    """
+    root = cache_dir()
+    lib = root / name
+    if private_store.check_file(lib) == "ok":
+        return lib
+    try:
+        with private_store.locked(root / f".{name}.lock"):
+            status = private_store.check_file(lib)
+            if status == "ok":
+                return lib  # another process built it meanwhile
+            if status is not None:
+                private_store.warn_once(f"cache entry {lib} not used: {status}; rebuilding it")
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / name
+                build(out)
+                private_store.install_file(out.read_bytes(), lib)
+    except OSError as exc:
+        raise NativeUnavailable(f"cannot store the compiled library {lib}: {exc.strerror or exc}") from exc
     return lib
 
 

@@ -243,39 +243,12 @@ def atomic_write(path: Path, writer, text: bool) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and not exc.filename:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
-
-
-RUN_MARKER = ".cpgsim-run"
-
-
-def prepare_run_directory(path: str | Path) -> Path:
-    """Make ``path`` an empty run directory, replacing a previous run there as a whole.
-
-    A missing or empty directory is used as it is; one that holds a previous run (its ``.cpgsim-run``
-    marker, or ``summary.json`` / ``results.meta.json`` of an older run) is emptied first, so old and
-    new files never mix; any other non-empty directory is refused with a :class:`ResultsError`.
-    """
-    import shutil
-
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ResultsError(f"output {path} exists and is not a directory")
-    if path.is_dir() and any(path.iterdir()):
-        if not any((path / n).exists() for n in (RUN_MARKER, "summary.json", "results.meta.json")):
-            raise ResultsError(f"output directory {path} is not empty and holds no cpgsim run: "
-                               f"choose another -o or empty it")
-        for entry in list(path.iterdir()):
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
-    path.mkdir(parents=True, exist_ok=True)
-    (path / RUN_MARKER).write_text("a cpgsim run directory: the next run into it replaces its contents\n")
-    return path
 
 
 def result_files(path: str | Path) -> list[Path]:
@@ -290,8 +263,10 @@ def result_files(path: str | Path) -> list[Path]:
 class ResultsWriter:
     """Stream results to ``path`` (``.csv`` or ``.npz``) while a run goes on (see the module docstring).
 
-    ``open(columns, units, meta)`` replaces the target as a whole (an old file of the same name and its
-    sidecars are removed first), ``append(time, rows)`` adds rows (written at ``flush()``, or by
+    ``open(columns, units, meta)`` starts the stream: into the target itself when it does not exist, else
+    (a rerun) into ``FILE.partial.csv`` beside it, which replaces the old file and sidecar only when the
+    run ends (a rerun killed midway leaves the previous results whole and the partial ones beside them);
+    ``append(time, rows)`` adds rows (written at ``flush()``, or by
     ``maybe_flush()`` when ``flush_seconds`` of wall time have passed), ``close(results)`` writes the
     final files (``complete`` and ``message`` from ``results``) and returns them. A run that recorded no
     row leaves no file.
@@ -317,9 +292,13 @@ class ResultsWriter:
 
     def open(self, columns: Sequence[str], units: Sequence[str], meta: dict | None = None) -> ResultsWriter:
         self.columns, self.units, self.meta = list(columns), list(units), dict(meta or {})
-        for f in result_files(self.path):
-            if f.exists():
-                f.unlink()
+        if self.path.suffix == ".csv" and self.path.exists():  # a rerun (--force): the old file stays till the end
+            self.stream_path = self.path.with_suffix(".partial.csv")
+        for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+            if f != self.path and f.exists():
+                f.unlink()  # a stream of an earlier run that did not finish
+        if self.stream_path == self.path and self.path.with_suffix(".meta.json").exists():
+            self.path.with_suffix(".meta.json").unlink()  # a sidecar without its CSV
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path.parent)
         self._write_meta(False, "incomplete: the run had not finished when this file was last written", None)
@@ -354,10 +333,13 @@ class ResultsWriter:
 
         buf = io.StringIO()
         np.savetxt(buf, table, delimiter=",", fmt="%.17g")
-        self._file.write(buf.getvalue())
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._rows += len(table)
+        try:
+            self._file.write(buf.getvalue())
+            self._rows += len(table)  # counted before the flush: a signal during fsync must not lose them
+            self._file.flush()
+            os.fsync(self._file.fileno())
+        except OSError as exc:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(self.stream_path)) from exc
 
     def close(self, results: Results) -> list[Path]:
         """Finish the stream with the run's ``results`` (their rows are those appended); returns the files."""
@@ -367,7 +349,7 @@ class ResultsWriter:
             self._file = None
         self.meta = {**self.meta, **results.meta}
         if self._rows == 0:
-            for f in result_files(self.path):
+            for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
                 if f.exists():
                     f.unlink()
             return []
@@ -378,6 +360,10 @@ class ResultsWriter:
                     f.unlink()
             return written
         self._write_meta(results.complete, results.message, self._rows)
+        if self.stream_path != self.path:  # the rerun is whole: it replaces the previous file and sidecar
+            os.replace(self.stream_path, self.path)
+            os.replace(self.stream_path.with_suffix(".meta.json"), self.path.with_suffix(".meta.json"))
+            self.stream_path = self.path
         return [self.path, self.path.with_suffix(".meta.json")]
 
     def abandon(self) -> None:

@@ -5,8 +5,9 @@ steps, one Python call per chunk). With co-simulation blocks the master calls th
 once per macro step through a zero-copy CasADi buffer, exchanges signals with the black boxes
 (Jacobi or Gauss-Seidel order) and steps them.
 
-A non-finite state stops the run with :class:`SimulationDiverged`, which names the first
-non-finite state and carries the results recorded up to that step (``exc.results``).
+A non-finite state, or a NaN or infinity in any recorded signal, stops the run with
+:class:`SimulationDiverged`, which names the first non-finite state or signal (and when) and carries
+the results recorded before it (``exc.results``, marked incomplete).
 """
 
 from __future__ import annotations
@@ -153,6 +154,13 @@ class Simulator:
         except BaseException as exc:
             if rec.writer is not None:
                 rec.finish(rec.results(False, f"stopped: {type(exc).__name__}: {exc}"))
+            raise
+        try:
+            rec.check_finite()  # the rows since the last check (the last row, t_end)
+        except SimulationError as exc:
+            if rec.writer is not None:
+                rec.finish(exc.results)
+                self.written = getattr(rec, "files", [])
             raise
         if stop is None:
             res = rec.results(complete=True, message="")
@@ -445,6 +453,7 @@ class _Recorder:
         self.writer: Any = None  # a cpgsim.harness.results.ResultsWriter when the run is streamed
         self.flush_rows = 1000  # hand rows to the writer at least every this many (one simulated second)
         self.streamed = 0  # rows handed to the writer
+        self.checked = 0  # rows checked to be finite
 
     def add_row(self, row: np.ndarray) -> None:
         self.data[self.n] = row
@@ -457,12 +466,33 @@ class _Recorder:
     def commit_rows(self, count: int) -> None:
         """The next ``count`` rows of :attr:`data` have been written (in place)."""
         self.n += count
-        if self.writer is not None:
-            self.tick()
+        self.tick()
+
+    def check_finite(self) -> None:
+        """End the run (:class:`SimulationDiverged`) at the first recorded NaN or infinity since the last check.
+
+        The results keep the rows before it; the message names the signal and the time.
+        """
+        if self.n <= self.checked:
+            return
+        block = self.data[self.checked:self.n]
+        if np.isfinite(block).all():
+            self.checked = self.n
+            return
+        bad = ~np.isfinite(block)
+        row = int(np.argmax(bad.any(axis=1)))
+        col = int(np.argmax(bad[row]))
+        t, value = float(self.times[self.checked + row]), block[row, col]
+        self.n = self.checked + row
+        kept = f"results kept up to t={self.last_time():.6g} s" if self.n else "no results kept"
+        raise SimulationDiverged(
+            f"simulation produced a non-finite value: signal {self.columns[col]} became {value} at t={t:.6g} s; "
+            f"{kept}", self.results(complete=False, message=f"non-finite: {self.columns[col]} at t={t:.6g}"))
 
     def tick(self) -> None:
-        """Streaming hook: pass new rows to the writer once a simulated second (or the wall-time period)
-        has been recorded since the last time."""
+        """Check the new rows for NaN/inf; streaming: pass them to the writer once a simulated second (or
+        the wall-time period) has been recorded since the last time."""
+        self.check_finite()
         w = self.writer
         if w is not None and self.n > self.streamed and (self.n - self.streamed >= self.flush_rows or w.due()):
             self._hand_over()

@@ -220,6 +220,12 @@ def far_edge_y(f: dict) -> float:
     return y
 
 
+MAX_STAIRS = 1000
+"""Most stairs one ``stairs`` feature may have (each is a body of the terrain; a robot run crosses a few dozen)."""
+MAX_BLOCKS = 20_000
+"""Most blocks one ``blocks`` patch may have (``length / size`` times ``2 half_width / size``)."""
+
+
 def _y_range(f: dict, ext: Extent) -> tuple[float, float]:
     t = f["type"]
     y = f["position_y"]
@@ -252,6 +258,8 @@ def _checked(f: dict, where: str) -> dict:
         elif key in ("count", "seed"):
             if isinstance(f[key], bool) or not isinstance(f[key], int) or (key == "count" and f[key] < 1):
                 raise ParameterError(f"{name} must be an integer{' >= 1' if key == 'count' else ''}, got {f[key]!r}")
+            if key == "count" and f[key] > MAX_STAIRS:
+                raise ParameterError(f"{name} = {f[key]} is more than the limit of {MAX_STAIRS} stairs")
             out[key] = int(f[key])
         elif key == "position_y":
             out[key] = _finite(name, f[key])
@@ -264,6 +272,11 @@ def _checked(f: dict, where: str) -> dict:
             out[key] = _positive(name, f[key])
     if kind == "blocks" and out["height_max"] < out["height_min"]:
         raise ParameterError(f"{where}.height_max ({out['height_max']}) is below height_min ({out['height_min']})")
+    if kind == "blocks":
+        n = math.ceil(out["length"] / out["size"]) * math.ceil(2 * out["half_width"] / out["size"])
+        if n > MAX_BLOCKS:
+            raise ParameterError(f"{where}: length, half_width and size make {n} blocks, more than the limit of "
+                                 f"{MAX_BLOCKS} (use larger blocks or a smaller patch)")
     return out
 
 

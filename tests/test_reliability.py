@@ -20,7 +20,7 @@ import pytest
 from test_fuzz_fmus import GUID, ROOT, c_fmu, compile_library, fmi3_array_xml, model_description, rezip, run_cli
 
 from cpgsim.harness.cli.main import main
-from cpgsim.harness.results import Results, ResultsWriter, prepare_run_directory, remove_stale_temporaries
+from cpgsim.harness.results import Results, ResultsWriter, remove_stale_temporaries
 
 pytestmark = pytest.mark.slow  # subprocess and FMU fault runs: the full suite only
 
@@ -351,22 +351,6 @@ def test_simulator_stream_flushes_every_simulated_second(tmp_path):
     assert seen[:5] == [100, 200, 300, 400, 500]  # one simulated second = 100 rows at dt 0.01
     back = Results.load(tmp_path / "v.csv")
     assert back.complete and np.array_equal(back.data, res.data)
-
-
-def test_run_directory_is_replaced_as_a_whole_or_refused(tmp_path):
-    from cpgsim.harness.results import ResultsError
-
-    run = tmp_path / "run"
-    prepare_run_directory(run)
-    (run / "old.png").write_text("old")
-    prepare_run_directory(run)
-    assert sorted(p.name for p in run.iterdir()) == [".cpgsim-run"]
-    other = tmp_path / "mine"
-    other.mkdir()
-    (other / "thesis.tex").write_text("precious")
-    with pytest.raises(ResultsError, match="holds no cpgsim run"):
-        prepare_run_directory(other)
-    assert (other / "thesis.tex").read_text() == "precious"
 
 
 # --------------------------------------------------------------------------------------------------

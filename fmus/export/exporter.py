@@ -45,6 +45,7 @@ import casadi as ca
 
 from cpgsim.components.core import Block
 from cpgsim.components.graph import Graph
+from cpgsim.fmus import trust
 from cpgsim.fmus.export import build
 from cpgsim.fmus.export.model_description import ExportError, Variables, collect_variables, model_description
 from cpgsim.harness.compile import compile_graph
@@ -149,6 +150,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         out_dir = staging / "binaries" / bin_folder
         out_dir.mkdir(parents=True)
         build.compile_binary(src, out_dir / f"{identifier}{suffix}", sources, optimize)
+        trust.record_export(out_dir / f"{identifier}{suffix}", path)  # this user's own: may run in-process
         build.write_fmu(staging, path)
     return ExportedFmu(path, variables, identifier, guid, fmi, kinds)
 

@@ -279,6 +279,54 @@ def identifier(name: str, taken: set[str]) -> str:
     return out
 
 
+INT_RANGES = {"Integer": (-2**31, 2**31 - 1), "Enumeration": (-2**31, 2**31 - 1), "Int8": (-2**7, 2**7 - 1),
+              "UInt8": (0, 2**8 - 1), "Int16": (-2**15, 2**15 - 1), "UInt16": (0, 2**16 - 1),
+              "Int32": (-2**31, 2**31 - 1), "UInt32": (0, 2**32 - 1), "Int64": (-2**63, 2**63 - 1),
+              "UInt64": (0, 2**64 - 1)}
+"""The value range of each FMI integer type (``Integer`` and ``Enumeration`` are FMI 2's 32-bit ``int``)."""
+_FLOAT_WORDS = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
+
+
+def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "Real") -> float:
+    """The number in ``attribute`` of ``element`` (e.g. ``<Integer start>`` of variable 'n'), checked.
+
+    An integer type's value must be an integer within the type's range; a real one a float64 (an overflow
+    such as ``1e400`` is out of range; ``INF`` written as such stays infinite). Anything else is a
+    :class:`ModelDescriptionError` naming the element and the attribute.
+    """
+    token = str(text).strip()
+    where = f"{element}: attribute {attribute}={token!r}"
+    if fmi_type in INT_TYPES:
+        try:
+            value = int(token)
+        except ValueError:
+            raise ModelDescriptionError(f"{where} is not an integer ({fmi_type})") from None
+        lo, hi = INT_RANGES.get(fmi_type, (-2**63, 2**64 - 1))
+        if not lo <= value <= hi:
+            raise ModelDescriptionError(f"{where} is out of range for {fmi_type} [{lo}, {hi}]")
+        return float(value)
+    try:
+        value = float(token)
+    except ValueError:
+        raise ModelDescriptionError(f"{where} is not a number") from None
+    if not math.isfinite(value) and token.lower() not in _FLOAT_WORDS:
+        raise ModelDescriptionError(f"{where} is out of range for a 64-bit float")
+    return value
+
+
+MAX_COUNT = 10_000_000
+"""Most continuous states or event indicators a modelDescription may declare (each is a float64 array slot)."""
+
+
+def _count(value: Any, attribute: str) -> int:
+    """A count attribute of ``<fmiModelDescription>``, a non-negative integer up to :data:`MAX_COUNT`."""
+    n = int(number_attribute(value or 0, "<fmiModelDescription>", attribute, "Int64"))
+    if not 0 <= n <= MAX_COUNT:
+        raise ModelDescriptionError(f"<fmiModelDescription>: attribute {attribute}={n} is out of range "
+                                    f"[0, {MAX_COUNT}]")
+    return n
+
+
 def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float, ...] | None:
     raw = var.start
     if raw is None:
@@ -287,10 +335,8 @@ def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float, ...] | Non
     if fmi_type in BOOL_TYPES:
         vals = [1.0 if t in ("true", "1") else 0.0 for t in text.split()]
     else:
-        try:
-            vals = [float(t) for t in text.split()]
-        except ValueError:
-            raise ModelDescriptionError(f"variable {var.name!r}: start value {raw!r} is not a number") from None
+        element = f"variable {var.name!r} <{fmi_type}>"
+        vals = [number_attribute(t, element, "start", fmi_type) for t in text.split()]
     if len(vals) == 1 and count > 1:
         vals = vals * count
     if len(vals) != count:
@@ -586,7 +632,9 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         start = _parse_start(v, v.type, 1)
         lo = _attr(v, "min")
         hi = _attr(v, "max")
-        bounds = (float(lo) if lo is not None else -math.inf, float(hi) if hi is not None else math.inf)
+        element = f"variable {v.name!r} <{v.type}>"
+        bounds = (number_attribute(lo, element, "min", v.type) if lo is not None else -math.inf,
+                  number_attribute(hi, element, "max", v.type) if hi is not None else math.inf)
         s0 = start[0] if start else None
         if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
             skipped.append(f"bounds of parameter {v.name!r} ignored: start {s0:g} is outside "
@@ -622,7 +670,8 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
     desc = FmuDescription(
         path=path, fmi_version=major, model_name=md.modelName or "", generation_tool=md.generationTool or "",
         guid=md.guid or "", description=md.description or "", cs_identifier=cs, me_identifier=me,
-        n_states=int(md.numberOfContinuousStates or 0), n_event_indicators=int(md.numberOfEventIndicators or 0),
+        n_states=_count(md.numberOfContinuousStates, "numberOfContinuousStates"),
+        n_event_indicators=_count(md.numberOfEventIndicators, "numberOfEventIndicators"),
         inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
         default_experiment=experiment,
         platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),

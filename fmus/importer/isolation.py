@@ -4,9 +4,14 @@
 call over a socket pair to ``python -m cpgsim.fmus.importer.isolation FD``, a child that owns the FMU. The child
 is a fresh interpreter (not a fork: FMU libraries and CasADi state are never shared), its stdout
 goes to stderr (an FMU printing cannot corrupt the protocol) and it ignores SIGINT (the parent
-decides). One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``,
-whose reply carries the outputs after the step; ``get_outputs`` asks the child only when inputs
-changed since the last answer (direct feedthrough).
+decides). It leads its own process group (``start_new_session``), killed as a whole when the run
+ends, so processes the FMU forks do not outlive it (one that calls ``setsid`` itself escapes: a limit). Its
+stdout and stderr reach cpgsim's stderr through a pipe capped at :data:`OUTPUT_LIMIT` bytes; the rest
+is counted and reported in one line.
+
+One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``, whose reply
+carries the outputs after the step; ``get_outputs`` asks the child only when inputs changed since the
+last answer (direct feedthrough).
 
 If the child dies (segmentation fault, abort, out of memory, killed, exit from inside the FMU) the
 call raises :class:`~cpgsim.fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal.
@@ -26,6 +31,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Mapping
 from multiprocessing.connection import Connection
@@ -91,9 +97,10 @@ class IsolatedRuntime:
         try:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "cpgsim.fmus.importer.isolation", str(child.fileno())],
-                pass_fds=(child.fileno(),),
-                stdin=subprocess.DEVNULL, stdout=sys.stderr.fileno() if _has_fileno(sys.stderr) else None,
-                env=env, cwd=str(self.scratch), close_fds=True)
+                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, env=env, cwd=str(self.scratch), close_fds=True,
+                start_new_session=True)  # its own process group: ended as a whole with the run
+            self._output = OutputForwarder(self.proc.stdout, f"FMU {self.path.name} (block {self.name!r})")
         except BaseException:
             remove_tree(self.scratch)
             raise
@@ -203,11 +210,61 @@ class IsolatedRuntime:
                 pass
         self._close_conn()
 
+    def _end_group(self) -> None:
+        """Kill what is left of the child's process group (processes the FMU forked), then report its output."""
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError, OSError):
+            pass
+        forwarder = getattr(self, "_output", None)
+        if forwarder is not None:
+            forwarder.finish()
+
     def _close_conn(self) -> None:
         if not self.conn.closed:
             self.conn.close()
         if self.proc.poll() is not None:
+            self._end_group()
             remove_tree(self.scratch)
+
+
+OUTPUT_LIMIT = 1 << 20
+"""Bytes of an isolated FMU's stdout and stderr shown on cpgsim's stderr; the rest is counted and reported."""
+
+
+class OutputForwarder:
+    """Copy a child's output to stderr up to :data:`OUTPUT_LIMIT` bytes (a thread); count what is dropped."""
+
+    def __init__(self, pipe: Any, label: str) -> None:
+        self.pipe, self.label = pipe, label
+        self.shown = self.dropped = 0
+        self._reported = False
+        self._thread = threading.Thread(target=self._copy, daemon=True, name=f"cpgsim output of {label}")
+        self._thread.start()
+
+    def _copy(self) -> None:
+        err = sys.stderr.buffer if hasattr(sys.stderr, "buffer") else None
+        try:
+            for chunk in iter(lambda: self.pipe.read1(65536), b""):
+                room = max(0, OUTPUT_LIMIT - self.shown)
+                if room and err is not None:
+                    try:
+                        err.write(chunk[:room])
+                        err.flush()
+                    except (OSError, ValueError):
+                        err = None
+                self.shown += min(room, len(chunk))
+                self.dropped += len(chunk) - min(room, len(chunk))
+        except (OSError, ValueError):
+            pass
+
+    def finish(self) -> None:
+        """Wait briefly for the rest of the output; say once how much was not shown."""
+        self._thread.join(timeout=2.0)
+        if self.dropped and not self._reported:
+            self._reported = True
+            print(f"cpgsim: warning: {self.label} printed {self.shown + self.dropped} bytes; the "
+                  f"{self.dropped} bytes after the first {OUTPUT_LIMIT} were not shown", file=sys.stderr)
 
 
 def _stopped(pid: int) -> bool:

@@ -85,6 +85,8 @@ def load_graph(spec: str) -> Graph | Block:
         sys.modules[mod_name] = module
         try:
             spec_obj.loader.exec_module(module)
+        except SystemExit as exc:  # user code ending the process is bad input, not cpgsim's exit status
+            raise GraphNotFound(f"importing {path} failed: the module called sys.exit({exc.code!r})") from None
         except Exception as exc:  # noqa: BLE001 - user code: report, don't crash
             hint = moved_name_hint(exc)
             if hint:
@@ -120,6 +122,8 @@ def call_builder(builder: Any, spec: str) -> Graph | Block:
         graph = builder()
     except ModelError:
         raise
+    except SystemExit as exc:
+        raise GraphNotFound(f"{spec}: the builder called sys.exit({exc.code!r})") from None
     except Exception as exc:  # noqa: BLE001 - user code: report, don't crash
         raise GraphNotFound(f"{spec}: the builder raised {type(exc).__name__}: {' '.join(str(exc).split())}") \
             from exc

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 from typing import Any
 
 
@@ -39,6 +40,9 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
         return 2, msg
     if type(exc).__name__ in ("FmuRuntimeError", "FmuCrashedError", "FmuTimeoutError"):
         return 1, msg
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        return 1, one_line(f"writing failed: {where}{exc.strerror or exc} (the run's results are incomplete)")
     if isinstance(exc, OSError):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         return 2, one_line(f"{where}{exc.strerror or exc}")
@@ -60,6 +64,18 @@ def add_scenario_set_argument(parser: argparse.ArgumentParser) -> None:
                              "controller.Fcx=20 (VALUE: a TOML value; a bare word is a string); repeatable")
 
 
+_CONTROL = {chr(c) for c in range(32)} | {chr(127)}
+
+
+def refuse_control_characters(item: str, flag: str = "--set") -> None:
+    """A ``KEY=VALUE`` with a newline, tab or other control character is refused (it could smuggle a second
+    TOML line or hide part of the value), naming the character."""
+    bad = next((ch for ch in item if ch in _CONTROL), None)
+    if bad is not None:
+        raise CliError(f"{flag} {item.partition('=')[0].strip()!r}: the value holds a control character "
+                       f"({bad!r}); give one plain line per {flag}")
+
+
 def parse_scenario_sets(items: list[str]) -> dict[str, Any]:
     """``["terrain.step.height=0.06", "terrain.step.side=left"]`` -> ``{"terrain.step.height": 0.06,
     "terrain.step.side": "left"}`` (each VALUE a TOML value, a bare word a string); malformed items raise
@@ -68,6 +84,7 @@ def parse_scenario_sets(items: list[str]) -> dict[str, Any]:
 
     out: dict[str, Any] = {}
     for item in items:
+        refuse_control_characters(item)
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise CliError(f"--set expects KEY=VALUE, got {item!r}")
@@ -86,6 +103,7 @@ def parse_sets(items: list[str]) -> dict[str, Any]:
     (``label="left leg"``), for the array and String parameters of FMUs."""
     out: dict[str, Any] = {}
     for item in items:
+        refuse_control_characters(item)
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise CliError(f"--set expects BLOCK.PARAM=VALUE, got {item!r}")
@@ -116,6 +134,7 @@ def parse_assignments(items: list[str], flag: str, form: str = "NAME=VALUE") -> 
     """``["name=1.5", ...]`` given with ``flag`` -> ``{"name": 1.5}``; malformed items raise :class:`CliError`."""
     out: dict[str, float] = {}
     for item in items:
+        refuse_control_characters(item, flag)
         key, sep, value = item.partition("=")
         if not sep or not key.strip() or not value.strip():
             raise CliError(f"{flag} expects {form}, got {item!r}")

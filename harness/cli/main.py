@@ -4,8 +4,10 @@ Each command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and ``
 
 The error policy of the whole CLI (:func:`main`): every failure ends with one line on stderr,
 ``cpgsim <command>: error: <what failed>``, and exit status 2 for bad input (arguments, files, graphs,
-FMUs that cannot be used), 1 for a run that failed (a simulation or an FMU call stopped early), 130
-when interrupted. An exception nobody expected is reported as an internal error on one line too.
+FMUs that cannot be used), 1 for a run that failed (a simulation or an FMU call stopped early, a robot
+run's criteria failed, the disk filled up), 130 when interrupted (Ctrl-C) and 143 on SIGTERM, each with
+one line; results streamed so far are kept, marked incomplete. An exception nobody expected is reported
+as an internal error on one line too.
 ``--debug`` (or the environment variable ``CPGSIM_DEBUG=1``) prints the traceback as well. A closed
 stdout (``cpgsim inspect X.fmu | head``) ends quietly.
 """
@@ -16,13 +18,16 @@ import argparse
 import importlib
 import os
 import pkgutil
+import signal
 import sys
+import threading
 import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
 from cpgsim.harness.cli import commands
-from cpgsim.harness.cli.common import CliError, exit_code_of
+from cpgsim.harness.cli.common import CliError, exit_code_of, one_line
+from cpgsim.harness.errors import Terminated, interruption
 
 __all__ = ["CliError", "build_parser", "main"]
 
@@ -90,8 +95,20 @@ def debug_enabled(args: argparse.Namespace | None = None) -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``cpgsim`` command; returns the exit status (see the module docstring for the policy)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    previous = _terminate_on_sigterm()  # before the command's imports: SIGTERM is one line from here on
+    try:
+        return _main(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str]) -> int:
+    try:
+        parser = build_parser(argv)
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM while the command's modules load
+        return _interrupted(None, next((a for a in argv if not a.startswith("-")), ""), exc, None)
     command = getattr(args, "command", None) or "cpgsim"
     try:
         code = int(args._run(args) or 0)
@@ -99,10 +116,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return code
     except BrokenPipeError:
         return _closed_stdout()
-    except KeyboardInterrupt:
-        _report(args, f"cpgsim {command}: interrupted")
-        return 130
+    except KeyboardInterrupt as exc:
+        return _interrupted(args, command, exc, None)
     except Exception as exc:  # noqa: BLE001 - the one place where every error becomes one line
+        if interruption(exc) is not None:  # a run that turned Ctrl-C / SIGTERM into its own error
+            return _interrupted(args, command, interruption(exc), exc)
         code, message = exit_code_of(exc)
         if code is None:
             message = (f"internal error: {type(exc).__name__}: {message} (this is a bug in cpgsim; "
@@ -112,7 +130,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         return code
 
 
-def _report(args: argparse.Namespace, line: str, exc: BaseException | None = None) -> None:
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def _terminate_on_sigterm() -> object | None:
+    """SIGTERM raises :class:`Terminated` (runs end, flush and mark their results as on Ctrl-C); returns the
+    previous handler (None when not in the main thread, where no handler can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def _interrupted(args: argparse.Namespace | None, command: str, intr: BaseException, exc: BaseException | None) -> int:
+    """One line for Ctrl-C (exit 130) or SIGTERM (exit 143); ``exc``: the run's own error, if it made one."""
+    what = "terminated (SIGTERM)" if isinstance(intr, Terminated) else "interrupted"
+    detail = f": {one_line(exc)}" if exc is not None and one_line(exc) else ""
+    prefix = f"cpgsim {command}" if command and command != "cpgsim" else "cpgsim"
+    _report(args, f"{prefix}: {what}{detail}; results so far are kept, marked incomplete")
+    return 143 if isinstance(intr, Terminated) else 130
+
+
+def _report(args: argparse.Namespace | None, line: str, exc: BaseException | None = None) -> None:
     try:
         sys.stdout.flush()
     except (BrokenPipeError, OSError, ValueError):

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from cpgsim.harness.errors import interruption
 from cpgsim.harness.experiments import outcomes
 from cpgsim.harness.experiments import plots as plots_run
 from cpgsim.harness.experiments.fukuhara import scenarios as fukuhara
@@ -83,6 +84,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
             raise
         res = exc.results
     wall = time.perf_counter() - wall0
+    interrupted = interruption(error) is not None
+    if interrupted:
+        plots = False  # Ctrl-C / SIGTERM: end within a moment, no pictures of a partial run
     res.meta.update({"scenario": label, **setup.info})  # results.csv was streamed during the run
     if save_results:
         res.save(out / "results.npz")
@@ -93,7 +97,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     if plots:
         summary["pictures"] = [str(p.name) for p in make_plots(setup, res, summary, out)]
     checks: dict[str, bool] = {}
-    if setup.extra is not None:
+    if setup.extra is not None and not interrupted:
         more = setup.extra(res, out)
         checks = more.pop("checks", {})
         summary.update(more)

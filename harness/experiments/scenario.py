@@ -263,6 +263,9 @@ def line_of(text: str, key: str) -> int | None:
     return None
 
 
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]{0,99}")
+
+
 def validate(scenario: Scenario, overridden: bool = False) -> None:
     """Check every key against :data:`SCHEMA`; fill defaults; raise :class:`ScenarioError` naming the key."""
     doc = scenario.doc
@@ -282,6 +285,9 @@ def validate(scenario: Scenario, overridden: bool = False) -> None:
             doc[key] = spec.default
         elif key == "name" or (key == "t_end" and doc.get("controller", {}).get("kind") != "fukuhara"):
             raise ScenarioError(f"missing key {key!r} ({scenario.source})")  # fukuhara: t_end by speed setting
+    if not _PLAIN_NAME.fullmatch(str(doc["name"])) or doc["name"] in (".", ".."):
+        raise ScenarioError(f"name = {_show(doc['name'])} must be a plain name (letters, digits, '.', '_', '-'; "
+                            f"no path: the default output is runs/<name>){_where(scenario, 'name', overridden)}")
     for alias, target in doc["aliases"].items():
         if not isinstance(target, str):
             raise ScenarioError(f"aliases.{alias} must be a string key, got {_show(target)}"

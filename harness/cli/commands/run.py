@@ -8,7 +8,11 @@ the resolved scenario and exits.
 
 Writes results.csv/.npz, scenario.toml, summary.json (distance, fell, max tilt, stalled, waiting share,
 success, reflex events) and PNGs (gait diagram, foot paths, toe forces, body, snapshots) into the output
-directory. Example: cpgsim run step -o runs/step --set terrain.step.height=0.05
+directory. The run is built in DIR.partial beside it and replaces the previous run in DIR only when it
+is complete; cpgsim never empties a folder it did not write (no .cpgsim-run.json manifest), and a second
+run into a DIR that is being written is refused ("in use").
+Exit status 1 when a criterion of the scenario fails (pytest's convention; the last line names each
+failed criterion with its value and limit). Example: cpgsim run step -o runs/step --set terrain.step.height=0.05
 """
 
 from __future__ import annotations
@@ -17,9 +21,14 @@ import argparse
 from pathlib import Path
 
 from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets, positive_float
+from cpgsim.harness.errors import interruption
 from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.experiments.scenario import builtin_descriptions, load
 from cpgsim.harness.simulate import SimulationError
+
+RUN_FILES = ["results.csv", "results.meta.json", "results.npz", "scenario.toml", "summary.json", "gait.png",
+             "feet_sagittal.png", "toe_forces.png", "body.png", "snapshots.png", "report.html"]
+"""The files a run may write (listed in a run being built, so a killed one can be replaced later)."""
 
 NAME = "run"
 HELP = "run a robot scenario (built-in name or FILE.toml) and make its pictures"
@@ -51,17 +60,47 @@ def run(args: argparse.Namespace) -> int:
         print(scenario.to_toml(), end="")
         return 0
     out = Path(args.output or Path("runs") / scenario.name)
-    from cpgsim.harness.results import prepare_run_directory
+    from cpgsim.harness.rundir import run_directory
 
-    prepare_run_directory(out)  # a previous run there is replaced as a whole
-    try:
-        summary = run_scenario(scenario, out, t_end=args.t_end, progress=not args.no_progress)
-    except SimulationError as exc:
-        if (out / "summary.json").exists():
-            print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
-        raise CliError(str(exc), code=1) from exc
+    failure: SimulationError | None = None
+    with run_directory(out, RUN_FILES) as work:  # the previous run there stays until this one is complete
+        try:
+            summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress)
+        except SimulationError as exc:
+            if interruption(exc) is not None:
+                print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")
+                raise
+            if not (work / "summary.json").exists():
+                raise CliError(str(exc), code=1) from exc
+            failure = exc  # a finished run that failed: it replaces the previous one, marked complete=false
+    if failure is not None:
+        print(f"partial results and pictures written to {out}/ (summary.json has complete=false)")
+        raise CliError(str(failure), code=1) from failure
     print_summary(summary, out)
+    if not summary["success"]:
+        raise CliError("criteria failed: " + "; ".join(failed_criteria(summary)), code=1)
     return 0
+
+
+def failed_criteria(summary: dict) -> list[str]:
+    """Each failed criterion of a run's summary with its value and limit (one phrase each)."""
+    crit = summary.get("criteria", {})
+    phrases = []
+    for name in summary.get("criteria_failed", []):
+        if name == "min_distance_m":
+            phrases.append(f"min_distance_m: walked {summary['distance_m']:.3f} m, needs >= {crit.get(name)} m")
+        elif name == "max_tilt_deg":
+            phrases.append(f"max_tilt_deg: tilted {summary['max_tilt_deg']:.1f} deg, needs < {crit.get(name)} deg")
+        elif name == "fell":
+            phrases.append(f"no_fall: fell at {summary.get('fell_time_s') or 0:.2f} s ({summary.get('fell_reason')})")
+        elif name == "stalled":
+            phrases.append(f"no_stall: stalled from {summary.get('stalled_from_s') or 0:.1f} s (less than "
+                           f"{crit.get('stall_progress_m')} m in {crit.get('stall_window_s')} s)")
+        elif name == "incomplete":
+            phrases.append("incomplete: the run did not reach its end time")
+        else:
+            phrases.append(f"{name}: not met")
+    return phrases
 
 
 def print_summary(summary: dict, out: Path) -> None:

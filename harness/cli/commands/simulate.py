@@ -50,7 +50,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     iso = p.add_mutually_exclusive_group()
     iso.add_argument("--isolate", dest="isolate", action="store_const", const=True, default=None,
                      help="run every FMU in a child process (a crashing FMU ends the run with partial results; "
-                          "default: only FMUs that cpgsim did not build)")
+                          "default: every FMU but those whose binary this user exported with cpgsim, "
+                          "whatever the FMU claims about its generation tool)")
     iso.add_argument("--no-isolate", dest="isolate", action="store_const", const=False,
                      help="run every FMU in this process (faster; a hanging FMU hangs cpgsim)")
     p.add_argument("--fmu-timeout", type=positive_float, default=None, metavar="SECONDS",
@@ -70,13 +71,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def isolate_fmus(graph: object, isolate: bool | None, timeout: float | None) -> int:
-    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) those whose
-    modelDescription does not name cpgsim as the generation tool. Returns how many are isolated."""
+    """Put FMU blocks in child processes: all (``True``), none (``False``), or (``None``) all but those whose
+    binary is byte for byte one this user exported (:func:`cpgsim.fmus.trust.exported_here`; the FMU's own
+    ``generationTool`` claim decides nothing). Returns how many are isolated."""
+    from cpgsim.fmus import trust
     from cpgsim.fmus.importer.block import fmu_blocks
 
     n = 0
     for blk in fmu_blocks(graph):
-        built_here = blk.info.generation_tool.startswith("cpgsim ")
+        built_here = trust.exported_here(blk.info.path, blk.info.binary_member(blk.kind))
         blk.isolate = bool(isolate) if isolate is not None else not built_here
         if blk.isolate and timeout is not None:
             blk.timeout = timeout
@@ -131,6 +134,14 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix not in (".csv", ".npz"):
         raise CliError(f"output {out} must end in .csv or .npz")
+    from cpgsim.harness.rundir import output_lock
+
+    with output_lock(out):  # one writer per output: a second run into it now is refused ("in use")
+        return _run_into(args, out)
+
+
+def _run_into(args: argparse.Namespace, out: Path) -> int:
+    """The run of ``simulate`` into ``out`` (its lock held)."""
     from cpgsim.harness.results import result_files
 
     existing = [f for f in result_files(out) if f.exists()]

@@ -1,0 +1,175 @@
+"""Run directories: cpgsim replaces only what it wrote, only by a complete run, one writer at a time."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from cpgsim.harness.cli.main import main
+from cpgsim.harness.experiments.scenario import ScenarioError, load
+from cpgsim.harness.results import ResultsError
+from cpgsim.harness.rundir import MANIFEST, output_lock, partial_path, read_manifest, run_directory
+
+
+def make_run(path: Path, files: dict[str, str]) -> None:
+    with run_directory(path, sorted(files)) as work:
+        for name, text in files.items():
+            (work / name).write_text(text)
+
+
+def test_a_folder_without_a_manifest_is_never_emptied(tmp_path, capsys):
+    project = tmp_path / "project"
+    (project / "src").mkdir(parents=True)
+    (project / "src" / "main.c").write_text("precious")
+    (project / "summary.json").write_text("{}")  # the old rule took this for a run and emptied the folder
+    (project / "results.meta.json").write_text("{}")
+    with pytest.raises(ResultsError, match="holds no cpgsim run"):
+        make_run(project, {"summary.json": "new"})
+    assert (project / "src" / "main.c").read_text() == "precious"
+    assert (project / "summary.json").read_text() == "{}"
+    assert not partial_path(project).exists()
+    assert main(["run", "flat", "-o", str(project), "--t-end", "0.1", "--no-progress"]) == 2
+    assert "holds no cpgsim run" in capsys.readouterr().err
+    assert sorted(p.name for p in project.rglob("*")) == ["main.c", "results.meta.json", "src", "summary.json"]
+
+
+def test_a_rerun_replaces_only_the_files_of_the_previous_run(tmp_path):
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "one", "gait.png": "one"})
+    assert read_manifest(run)["complete"] is True
+    (run / "notes.txt").write_text("mine")  # the user's own file in a run directory
+    make_run(run, {"summary.json": "two"})
+    assert (run / "summary.json").read_text() == "two" and not (run / "gait.png").exists()
+    assert read_manifest(run)["files"] == ["summary.json"]
+    (kept,) = tmp_path.glob("run.kept-*")  # the user's file survived beside the run, never deleted
+    assert sorted(p.name for p in kept.iterdir()) == ["notes.txt"] and (kept / "notes.txt").read_text() == "mine"
+    assert not partial_path(run).exists()
+
+
+def test_a_failing_body_leaves_the_previous_run_and_the_partial_one_beside(tmp_path):
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "old"})
+    with pytest.raises(KeyboardInterrupt):
+        with run_directory(run, ["results.csv"]) as work:
+            (work / "results.csv").write_text("time\n0\n")
+            raise KeyboardInterrupt
+    assert (run / "summary.json").read_text() == "old"
+    part = partial_path(run)
+    assert (part / "results.csv").exists() and read_manifest(part)["complete"] is False
+    make_run(run, {"summary.json": "new"})  # the partial run is cpgsim's: the next run may replace it
+    assert (run / "summary.json").read_text() == "new" and not part.exists()
+
+
+KILLED = textwrap.dedent("""
+    import sys, time
+    from pathlib import Path
+    from cpgsim.harness.rundir import run_directory
+    with run_directory(Path(sys.argv[1]), ["results.csv", "summary.json"]) as work:
+        with open(work / "results.csv", "w") as f:
+            for k in range(10_000):
+                f.write(f"{k}\\n"); f.flush(); time.sleep(0.0005)
+        (work / "summary.json").write_text(sys.argv[2])
+""")
+
+
+def test_killed_reruns_never_lose_the_previous_complete_run(tmp_path):
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "first", "results.csv": "0\n"})
+    script = tmp_path / "w.py"
+    script.write_text(KILLED)
+    rng = random.Random(27)
+    for i in range(5):
+        proc = subprocess.Popen([sys.executable, str(script), str(run), f"run{i}"])
+        time.sleep(rng.uniform(0.3, 1.5))
+        proc.send_signal(rng.choice([signal.SIGKILL, signal.SIGTERM]))
+        proc.wait(timeout=30)
+        summary = (run / "summary.json").read_text()
+        assert summary == "first" or (summary.startswith("run") and proc.returncode == 0)
+        assert read_manifest(run)["complete"] is True
+        part = partial_path(run)
+        if part.exists():  # a partial run is never without its manifest (complete only if killed while swapping)
+            assert (part / MANIFEST).exists() and read_manifest(part) is not None
+    make_run(run, {"summary.json": "last"})  # whatever the kills left, the next run goes through
+    assert (run / "summary.json").read_text() == "last" and not partial_path(run).exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.cpgsim-lock", "run", "w.py"]
+
+
+def test_one_writer_per_output(tmp_path):
+    run = tmp_path / "run"
+    with output_lock(run):
+        with pytest.raises(ResultsError, match="in use by another cpgsim run"):
+            make_run(run, {"summary.json": "x"})
+    make_run(run, {"summary.json": "x"})
+
+
+@pytest.mark.parametrize("name", ["../../victim", "/etc/cron.d/x", "a/b", "..", "", "x\ny"])
+def test_a_scenario_name_is_a_plain_name(tmp_path, name):
+    f = tmp_path / "s.toml"
+    f.write_text(f"name = {json.dumps(name)}\nt_end = 1.0\n[controller]\nkind = 'yu'\n")
+    with pytest.raises(ScenarioError, match="must be a plain name"):
+        load(str(f))
+
+
+def test_an_ordinary_scenario_name_is_fine(tmp_path):
+    assert load("flat").name == "flat"
+    assert not os.path.isabs(load("flat").name)
+
+
+def test_cli_rerun_replaces_the_run_and_failed_criteria_exit_1(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "r"
+    assert main(["run", "flat", "-o", str(out), "--t-end", "0.3", "--no-progress"]) == 1  # walks ~2 mm
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("cpgsim run: error: criteria failed: min_distance_m: walked ")
+    assert "needs >= 0.3 m" in err
+    first = read_manifest(out)
+    assert first["complete"] and "summary.json" in first["files"] and "gait.png" in first["files"]
+    (out / "stale.png").write_text("x")  # not listed: the rerun moves it aside rather than deleting it
+    assert main(["run", "flat", "-o", str(out), "--t-end", "0.2", "--no-progress", "--set",
+                 "criteria.min_distance_m=0"]) == 0
+    assert json.loads((out / "summary.json").read_text())["t_end"] == pytest.approx(0.2, abs=2e-3)
+    assert not partial_path(out).exists() and not (out / "stale.png").exists()
+    assert [p.name for p in tmp_path.glob("r.kept-*/*")] == ["stale.png"]
+
+
+def test_simulate_into_an_output_in_use_is_refused(tmp_path, capsys):
+    out = tmp_path / "same.csv"
+    with output_lock(out):
+        assert main(["simulate", "damped-oscillator", "--t-end", "0.1", "-o", str(out)]) == 2
+    assert "is in use by another cpgsim run" in capsys.readouterr().err and not out.exists()
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.1", "-o", str(out)]) == 0
+
+
+@pytest.mark.slow  # three killed subprocess runs (about 8 s)
+def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
+    from cpgsim.harness.results import Results
+
+    out = tmp_path / "r.csv"
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.5", "--dt", "0.01", "-o", str(out)]) == 0
+    before = out.read_bytes(), out.with_suffix(".meta.json").read_bytes()
+    rng = random.Random(8)
+    for _ in range(3):
+        proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "damped-oscillator",
+                                 "--t-end", "1e5", "--dt", "0.001", "-o", str(out), "--force"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        partial = tmp_path / "r.partial.csv"
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (partial.exists() and partial.stat().st_size > 5000):
+            time.sleep(0.1)
+        time.sleep(rng.uniform(0, 0.3))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        assert (out.read_bytes(), out.with_suffix(".meta.json").read_bytes()) == before
+        res = Results.load(partial)
+        assert not res.complete and len(res.time) > 10
+    assert main(["simulate", "damped-oscillator", "--t-end", "0.2", "--dt", "0.01", "-o", str(out), "--force"]) == 0
+    assert len(Results.load(out).time) == 21 and not (tmp_path / "r.partial.csv").exists()

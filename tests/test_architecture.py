@@ -157,7 +157,9 @@ def test_imports_point_down_the_layers():
 
 def test_engine_root_stays_small():
     root_modules = [p.stem for p in (ROOT / "harness").glob("*.py") if p.stem != "__init__"]
-    assert len(root_modules) <= 12, sorted(root_modules)
+    # 14: the twelve of the engine plus rundir (which files a run may replace, one writer per output) and
+    # fused (a co-simulation block's own C loop with the compiled step, e.g. MuJoCo's)
+    assert len(root_modules) <= 14, sorted(root_modules)
 
 
 @pytest.mark.parametrize("package", sorted(m for m, p in project_modules().items() if p.name == "__init__.py"))

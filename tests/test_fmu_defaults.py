@@ -78,7 +78,7 @@ def test_command_line_overrides_the_default_experiment(tmp_path, fmu_tmp):
 
 
 @pytest.mark.parametrize("experiment, fragment", [
-    ('<DefaultExperiment stopTime="soon"/>', "DefaultExperiment stopTime 'soon' is not a number"),
+    ('<DefaultExperiment stopTime="soon"/>', "<DefaultExperiment>: attribute stopTime='soon' is not a number"),
     ('<DefaultExperiment startTime="2" stopTime="1"/>', "stopTime 1 is not after its startTime 2"),
     ('<DefaultExperiment stepSize="-0.1"/>', "stepSize -0.1 must be positive"),
 ])

@@ -438,10 +438,7 @@ def default_experiment(exp: Any, path: Path) -> dict[str, float]:
         raw = getattr(exp, attr, None)
         if raw is None or (isinstance(raw, str) and not raw.strip()):
             continue
-        try:
-            value = float(raw)
-        except (TypeError, ValueError):
-            raise ModelDescriptionError(f"FMU {path}: DefaultExperiment {attr} {raw!r} is not a number") from None
+        value = number_attribute(raw, "<DefaultExperiment>", attr)
         if not math.isfinite(value):
             raise ModelDescriptionError(f"FMU {path}: DefaultExperiment {attr} {raw!r} is not a finite number")
         if attr in ("stepSize", "tolerance") and value <= 0:

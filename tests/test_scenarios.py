@@ -376,3 +376,23 @@ def test_static_stability_by_hand():
     assert statically_stable(tri, np.array([0.5, 0.0]))  # on an edge: still held
     assert not statically_stable(tri[:2], np.array([0.5, 0.0]))  # two feet are a line
     assert not statically_stable(np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]), np.array([1.0, 0.0]))
+
+
+def test_no_reflex_waits_to_count_is_said_as_none():
+    """Found from outside: the Fukuhara run printed 'waited on reflexes 0%' though it has no reflex waits."""
+    t = np.arange(1000) * 0.01
+    assert evaluate(_run(0.02 * t), "robot", CRITERIA)["waiting_share"] is None
+    assert evaluate(_run(0.02 * t), "robot", CRITERIA, waiting=np.zeros(1000, bool))["waiting_share"] == 0.0
+
+
+def test_every_failed_criterion_line_names_value_and_limit():
+    from cpgsim.harness.cli.commands.run import failed_criteria
+
+    t = np.arange(3500) * 0.01
+    y = np.where(t < 32, 0.6 * t / 32, 0.6 - 0.08 * np.clip((t - 32) / 1.0, 0, 1))
+    crit = {**CRITERIA, "end_window_s": 5.0, "end_backslide_m": 0.03, "end_tilt_deg": 15.0, "min_distance_m": 0.7}
+    out = evaluate(_run(y, roll_deg=np.where(t > 33, 20.0, 0.0)), "robot", crit, waiting=(t > 27) & (t < 33))
+    phrases = failed_criteria(out)
+    assert phrases == ["min_distance_m: walked 0.520 m, needs >= 0.7 m",
+                       "end_backslide_m: slid back 0.080 m in the last 5.0 s, allowed 0.03 m",
+                       "end_tilt_deg: tilted 20.0 deg at the end, needs <= 15.0 deg"]

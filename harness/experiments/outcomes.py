@@ -146,6 +146,7 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
     scenario's own criteria (name -> met)."""
     t = res.time
     pos = res[f"{robot}.body_position"]
+    has_waits = waiting is not None
     waiting = np.zeros(len(t), bool) if waiting is None else np.asarray(waiting, bool).reshape(len(t))
     fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", 45.0)))
     tilt = tilt_deg(res, robot)
@@ -176,7 +177,8 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
         "fell": fell, "fell_time_s": fell_t, "fell_reason": reason,
         "max_tilt_deg": max_tilt,
         "height_drop_m": float(pos[0, 2] - np.nanmin(pos[:, 2])),
-        "waiting_share": float(waiting[1:].mean()) if len(t) > 1 else 0.0,
+        # None: the controller has no reflex waits to count (Fukuhara's rules never hold the robot)
+        "waiting_share": None if not has_waits else float(waiting[1:].mean()) if len(t) > 1 else 0.0,
         "stalled": stalled, "stalled_from_s": stall_t,
         "distance_m": distance,
         "speed_m_s": distance / duration if duration > 0 else math.nan,

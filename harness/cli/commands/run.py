@@ -96,6 +96,22 @@ def failed_criteria(summary: dict) -> list[str]:
         elif name == "stalled":
             phrases.append(f"no_stall: stalled from {summary.get('stalled_from_s') or 0:.1f} s (less than "
                            f"{crit.get('stall_progress_m')} m in {crit.get('stall_window_s')} s)")
+        elif name == "end_backslide_m":
+            phrases.append(f"end_backslide_m: slid back {summary['end_backslide_m']:.3f} m in the last "
+                           f"{crit.get('end_window_s')} s, allowed {crit.get(name)} m")
+        elif name == "end_tilt_deg":
+            phrases.append(f"end_tilt_deg: tilted {summary['end_tilt_deg']:.1f} deg at the end, needs <= "
+                           f"{crit.get(name)} deg")
+        elif name == "end_support":
+            phrases.append(f"end_support: a statically stable support held the body {summary['end_support_share']:.0%} "
+                           "of the last second, needs >= 50 %")
+        elif name == "cross":
+            phrases.append(f"cross: the body reached y = {summary.get('max_y_m', float('nan')):.3f} m, needs "
+                           f"{summary.get('goal_y_m', float('nan')):.3f} m ({crit.get('cross')} far edge + "
+                           f"{crit.get('cross_margin_m')} m) before any fall")
+        elif name == "expected_gait":
+            phrases.append(f"expected_gait: the gait was {summary.get('gait')!r}, needs "
+                           f"{summary.get('expected_gait') or crit.get('expected_gait')!r}")
         elif name == "incomplete":
             phrases.append("incomplete: the run did not reach its end time")
         else:
@@ -110,11 +126,16 @@ def print_summary(summary: dict, out: Path) -> None:
           + (f" at {summary['fell_time_s']:.2f} s ({summary['fell_reason']})" if summary["fell"] else "")
           + f", max tilt {summary['max_tilt_deg']:.1f} deg, stalled: {summary['stalled']}"
           + (f" from {summary['stalled_from_s']:.1f} s" if summary["stalled"] else "")
-          + f", waited on reflexes {summary['waiting_share']:.0%} of the time")
+          + (f", waited on reflexes {summary['waiting_share']:.0%} of the time"
+             if summary.get("waiting_share") is not None else ""))
     for ev in summary.get("reflexes", []):
+        force = ev.get("trigger_force_N", ev.get("force_N", 0.0))
+        peak = f", hit peak {ev['peak_force_N']:.1f} N at {ev['peak_t']:.3f} s" if "peak_force_N" in ev else ""
         print(f"  reflex: {ev['leg']} (leg {ev['leg_number']}) {ev['kind']} at {ev['t']:.3f} s, "
-              f"{ev.get('force_N', 0):.1f} N")
-    verdict = "success" if summary["success"] else "FAILED: " + ", ".join(summary["criteria_failed"])
-    print(f"  {verdict}")
+              f"trigger {force:.1f} N{peak}")
+    if summary["success"]:
+        print("  success")
+    for phrase in failed_criteria(summary):  # one line per criterion: its value and its limit
+        print(f"  FAILED: {phrase}")
     print(f"  results: {out}/results.csv, {out}/summary.json, {out}/scenario.toml")
     print("  pictures: " + ", ".join(f"{out}/{p}" for p in summary.get("pictures", [])))

@@ -344,6 +344,7 @@ def build(scenario: Scenario) -> RunSetup:
         checks: dict[str, bool] = {}
         if expected is not None:
             checks["expected_gait"] = s["gait"] == expected
+            s["expected_gait"] = expected
         if amputated:
             pos = res["robot.body_position"]
             s["walks"] = bool(not fall(res, "robot")[0] and pos[-1, 1] - pos[0, 1] >= MIN_WALK)

@@ -15,7 +15,9 @@
   of the last second in which a statically stable support holds the body: at least three loaded feet,
   vertical toe force above 1 N, whose convex hull contains the body centre's ground projection; ``None``
   when feet and forces were not recorded). Criteria ``end_backslide_m`` (default 0.03 m), ``end_tilt_deg``
-  (default 15 deg) and ``end_support`` (default on: the share must be at least one half).
+  (default 15 deg) and ``end_support`` (default on: some instant of the last second has such a support;
+  a walking gait is statically stable only part of the time -- Fukuhara's tripod about a quarter of it,
+  two diagonal feet loaded in between -- so a share is reported and only none at all fails).
 - ``success``: every criterion of the scenario's ``[criteria]`` table holds; ``criteria_failed`` lists the
   ones that did not (``"fell"``, ``"stalled"``, ``"max_tilt_deg"``, ``"min_distance_m"``,
   ``"end_backslide_m"``, ``"end_tilt_deg"``, ``"end_support"``, plus the scenario's own, e.g.
@@ -170,7 +172,7 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
     if not end["end_tilt_deg"] <= float(criteria.get("end_tilt_deg", 15.0)):
         failed.append("end_tilt_deg")
     if criteria.get("end_support", True) and end["end_support_share"] is not None \
-            and end["end_support_share"] < 0.5:
+            and end["end_support_share"] == 0.0:
         failed.append("end_support")
     failed += [name for name, met in (scenario_checks or {}).items() if not met]
     return {

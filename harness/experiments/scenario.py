@@ -157,7 +157,8 @@ SCHEMA: dict[str, Any] = {
         "end_window_s": Field(float, 5.0, **POSITIVE, doc="the run's final window, reflex waits included"),
         "end_backslide_m": Field(float, 0.03, lo=0.0, doc="success needs the body not to slide back more in it"),
         "end_tilt_deg": Field(float, 15.0, lo=0.0, doc="success needs the tilt at the end below this"),
-        "end_support": Field(bool, True, doc="success needs a statically stable support in the last second"),
+        "end_support": Field(bool, True, doc="success needs a statically stable support at some instant of the "
+                             "last second"),
     },
     "aliases": Field(dict, {}, doc="short --set keys: alias = 'full.key'"),
 }

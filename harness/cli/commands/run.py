@@ -103,8 +103,8 @@ def failed_criteria(summary: dict) -> list[str]:
             phrases.append(f"end_tilt_deg: tilted {summary['end_tilt_deg']:.1f} deg at the end, needs <= "
                            f"{crit.get(name)} deg")
         elif name == "end_support":
-            phrases.append(f"end_support: a statically stable support held the body {summary['end_support_share']:.0%} "
-                           "of the last second, needs >= 50 %")
+            phrases.append("end_support: no statically stable support (3 loaded feet around the body centre) "
+                           "at any instant of the last second")
         elif name == "cross":
             phrases.append(f"cross: the body reached y = {summary.get('max_y_m', float('nan')):.3f} m, needs "
                            f"{summary.get('goal_y_m', float('nan')):.3f} m ({crit.get('cross')} far edge + "

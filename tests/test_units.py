@@ -230,3 +230,12 @@ def test_empty_or_malformed_parts_are_not_known():
     for bad in ("m//s", "/", "m/s/", "*", "m*", ".m"):
         assert not parse_unit(bad).known, bad
     assert parse_unit("m*1").known and parse_unit("1/s").exponents == {"s": -1}
+
+
+def test_identity_needs_both_scale_one_and_no_shift():
+    """Survivors of the mutation run: scale > 1 (m -> mm, x1000) and a negative shift (K -> degC, -273.15)
+    are conversions, not the identity; a squared symbol prints its exponent."""
+    assert not conversion("m", "mm").identity and conversion("m", "mm").scale == pytest.approx(1000.0)
+    kc = conversion("K", "degC")
+    assert not kc.identity and kc.shift == pytest.approx(-273.15)
+    assert parse_unit("m2/s").dimension() == "m2 s-1"

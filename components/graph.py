@@ -15,6 +15,12 @@ from typing import Any
 from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError, Port, _Declared, did_you_mean
 from cpgsim.components.units import Conversion, UnitMismatch, conversion
 
+MAX_GRAPH_BLOCKS = 100_000
+"""Most blocks one graph level may hold (building runs at about 20,000 blocks per second here; a larger
+model is a graph of graphs, whose identical sub-graphs are compiled once)."""
+MAX_FLAT_BLOCKS = 500_000
+"""Most leaf blocks a graph may flatten to (nested graphs included)."""
+
 
 class WiringError(ModelError):
     """A connection is invalid (unknown port, wrong direction, unit, kind or shape mismatch)."""
@@ -79,6 +85,10 @@ class Graph(_Declared):
             raise WiringError(f"graph {self.name!r}: can only add blocks or graphs, got {type(block).__name__}")
         if block.name in self.blocks:
             raise WiringError(f"graph {self.name!r} already has a block named {block.name!r}")
+        if len(self.blocks) >= MAX_GRAPH_BLOCKS:
+            raise WiringError(f"graph {self.name!r} already has {MAX_GRAPH_BLOCKS:,} blocks, the most one graph "
+                              f"level may hold: build a large model as a graph of graphs (identical sub-graphs "
+                              f"are compiled once)")
         self.blocks[block.name] = block
         return block
 
@@ -207,6 +217,9 @@ class Graph(_Declared):
         """Inline nested graphs: leaf blocks named by path, connections between leaf ports."""
         flat = FlatGraph(self.name)
         self._flatten_into(flat, prefix="")
+        if len(flat.blocks) > MAX_FLAT_BLOCKS:
+            raise WiringError(f"graph {self.name!r} has {len(flat.blocks):,} leaf blocks, more than the "
+                              f"{MAX_FLAT_BLOCKS:,} a graph may flatten to")
         flat.resolve()
         flat.check_connected()
         return flat

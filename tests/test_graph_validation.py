@@ -150,3 +150,27 @@ def test_free_inputs_must_be_given():
         simulate(g, t_end=0.1)
     res = simulate(g, t_end=0.1, inputs={"u": lambda t: t})
     assert res["k.y"][-1] == pytest.approx(0.1)
+
+
+def test_graph_sizes_are_bounded_with_a_clear_error(monkeypatch):
+    """A graph of 10^6 blocks was still building after 4 minutes: one graph level holds at most
+    MAX_GRAPH_BLOCKS blocks, a graph flattens to at most MAX_FLAT_BLOCKS leaves (limits lowered here so
+    the test is fast; the rule is the same)."""
+    import cpgsim.components.graph as graph_module
+
+    monkeypatch.setattr(graph_module, "MAX_GRAPH_BLOCKS", 3)
+    g = Graph("g")
+    for i in range(3):
+        g.add(Gain(f"k{i}"))
+    with pytest.raises(WiringError, match="already has 3 blocks, the most one graph level may hold"):
+        g.add(Gain("k3"))
+    monkeypatch.setattr(graph_module, "MAX_FLAT_BLOCKS", 5)
+    outer = Graph("outer")
+    for i in range(2):
+        sub = Graph(f"s{i}")
+        for j in range(3):
+            sub.add(Gain(f"k{j}"))
+            sub.expose_input(f"u{j}", f"k{j}.u", default=0.0)
+        outer.add(sub)
+    with pytest.raises(WiringError, match="has 6 leaf blocks, more than the 5 a graph may flatten to"):
+        outer.flatten()

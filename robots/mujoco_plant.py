@@ -33,7 +33,7 @@ from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
 from cpgsim.robots.hexapod import foot_positions_body, tilt_angle
 from cpgsim.robots.mjcf import ContactModel, mjcf
-from cpgsim.robots.plant import default_gains, standing_posture
+from cpgsim.robots.plant import PlantReadings, declare_plant, standing_posture
 from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
 from cpgsim.robots.terrain import Terrain, flat
 
@@ -42,7 +42,7 @@ _BODY = 100
 _OTHER = 1000
 
 
-class MujocoHexapod(CoSimBlock):
+class MujocoHexapod(PlantReadings, CoSimBlock):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
     Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle`` as
@@ -86,24 +86,7 @@ class MujocoHexapod(CoSimBlock):
 
     # -- declaration (the DART plant's ports and parameters) ---------------------------------------
     def declare(self) -> None:
-        kp, kd = default_gains(self.geometry)
-        self.add_parameter("kp", kp, "N*m/rad", (0.0, math.inf), "joint servo stiffness", strict=True)
-        self.add_parameter("kd", kd, "N*m*s/rad", (0.0, math.inf), "joint servo damping", strict=True)
-        self.add_parameter("friction", 1.0, "1", (0.0, math.inf), "Coulomb friction of the robot's shapes",
-                           strict=True)
-        self.add_parameter("velocity_ff", 0.0, "1", (0.0, 1.0), "advance the servo rest position by "
-                           "kd/kp * target velocity", kind="boolean")
-        self.add_input("q_target", 18, "rad",
-                       description="joint position targets, leg-major (alpha, beta, gamma)")
-        self.add_output("q", 18, "rad", description="joint angles, leg-major")
-        self.add_output("qd", 18, "rad/s", description="joint velocities, leg-major")
-        self.add_output("toe_force", 18, "N", description="ground force on each foot "
-                        "(Fx lateral, Fy forward, Fz vertical) in the body frame")
-        self.add_output("body_position", 3, "m", description="body origin in the world frame")
-        self.add_output("body_rpy", 3, "rad", description="roll (about y), pitch (about x), yaw (about z)")
-        self.add_output("foot_position", 18, "m", description="foot centres in the world frame, leg-major")
-        self.add_output("body_contact", 1, "1", kind="boolean",
-                        description="1 when the body box touched anything during the last step")
+        declare_plant(self)
 
     def set(self, **values: float) -> MujocoHexapod:
         """Set parameters; on a set-up plant, gains apply from the next step (friction needs a new setup)."""
@@ -361,20 +344,7 @@ class MujocoHexapod(CoSimBlock):
         out = self._readout_out.copy()
         return {name: out[sl] for name, sl in _PORT_SLICES}
 
-    # -- helpers (as DartHexapod) -------------------------------------------------------------------
-    @property
-    def time(self) -> float:
-        return self._t
-
-    def toe_force_world(self) -> np.ndarray:
-        """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
-        return self._force_world.reshape(6, 3).copy()
-
-    def link_contacts(self) -> np.ndarray:
-        return self._link_contact.copy()
-
-    def body_contact(self) -> bool:
-        return bool(self._body_contact)
+    # -- helpers (time, toe_force_world, link_contacts, body_contact: PlantReadings) ----------------
 
     def total_mass(self) -> float:
         """Mass of the robot in the compiled model (kg)."""

@@ -115,7 +115,57 @@ def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
     return Rz @ Rx @ Ry
 
 
-class DartHexapod(CoSimBlock):
+def declare_plant(block: CoSimBlock) -> None:
+    """The hexapod plant's parameters and ports, the same in every engine (DART here, MuJoCo in
+    :mod:`cpgsim.robots.mujoco_plant`): servo gains, friction, the joint targets in, and joint angles and
+    velocities, toe forces, body pose, feet and body contact out."""
+    kp, kd = default_gains(block.geometry)
+    block.add_parameter("kp", kp, "N*m/rad", (0.0, math.inf), "joint servo stiffness", strict=True)
+    block.add_parameter("kd", kd, "N*m*s/rad", (0.0, math.inf), "joint servo damping", strict=True)
+    block.add_parameter("friction", 1.0, "1", (0.0, math.inf), "Coulomb friction of the robot's shapes",
+                        strict=True)
+    block.add_parameter("velocity_ff", 0.0, "1", (0.0, 1.0), "advance the servo rest position by "
+                        "kd/kp * target velocity", kind="boolean")
+    block.add_input("q_target", 18, "rad",
+                    description="joint position targets, leg-major (alpha, beta, gamma)")
+    block.add_output("q", 18, "rad", description="joint angles, leg-major")
+    block.add_output("qd", 18, "rad/s", description="joint velocities, leg-major")
+    block.add_output("toe_force", 18, "N", description="ground force on each foot "
+                     "(Fx lateral, Fy forward, Fz vertical) in the body frame")
+    block.add_output("body_position", 3, "m", description="body origin in the world frame")
+    block.add_output("body_rpy", 3, "rad", description="roll (about y), pitch (about x), yaw (about z)")
+    block.add_output("foot_position", 18, "m", description="foot centres in the world frame, leg-major")
+    block.add_output("body_contact", 1, "1", kind="boolean",
+                     description="1 when the body box touched anything during the last step")
+
+
+class PlantReadings:
+    """What a hexapod plant of any engine reports between steps (kept in ``_t``, ``_force_world``,
+    ``_link_contact``, ``_body_contact`` by its ``do_step``)."""
+
+    _t: float
+    _force_world: np.ndarray
+    _link_contact: np.ndarray
+    _body_contact: bool
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    def toe_force_world(self) -> np.ndarray:
+        """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
+        return self._force_world.reshape(6, 3).copy()
+
+    def link_contacts(self) -> np.ndarray:
+        """Per leg, whether a coxa or femur (or an unsensed tibia) touched something in the last step."""
+        return self._link_contact.copy()
+
+    def body_contact(self) -> bool:
+        """Whether the body box touched anything in the last step."""
+        return bool(self._body_contact)
+
+
+class DartHexapod(PlantReadings, CoSimBlock):
     """The hexapod on a terrain in a DART world, stepped by the co-simulation master.
 
     Constructor arguments (fixed for the block's life; parameters go in ``**params``):
@@ -167,24 +217,7 @@ class DartHexapod(CoSimBlock):
 
     # -- declaration ------------------------------------------------------------------------------
     def declare(self) -> None:
-        kp, kd = default_gains(self.geometry)
-        self.add_parameter("kp", kp, "N*m/rad", (0.0, math.inf), "joint servo stiffness", strict=True)
-        self.add_parameter("kd", kd, "N*m*s/rad", (0.0, math.inf), "joint servo damping", strict=True)
-        self.add_parameter("friction", 1.0, "1", (0.0, math.inf), "Coulomb friction of the robot's shapes",
-                           strict=True)
-        self.add_parameter("velocity_ff", 0.0, "1", (0.0, 1.0), "advance the servo rest position by "
-                           "kd/kp * target velocity", kind="boolean")
-        self.add_input("q_target", 18, "rad",
-                       description="joint position targets, leg-major (alpha, beta, gamma)")
-        self.add_output("q", 18, "rad", description="joint angles, leg-major")
-        self.add_output("qd", 18, "rad/s", description="joint velocities, leg-major")
-        self.add_output("toe_force", 18, "N", description="ground force on each foot "
-                        "(Fx lateral, Fy forward, Fz vertical) in the body frame")
-        self.add_output("body_position", 3, "m", description="body origin in the world frame")
-        self.add_output("body_rpy", 3, "rad", description="roll (about y), pitch (about x), yaw (about z)")
-        self.add_output("foot_position", 18, "m", description="foot centres in the world frame, leg-major")
-        self.add_output("body_contact", 1, "1", kind="boolean",
-                        description="1 when the body box touched anything during the last step")
+        declare_plant(self)
 
     def set(self, **values: float) -> DartHexapod:
         """Set parameters (validated); on a set-up plant, gains and friction apply from the next step."""
@@ -443,21 +476,6 @@ class DartHexapod(CoSimBlock):
         return {name: out[sl] for name, sl in _PORT_SLICES}
 
     # -- helpers ----------------------------------------------------------------------------------
-    @property
-    def time(self) -> float:
-        return self._t
-
-    def toe_force_world(self) -> np.ndarray:
-        """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
-        return self._force_world.reshape(6, 3).copy()
-
-    def link_contacts(self) -> np.ndarray:
-        """Per leg, whether a coxa or femur (or an unsensed tibia) touched something in the last step."""
-        return self._link_contact.copy()
-
-    def body_contact(self) -> bool:
-        """Whether the body box touched anything in the last step."""
-        return bool(self._body_contact)
 
     def fell(self, max_tilt: float = math.pi / 4) -> bool:
         """The robot has fallen: body touched the ground, tilt above ``max_tilt`` or non-finite state."""

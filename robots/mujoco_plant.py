@@ -23,7 +23,7 @@ several MuJoCo steps the force is averaged, as in the DART plant.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -33,16 +33,16 @@ from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
 from cpgsim.robots.hexapod import foot_positions_body, tilt_angle
 from cpgsim.robots.mjcf import ContactModel, mjcf
-from cpgsim.robots.plant import PlantReadings, declare_plant, standing_posture
+from cpgsim.robots.plant import PlantCommon, declare_plant
 from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
-from cpgsim.robots.terrain import Terrain, flat
+from cpgsim.robots.terrain import Terrain
 
 _LINK = 10
 _BODY = 100
 _OTHER = 1000
 
 
-class MujocoHexapod(PlantReadings, CoSimBlock):
+class MujocoHexapod(PlantCommon, CoSimBlock):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
     Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle`` as
@@ -57,26 +57,14 @@ class MujocoHexapod(PlantReadings, CoSimBlock):
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
                  settle: float = 0.0, native: bool = True, **params: float) -> None:
-        if not isinstance(geometry, RobotGeometry):
-            raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
+        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle)
         contact = contact or ContactModel()
         if time_step is not None:
             if not (math.isfinite(time_step) and time_step > 0):
                 raise ParameterError(f"time_step must be > 0, got {time_step!r}")
             contact = ContactModel(**{**contact.__dict__, "timestep": float(time_step)})
-        if not (math.isfinite(settle) and settle >= 0):
-            raise ParameterError(f"settle must be >= 0, got {settle!r}")
-        self.geometry = geometry
-        self.terrain = terrain if terrain is not None else flat()
-        q0_arr = standing_posture(geometry) if q0 is None else np.asarray(q0, dtype=float).ravel()
-        if q0_arr.shape != (18,) or not np.all(np.isfinite(q0_arr)):
-            raise ParameterError(f"q0 needs 18 finite joint angles, got shape {q0_arr.shape}")
-        self.q0 = q0_arr
-        self.body_height = body_height
         self.contact = contact
         self.time_step = contact.timestep
-        self.sense_shank = bool(sense_shank)
-        self.settle = float(settle)
         self.native = bool(native)
         self._native = None
         self.model: mujoco.MjModel | None = None
@@ -183,29 +171,6 @@ class MujocoHexapod(PlantReadings, CoSimBlock):
         self.data = None
 
     # -- stepping ---------------------------------------------------------------------------------
-    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        q = values.get("q_target")
-        if q is None:
-            return
-        q = np.asarray(q, dtype=float).ravel()
-        if q.shape != (18,):
-            raise ModelError(f"{self.name}.q_target needs 18 values, got {q.size}")
-        if not math.isfinite(float(q.sum())):
-            raise ModelError(f"{self.name}.q_target is not finite: {q}")
-        if q.tobytes() != self._q_target.tobytes():
-            self._q_target = q.copy()
-            self._target_changed = True
-
-    def _steps_for(self, dt: float) -> int:
-        n = self._steps_per.get(dt)
-        if n is None:
-            h = self.time_step
-            n = int(round(dt / h))
-            if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
-                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
-            self._steps_per[dt] = n
-        return n
-
     def _update_ctrl(self, dt: float) -> None:
         """``ctrl = q_target`` (+ ``kd/kp * dq_target/dt`` with ``velocity_ff``)."""
         if self._target_changed or self._ff_active:
@@ -344,7 +309,7 @@ class MujocoHexapod(PlantReadings, CoSimBlock):
         out = self._readout_out.copy()
         return {name: out[sl] for name, sl in _PORT_SLICES}
 
-    # -- helpers (time, toe_force_world, link_contacts, body_contact: PlantReadings) ----------------
+    # -- helpers (time, toe_force_world, link_contacts, body_contact, set_inputs: PlantCommon) ------
 
     def total_mass(self) -> float:
         """Mass of the robot in the compiled model (kg)."""

@@ -139,14 +139,63 @@ def declare_plant(block: CoSimBlock) -> None:
                      description="1 when the body box touched anything during the last step")
 
 
-class PlantReadings:
-    """What a hexapod plant of any engine reports between steps (kept in ``_t``, ``_force_world``,
-    ``_link_contact``, ``_body_contact`` by its ``do_step``)."""
+class PlantCommon:
+    """What hexapod plants of every engine share: taking the joint targets (``set_inputs``), the world
+    steps per macro step, and the readings they keep between steps (``_t``, ``_force_world``,
+    ``_link_contact``, ``_body_contact``, set by each engine's ``do_step``)."""
 
+    name: str
+    time_step: float
+    _q_target: np.ndarray
+    _target_changed: bool
+    _steps_per: dict[float, int]
     _t: float
     _force_world: np.ndarray
     _link_contact: np.ndarray
     _body_contact: bool
+
+    def _describe(self, geometry: RobotGeometry, terrain: Terrain | None, q0: Sequence[float] | None,
+                  body_height: float | None, sense_shank: bool, settle: float) -> np.ndarray:
+        """Check and keep the constructor arguments every engine takes; returns the start posture ``q0``."""
+        if not isinstance(geometry, RobotGeometry):
+            raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
+        if not (math.isfinite(settle) and settle >= 0):
+            raise ParameterError(f"settle must be >= 0, got {settle!r}")
+        self.geometry = geometry
+        self.terrain = terrain if terrain is not None else flat()
+        q0_arr = standing_posture(geometry) if q0 is None else np.asarray(q0, dtype=float).ravel()
+        if q0_arr.shape != (18,) or not np.all(np.isfinite(q0_arr)):
+            raise ParameterError(f"q0 needs 18 finite joint angles, got shape {q0_arr.shape}")
+        self.q0 = q0_arr
+        self.body_height = body_height
+        self.sense_shank = bool(sense_shank)
+        self.settle = float(settle)
+        return q0_arr
+
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        q = values.get("q_target")
+        if q is None:
+            return
+        q = np.asarray(q, dtype=float)
+        if q.shape != (18,):
+            q = q.ravel()
+            if q.shape != (18,):
+                raise ModelError(f"{self.name}.q_target needs 18 values, got {q.size}")
+        if not math.isfinite(float(q.sum())):  # a sum is finite only if every element is
+            raise ModelError(f"{self.name}.q_target is not finite: {q}")
+        if q.tobytes() != self._q_target.tobytes():  # cheaper than array_equal on 18 values
+            self._q_target = q.copy()
+            self._target_changed = True
+
+    def _steps_for(self, dt: float) -> int:
+        n = self._steps_per.get(dt)
+        if n is None:
+            h = self.time_step
+            n = int(round(dt / h))
+            if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
+                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
+            self._steps_per[dt] = n
+        return n
 
     @property
     def time(self) -> float:
@@ -165,7 +214,7 @@ class PlantReadings:
         return bool(self._body_contact)
 
 
-class DartHexapod(PlantReadings, CoSimBlock):
+class DartHexapod(PlantCommon, CoSimBlock):
     """The hexapod on a terrain in a DART world, stepped by the co-simulation master.
 
     Constructor arguments (fixed for the block's life; parameters go in ``**params``):
@@ -191,25 +240,13 @@ class DartHexapod(PlantReadings, CoSimBlock):
                  q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
                  time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
                  **params: float) -> None:
-        if not isinstance(geometry, RobotGeometry):
-            raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
         if detector not in DETECTORS:
             raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
         if not (math.isfinite(time_step) and time_step > 0):
             raise ParameterError(f"time_step must be > 0, got {time_step!r}")
-        if not (math.isfinite(settle) and settle >= 0):
-            raise ParameterError(f"settle must be >= 0, got {settle!r}")
-        self.geometry = geometry
-        self.terrain = terrain if terrain is not None else flat()
-        q0_arr = standing_posture(geometry) if q0 is None else np.asarray(q0, dtype=float).ravel()
-        if q0_arr.shape != (18,) or not np.all(np.isfinite(q0_arr)):
-            raise ParameterError(f"q0 needs 18 finite joint angles, got shape {q0_arr.shape}")
-        self.q0 = q0_arr
-        self.body_height = body_height
+        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle)
         self.detector = detector
         self.time_step = float(time_step)
-        self.sense_shank = bool(sense_shank)
-        self.settle = float(settle)
         self.world: dart.simulation.World | None = None
         self.model: HexapodModel | None = None
         self._q_target = q0_arr.copy()
@@ -343,31 +380,6 @@ class DartHexapod(PlantReadings, CoSimBlock):
         self._object_code = {}
 
     # -- stepping ---------------------------------------------------------------------------------
-    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
-        q = values.get("q_target")
-        if q is None:
-            return
-        q = np.asarray(q, dtype=float)
-        if q.shape != (18,):
-            q = q.ravel()
-            if q.shape != (18,):
-                raise ModelError(f"{self.name}.q_target needs 18 values, got {q.size}")
-        if not math.isfinite(float(q.sum())):  # a sum is finite only if every element is
-            raise ModelError(f"{self.name}.q_target is not finite: {q}")
-        if q.tobytes() != self._q_target.tobytes():  # cheaper than array_equal on 18 values
-            self._q_target = q.copy()
-            self._target_changed = True
-
-    def _steps_for(self, dt: float) -> int:
-        n = self._steps_per.get(dt)
-        if n is None:
-            h = self.time_step
-            n = int(round(dt / h))
-            if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
-                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
-            self._steps_per[dt] = n
-        return n
-
     def do_step(self, t: float, dt: float) -> None:
         """Advance ``[t, t + dt]``: ``dt / time_step`` world steps with the servo targets held."""
         if self.world is None:

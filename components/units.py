@@ -20,6 +20,7 @@ unit that is not ``known``: it still connects to the identical string, and nothi
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass, field
@@ -124,14 +125,25 @@ class UnitMismatch(ValueError):
     """Two units that cannot feed each other (different dimensions, or an unknown unit)."""
 
 
+_IDENTITY = Conversion(1.0, 0.0)
+
+
 def conversion(src: str, dst: str) -> Conversion:
     """How a value in unit ``src`` becomes a value in unit ``dst``; raises :class:`UnitMismatch`.
 
     ``value_SI = f_src * v + o_src`` and ``v_dst = (value_SI - o_dst) / f_dst``, so
-    ``scale = f_src / f_dst`` and ``shift = (o_src - o_dst) / f_dst``."""
+    ``scale = f_src / f_dst`` and ``shift = (o_src - o_dst) / f_dst``. Called for every wire at wiring and
+    again at flattening: the same spelling is the identity without parsing, other pairs are parsed once."""
+    if src == dst:
+        return _IDENTITY
+    return _conversion(src, dst)
+
+
+@functools.lru_cache(maxsize=4096)
+def _conversion(src: str, dst: str) -> Conversion:
     a, b = parse_unit(src), parse_unit(dst)
     if a.name == b.name:
-        return Conversion(1.0, 0.0)
+        return _IDENTITY
     if not (a.known and b.known):
         unknown = [u.name for u in (a, b) if not u.known]
         raise UnitMismatch(f"[{src}] and [{dst}] differ and {', '.join(unknown)} is not a unit cpgsim knows "

@@ -23,6 +23,7 @@ import sys
 import threading
 import traceback
 from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 from cpgsim.harness.cli import commands
@@ -45,7 +46,7 @@ def _declared_name_and_help(path: str) -> tuple[str, str] | None:
     import ast
 
     found: dict[str, str] = {}
-    for node in ast.parse(open(path, encoding="utf-8").read()).body:  # noqa: SIM115 - read and closed
+    for node in ast.parse(Path(path).read_text(encoding="utf-8")).body:
         if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name) \
                 and node.targets[0].id in ("NAME", "HELP") and isinstance(node.value, ast.Constant):
             found[node.targets[0].id] = str(node.value.value)

@@ -174,6 +174,9 @@ def reflex_events(res: Results) -> list[dict[str, Any]]:
     Fig. 14c reports (55.6, 62.4 and 85.5 N for legs 4-6).
     """
     force = res[f"{ROBOT}.toe_force"].reshape(len(res.time), 6, 3)
+    horizontal_all = np.abs(force[:, :, :2]).max(axis=2)  # time x leg: max(|Fx|, |Fy|)
+    dt = float(res.time[1] - res.time[0]) if len(res.time) > 1 else 1e-3
+    lookback = int(round(0.02 / dt))
     events = []
     for leg, name in enumerate(LEGS):
         for kind, counter in EVENTS:
@@ -184,10 +187,9 @@ def reflex_events(res: Results) -> list[dict[str, Any]]:
             for k in steps:
                 ev = leg_fields(leg) | {"kind": kind, "t": float(res.time[k])}
                 if kind == "elevator":
-                    horizontal = np.abs(force[:, leg, :2]).max(axis=1)
-                    dt = float(res.time[1] - res.time[0]) if len(res.time) > 1 else 1e-3
+                    horizontal = horizontal_all[:, leg]
                     k0, k1 = hit_window(horizontal, k, dt)
-                    ev["trigger_force_N"] = float(horizontal[max(0, k - int(round(0.02 / dt))):k + 1].max())
+                    ev["trigger_force_N"] = float(horizontal[max(0, k - lookback):k + 1].max())
                     peak = k0 + int(np.argmax(horizontal[k0:k1]))
                     ev.update({"peak_force_N": float(horizontal[peak]), "peak_t": float(res.time[peak]),
                                "hit_start_t": float(res.time[k0]), "hit_end_t": float(res.time[k1 - 1])})

@@ -45,7 +45,7 @@ from cpgsim.components.fukuhara.controller import (
 from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.components.graph import Graph
 from cpgsim.harness.experiments.gait_classifier import classify, stance_from_fz
-from cpgsim.harness.experiments.outcomes import fall
+from cpgsim.harness.experiments.outcomes import crossing, fall
 from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
 from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from cpgsim.harness.results import Results
@@ -368,15 +368,10 @@ def build(scenario: Scenario) -> RunSetup:
 
 
 def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> dict[str, Any]:
-    """Gap crossing criterion: the body centre reaches ``far_edge + margin`` before any fall."""
+    """Gap crossing criterion (:func:`cpgsim.harness.experiments.outcomes.crossing`: the body centre reaches
+    ``far_edge + margin`` before any fall), with the fall's time and reason."""
     fell, fell_t, reason = fall(res, "robot")
-    y = res["robot.body_position"][:, 1]
-    goal = far_edge + margin
-    reached = np.flatnonzero(y >= goal)
-    t_cross = float(res.time[reached[0]]) if len(reached) else None
-    success = t_cross is not None and (not fell or fell_t > t_cross)
-    return {"success": bool(success), "crossed_time_s": t_cross, "goal_y_m": goal,
-            "max_y_m": float(np.max(y)), "fell": fell, "fell_time_s": fell_t, "fell_reason": reason}
+    return {**crossing(res, "robot", far_edge, margin), "fell": fell, "fell_time_s": fell_t, "fell_reason": reason}
 
 
 

@@ -13,6 +13,10 @@ mutant runs the module's tests, 2-5 s), so it is not part of the test run. Print
 (mutants, killed, survived, score) and, with ``--survivors``, each surviving mutant's diff, to judge
 whether it is equivalent (cannot change behaviour) or shows a missing test. Needs ``pip install
 cosmic-ray`` (not a dependency of the project). docs/testing.md holds the latest table.
+
+It deletes only what it made: the ``cpgsim-mutation-*`` folder from ``tempfile.mkdtemp`` (private to this
+user) and its worktree, at the end. A run killed midway leaves both; ``git worktree prune`` drops the
+stale worktree entry once the folder is removed.
 """
 
 from __future__ import annotations

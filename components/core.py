@@ -85,12 +85,12 @@ class Port:
     unit: str = "1"
     kind: Kind = "real"
     description: str = ""
-    default: float | tuple[float, ...] | None = None
+    default: float | int | tuple[float | int, ...] | None = None
 
     def __post_init__(self) -> None:
         check_name(self.name, "port")
         if isinstance(self.default, (tuple, list, np.ndarray)):
-            vals = tuple(float(v) for v in np.asarray(self.default, dtype=float).ravel())
+            vals = tuple(_number(v, self.kind) for v in np.asarray(self.default, dtype=object).ravel())
             size = int(np.prod(_as_shape(self.shape)))
             if len(vals) not in (1, size):
                 raise DeclarationError(f"port {self.name!r}: default has {len(vals)} values for {size} elements")
@@ -107,15 +107,56 @@ class Port:
         return math.prod(self.shape)
 
     def default_values(self) -> np.ndarray | None:
-        """The default as ``size`` numbers (None without a default)."""
+        """The default as ``size`` numbers (None without a default): float64, or exact int64/uint64 for an
+        integer default that a float64 would round (an FMI 3 Int64/UInt64 start beyond 2^53)."""
         if self.default is None:
             return None
-        return np.broadcast_to(np.asarray(self.default, dtype=float), (self.size,)).copy()
+        return np.broadcast_to(exact_or_float(self.default), (self.size,)).copy()
+
+    def float_default_values(self, owner: str = "") -> np.ndarray | None:
+        """The default as float64 values for code that computes in float64 (equation blocks, the verifier,
+        an exported FMU's start values); an integer default a float64 would round is a
+        :class:`DeclarationError` naming the port, never a silently rounded number."""
+        values = self.default_values()
+        if values is not None and values.dtype.kind in "iu":
+            where = f"{owner}.{self.name}" if owner else self.name
+            bad = next(int(v) for v in values if int(v) != int(float(v)))
+            raise DeclarationError(f"input {where}: default {bad} is beyond 2^53 and would be rounded to "
+                                   f"{float(bad):.17g} by float64 arithmetic")
+        return values
 
     def element_names(self, prefix: str) -> list[str]:
         """Column names ``prefix`` (scalar) or ``prefix[i]`` (vector)."""
         base = f"{prefix}.{self.name}" if prefix else self.name
         return [base] if self.size == 1 else [f"{base}[{i}]" for i in range(self.size)]
+
+
+FLOAT64_EXACT_INT = 2 ** 53
+"""Every integer of magnitude up to 2^53 is exact in a float64; beyond, some are rounded."""
+
+
+def _number(value: Any, kind: str) -> float | int:
+    """One default value: an exact int for an integer port given an int, else a float."""
+    if kind == "integer" and isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return int(value)
+    return float(value)
+
+
+def _show(value: float | int) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
+def exact_or_float(values: Any) -> np.ndarray:
+    """``values`` (a number or a sequence) as a flat array: float64, unless they are integers one of which a
+    float64 would round -- then exact int64 (or uint64 for values beyond int64 that are all >= 0)."""
+    flat = np.atleast_1d(np.asarray(values, dtype=object)).ravel()
+    ints = [int(v) for v in flat if isinstance(v, (int, np.integer)) and not isinstance(v, bool)]
+    if len(ints) == len(flat) and any(abs(v) > FLOAT64_EXACT_INT for v in ints):
+        if all(-2 ** 63 <= v < 2 ** 63 for v in ints):
+            return np.array(ints, dtype=np.int64)
+        if all(0 <= v < 2 ** 64 for v in ints):
+            return np.array(ints, dtype=np.uint64)
+    return flat.astype(float)
 
 
 @dataclass(frozen=True)
@@ -138,28 +179,32 @@ class Parameter:
         object.__setattr__(self, "unit", normalize_unit(self.unit))
         self.validate(self.default, owner="(default)")
 
-    def validate(self, value: Any, owner: str = "") -> float:
-        """Return ``value`` as a float, or raise :class:`ParameterError` explaining why not."""
+    def validate(self, value: Any, owner: str = "") -> float | int:
+        """Return ``value`` as a float (an ``integer`` parameter: an exact Python int, so an FMI 3
+        Int64/UInt64 beyond 2^53 keeps every digit), or raise :class:`ParameterError` explaining why not."""
         where = f"{owner}.{self.name}" if owner else self.name
         if isinstance(value, bool):
             value = float(value)
         try:
             v = float(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ParameterError(f"parameter {where}: expected a number, got {value!r}") from None
         if not math.isfinite(v):
             raise ParameterError(f"parameter {where}: value {v} is not finite")
+        exact: float | int = v
+        if self.kind == "integer" and isinstance(value, (int, np.integer)):
+            exact = int(value)
         lo, hi = self.bounds
-        ok = (lo < v < hi) if self.strict else (lo <= v <= hi)
+        ok = (lo < exact < hi) if self.strict else (lo <= exact <= hi)
         if not ok:
             rel = ("<", "<") if self.strict else ("<=", "<=")
             raise ParameterError(
-                f"parameter {where} = {v:g} is out of bounds: need {lo:g} {rel[0]} {self.name} {rel[1]} {hi:g}"
-                + (f" ({self.description})" if self.description else "")
+                f"parameter {where} = {_show(exact)} is out of bounds: need {_show(lo)} {rel[0]} {self.name} "
+                f"{rel[1]} {_show(hi)}" + (f" ({self.description})" if self.description else "")
             )
         if self.kind in ("integer", "boolean") and v != round(v):
             raise ParameterError(f"parameter {where} = {v:g} must be an integer")
-        return v
+        return int(exact) if self.kind == "integer" else v
 
 
 @dataclass(frozen=True)
@@ -247,11 +292,11 @@ class _Declared:
         self.outputs[name] = port
         return port
 
-    def add_parameter(self, name: str, default: float, unit: str = "1",
+    def add_parameter(self, name: str, default: float | int, unit: str = "1",
                       bounds: tuple[float, float] = (-math.inf, math.inf), description: str = "",
                       strict: bool = False, kind: Kind = "real") -> Parameter:
         self._check_free(name)
-        par = Parameter(name, float(default), unit, bounds, description, strict, kind)
+        par = Parameter(name, _number(default, kind), unit, bounds, description, strict, kind)
         self.parameters[name] = par
         self.values[name] = par.default
         return par

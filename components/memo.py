@@ -11,10 +11,12 @@ memoised; a missing, damaged or unwritable cache only costs the computation.
 
 from __future__ import annotations
 
+import atexit
 import functools
 import hashlib
 import json
 import os
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable
@@ -51,10 +53,18 @@ def cache_root() -> Path:
         reason = f"it cannot be created ({exc.strerror})"
     if reason is not None:
         fallback = Path(tempfile.mkdtemp(prefix="cpgsim-cache-"))
-        private_store.warn_once(f"cache folder {root} not used: {reason}; using the private folder {fallback}")
+        atexit.register(_remove_fallback, fallback, os.getpid())
+        private_store.warn_once(f"cache folder {root} not used: {reason}; using the private folder {fallback} "
+                                "(removed at exit)")
         root = fallback
     _chosen[key] = root
     return root
+
+
+def _remove_fallback(folder: Path, owner_pid: int) -> None:
+    """Remove this process's private fallback cache at exit (not from a forked child: the parent uses it)."""
+    if os.getpid() == owner_pid:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def caching_enabled() -> bool:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import tempfile
 import weakref
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -37,7 +36,14 @@ from typing import Any
 from cpgsim.components.core import Block, CoSimBlock
 from cpgsim.components.graph import Graph, PortRef, parse_ref
 from cpgsim.fmus.errors import FmuError, ModelDescriptionError, one_line
-from cpgsim.fmus.importer.archive import check_archive, open_zip, read_member, remove_tree, safe_extract
+from cpgsim.fmus.importer.archive import (
+    check_archive,
+    open_zip,
+    private_scratch,
+    read_member,
+    remove_tree,
+    safe_extract,
+)
 from cpgsim.fmus.importer.block import FmuBlock
 from cpgsim.fmus.importer.description import identifier
 from cpgsim.fmus.units import base_unit_attributes, unit_definition
@@ -83,7 +89,7 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
     path = Path(path)
     if path.suffix != ".ssp":
         raise SspError(f"SSP file name {path} must end in .ssp")
-    tmp = Path(tempfile.mkdtemp(prefix="cpgsim_ssp_", dir=None if workdir is None else str(workdir)))
+    tmp = private_scratch("cpgsim_ssp_", workdir)
     try:
         members: dict[str, Path] = {}
         comps: dict[str, _Comp] = {}

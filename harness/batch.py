@@ -522,7 +522,7 @@ def _held_inputs(model: CompiledModel) -> np.ndarray:
         if port.default is None:
             raise ModelError(f"graph input {name!r} is free: simulate_batch needs a graph whose inputs are "
                              f"connected or declare a default")
-        u[model.inputs.index("$" + name).slice] = port.default_values()
+        u[model.inputs.index("$" + name).slice] = port.float_default_values()
     return u
 
 

@@ -279,7 +279,7 @@ class _Compiler:
             key = f"{path}.{port.name}"
             src = self.flat.sources.get(key)
             if src is None:
-                return ca.SX(port.default_values().reshape(-1, 1))
+                return ca.SX(port.float_default_values(path).reshape(-1, 1))
             if src.startswith("$") or src in self.inputs:
                 return U[self.inputs.index(src).slice]
             active.append(key)

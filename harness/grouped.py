@@ -223,7 +223,7 @@ def _generic_equations(blk: Block, connected: tuple[str, ...]) -> tuple[list[ca.
     u_all = split(u, conn)
     for name, port in blk.inputs.items():
         if name not in u_all:
-            u_all[name] = ca.SX(port.default_values().reshape(-1, 1))
+            u_all[name] = ca.SX(port.float_default_values(blk.name).reshape(-1, 1))
     v = Symbols(t=t, x=split(x, states), z=split(z, dstates), u={k: u_all[k] for k in blk.inputs},
                 p={k: p[i] for i, k in enumerate(blk.parameters)})
     return [t, x, z, u, p], blk.checked_equations(v), v

@@ -22,7 +22,7 @@ and returns a :class:`StopInfo` naming the block.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -47,7 +47,8 @@ class StopInfo:
 class _Plan:
     """Everything the loop needs, resolved once."""
 
-    def __init__(self, m: CompiledModel, cs: dict[str, CoSimBlock], picks) -> None:
+    def __init__(self, m: CompiledModel, cs: dict[str, CoSimBlock], picks,
+                 exact_free: Mapping[str, np.ndarray] | None = None) -> None:
         free_rows = dict(zip(m.free_inputs, row_slices(m.free_inputs), strict=True))
         self.free_to_u = [(m.inputs.index("$" + name).slice, rows) for name, rows in free_rows.items()]
         self.cs_to_u = [(m.inputs.index(s.name).slice, *s.name.rsplit(".", 1))
@@ -67,6 +68,8 @@ class _Plan:
                 src = m.cosim_feeds.get(f"{path}.{iname}")
                 if src is None:
                     feeds.append((iname, ("const", port.default_values())))
+                elif src.startswith("$") and src[1:] in (exact_free or {}):  # exact 64-bit integers, constant
+                    feeds.append((iname, ("const", exact_free[src[1:]])))  # type: ignore[index]
                 elif src.startswith("$"):
                     feeds.append((iname, ("free", free_rows[src[1:]])))
                 elif src.rsplit(".", 1)[0] in cs:
@@ -140,7 +143,8 @@ class _Plan:
 def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times: np.ndarray,
                u_free: np.ndarray, picks, rec, order: str, progress_bar,
                on_block_error: Callable[[str, str, Exception], Exception],
-               on_diverged: Callable[[], None]) -> StopInfo | None:
+               on_diverged: Callable[[], None],
+               exact_free: Mapping[str, np.ndarray] | None = None) -> StopInfo | None:
     """Run the macro steps ``times[0] .. times[-1]`` (see the module docstring).
 
     ``step(t)`` evaluates the compiled step on ``buffers = (x, z, u, y, x_next, z_next)``;
@@ -150,7 +154,7 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     block that asked to stop, else None.
     """
     x, z, u, y, x_next, z_next = buffers
-    plan = _Plan(m, cs, picks)
+    plan = _Plan(m, cs, picks, exact_free)
     n = len(times) - 1
     dt = m.dt
     t_list = times.tolist()

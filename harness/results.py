@@ -17,17 +17,20 @@ removes those left there by processes that no longer run (:func:`remove_stale_te
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
 import tempfile
 import time as _time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from cpgsim.components.private_store import pid_alive
 
 
 class ResultsError(ValueError):
@@ -118,13 +121,17 @@ class Results:
         raise ResultsError(f"unknown results format {path.suffix!r} for {path} (use .csv or .npz)")
 
     def to_csv(self, path: str | Path) -> Path:
+        """Write the table as CSV (floats with 17 significant digits; 64-bit integer columns as the exact
+        integers)."""
         path = Path(path)
         header = ",".join(["time", *self.columns])
         table = np.column_stack([self.time, self.data]) if self.data.size else self.time[:, None]
+        exact = {self._index[c] + 1: d["values"] for c, d in self.meta.get("exact_integers", {}).items()
+                 if c in self._index}
 
         def write(f) -> None:
             f.write(header + "\n")
-            np.savetxt(f, table, delimiter=",", fmt="%.17g")
+            f.write(csv_rows(table, exact))
 
         atomic_write(path, write, text=True)
         return path
@@ -143,7 +150,7 @@ class Results:
     def _write_meta(self, csv_path: Path) -> Path:
         meta_path = csv_path.with_suffix(".meta.json")
         doc = {"columns": self.columns, "units": self.units, "complete": self.complete,
-               "message": self.message, "rows": len(self.time), **self.meta}
+               "message": self.message, "rows": len(self.time), **csv_meta(self.meta)}
         atomic_write(meta_path, lambda f: json.dump(doc, f, indent=2), text=True)
         return meta_path
 
@@ -178,9 +185,54 @@ class Results:
             units = meta.pop("units", ["1"] * (len(header) - 1))
             meta.pop("columns", None)
             meta.pop("rows", None)
+            _read_exact_columns(meta, header, lines, path)
             return cls(table[:, 0], header[1:], units, table[:, 1:], meta.pop("complete", True),
                        meta.pop("message", ""), meta)
         raise ResultsError(f"unknown results format {path.suffix!r} for {path}")
+
+
+def csv_rows(table: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> str:
+    """``table``'s rows as CSV lines (``%.17g``: every float64 reads back exactly); the columns in ``exact``
+    (index -> the column's integers) are written as those integers, every digit of an Int64/UInt64."""
+    buf = io.StringIO()
+    if not exact:
+        np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+        return buf.getvalue()
+    cells = np.char.mod("%.17g", table).astype(object)
+    for j, values in exact.items():
+        cells[:, j] = [str(int(v)) for v in values]
+    return "".join(",".join(row) + "\n" for row in cells)
+
+
+def csv_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """``meta`` as the CSV's sidecar holds it: the 64-bit integer columns' values are in the CSV itself
+    (exact integer text), the sidecar names them and their type (``integer_columns``)."""
+    out = dict(meta)
+    exact = out.pop("exact_integers", None)
+    if exact:
+        out["integer_columns"] = {**out.get("integer_columns", {}), **{c: d["dtype"] for c, d in exact.items()}}
+    return out
+
+
+def _read_exact_columns(meta: dict[str, Any], header: list[str], lines: list[str], path: Path) -> None:
+    """The ``integer_columns`` of a CSV, read exactly from their text into ``meta["exact_integers"]``."""
+    named = meta.get("integer_columns") or {}
+    if not named:
+        return
+    index = {c: j for j, c in enumerate(header)}
+    cells = [line.split(",") for line in lines]
+    exact: dict[str, dict[str, Any]] = {}
+    for col, dtype in named.items():
+        j = index.get(col)
+        if j is None:
+            continue
+        try:
+            values = [int(row[j]) for row in cells]
+        except (ValueError, IndexError):
+            raise ResultsError(f"{path}: column {col!r} is declared {dtype} but holds a value that is not an "
+                               "integer") from None
+        exact[col] = {"dtype": dtype, "values": values}
+    meta["exact_integers"] = exact
 
 
 _TMP_PREFIX = ".cpgsim-tmp."
@@ -194,18 +246,6 @@ def file_mode() -> int:
     return 0o666 & ~mask
 
 
-def _pid_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def remove_stale_temporaries(folder: str | Path) -> list[Path]:
     """Remove ``.cpgsim-tmp.<pid>.*`` files in ``folder`` whose process no longer runs; returns them."""
     removed = []
@@ -215,7 +255,7 @@ def remove_stale_temporaries(folder: str | Path) -> list[Path]:
         return removed
     for entry in entries:
         m = _TMP_RE.match(entry.name)
-        if m and not _pid_alive(int(m.group(1))):
+        if m and not pid_alive(int(m.group(1))):
             try:
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
@@ -279,7 +319,7 @@ class ResultsWriter:
         self.stream_path = self.path if self.path.suffix == ".csv" else self.path.with_suffix(".partial.csv")
         self.flush_seconds = float(flush_seconds)
         self._file = None
-        self._pending: list[np.ndarray] = []
+        self._pending: list[tuple[np.ndarray, Mapping[int, Sequence[int]] | None]] = []
         self._rows = 0
         self._last = _time.monotonic()
         self.columns: list[str] = []
@@ -311,12 +351,14 @@ class ResultsWriter:
 
     def _write_meta(self, complete: bool, message: str, rows: int | None) -> None:
         doc = {"columns": self.columns, "units": self.units, "complete": complete, "message": message,
-               "rows": rows, **self.meta}
+               "rows": rows, **csv_meta(self.meta)}
         atomic_write(self.stream_path.with_suffix(".meta.json"), lambda f: json.dump(doc, f, indent=2), text=True)
 
-    def append(self, time: np.ndarray, rows: np.ndarray) -> None:
+    def append(self, time: np.ndarray, rows: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> None:
+        """Add rows; ``exact`` maps a column index of ``rows`` to its exact 64-bit integers."""
         if len(time):
-            self._pending.append(np.column_stack([np.asarray(time, dtype=float), rows]))
+            shifted = {j + 1: v for j, v in exact.items()} if exact else None  # column 0 is the time
+            self._pending.append((np.column_stack([np.asarray(time, dtype=float), rows]), shifted))
 
     def due(self) -> bool:
         """``flush_seconds`` of wall time have passed since the last flush."""
@@ -327,15 +369,12 @@ class ResultsWriter:
         self._last = _time.monotonic()
         if self._file is None or not self._pending:
             return
-        table = np.vstack(self._pending)
-        self._pending = []
-        import io
-
-        buf = io.StringIO()
-        np.savetxt(buf, table, delimiter=",", fmt="%.17g")
+        pending, self._pending = self._pending, []
+        text = "".join(csv_rows(table, exact) for table, exact in pending)
         try:
-            self._file.write(buf.getvalue())
-            self._rows += len(table)  # counted before the flush: a signal during fsync must not lose them
+            self._file.write(text)
+            self._rows += sum(len(table) for table, _ in pending)  # counted before the flush: a signal
+            # during fsync must not lose them
             self._file.flush()
             os.fsync(self._file.fileno())
         except OSError as exc:  # a full disk: say which file

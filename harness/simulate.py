@@ -131,9 +131,13 @@ class Simulator:
         x, z = self._initial_states(x0)
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
+        self._exact_free = self._exact_free_inputs(inputs or {})
         rec = _Recorder(times, columns, units)
         rec.aliases = dict(self._recorded_aliases)
         rec.meta = dict(meta or {})
+        integer_columns = self._integer_columns(columns)
+        if integer_columns:  # the stream's sidecar says from the start which columns hold exact integers
+            rec.meta["integer_columns"] = integer_columns
         if stream is not None:
             from cpgsim.harness.results import ResultsWriter
 
@@ -202,7 +206,44 @@ class Simulator:
         unknown = set(inputs) - set(m.free_inputs)
         if unknown:
             raise ModelError(f"unknown graph input(s) {sorted(unknown)}; free inputs: {list(m.free_inputs)}")
-        return np.vstack(rows) if rows else np.zeros((0, len(times)))
+        return np.vstack(rows).astype(float) if rows else np.zeros((0, len(times)))
+
+    def _integer_columns(self, columns: list[str]) -> dict[str, str]:
+        """Recorded columns of 64-bit integer block outputs: ``{column: "int64" | "uint64"}``."""
+        out: dict[str, str] = {}
+        for path, blk in self._cosim_blocks.items():
+            for port, dtype in (getattr(blk, "exact_outputs", {}) or {}).items():
+                key = f"{path}.{port}"
+                out.update({c: dtype for c in columns if c == key or (c.startswith(key + "[") and c.endswith("]"))})
+        return out
+
+    def _exact_free_inputs(self, inputs: Mapping[str, InputValue]) -> dict[str, np.ndarray]:
+        """Free inputs whose constant value is an integer a float64 would round (an FMI 3 Int64/UInt64
+        beyond 2^53, from ``inputs`` or a port default): ``{name: exact int64/uint64 values}``, handed to
+        co-simulation blocks as they are. Such a value into an equation block (float64), or as a time
+        series, is an error naming the input."""
+        from cpgsim.components.core import exact_or_float
+
+        m = self.model
+        out: dict[str, np.ndarray] = {}
+        for name, port in m.free_inputs.items():
+            value = inputs.get(name, port.default)
+            if value is None or callable(value):
+                continue
+            arr = np.asarray(value, dtype=object)
+            if arr.ndim >= 2 and arr.dtype.kind == "O" and exact_or_float(arr).dtype.kind in "iu":
+                raise ModelError(f"input {name!r}: a time series of integers beyond 2^53 would be rounded "
+                                 "(float64); give one constant value")
+            exact = exact_or_float(value)
+            if exact.dtype.kind not in "iu":
+                continue
+            if any(src == "$" + name and dst.rsplit(".", 1)[0] not in self._cosim_blocks
+                   for dst, src in m.flat.sources.items()):
+                bad = next(int(v) for v in exact if int(v) != int(float(v)))
+                raise ModelError(f"input {name!r} = {bad} feeds an equation block (float64), which would round it "
+                                 f"to {float(bad):.17g}")
+            out[name] = np.broadcast_to(exact, (port.size,)).copy()
+        return out
 
     @property
     def aliases(self) -> dict[str, str]:
@@ -381,7 +422,7 @@ class Simulator:
         bar = _progress(len(times) - 1, progress, m.name)
         try:
             stop = run_master(m, cs, step, (x, z, u, y, x_next, z_next), times, u_free, picks, rec, self.order, bar,
-                       block_error, diverged)
+                              block_error, diverged, exact_free=self._exact_free)
         except KeyboardInterrupt as exc:
             raise SimulationError(f"interrupted at t={rec.last_time():.6g} s",
                                   rec.results(False, "interrupted")) from exc
@@ -499,7 +540,8 @@ class _Recorder:
             w.flush()
 
     def _hand_over(self) -> None:
-        self.writer.append(self.times[self.streamed:self.n], self.data[self.streamed:self.n])
+        self.writer.append(self.times[self.streamed:self.n], self.data[self.streamed:self.n],
+                           self._exact_cells(self.streamed, self.n))
         self.streamed = self.n
 
     def finish(self, results: Results) -> None:
@@ -509,7 +551,7 @@ class _Recorder:
             return
         n = len(results.time)
         if n > self.streamed:
-            w.append(results.time[self.streamed:n], results.data[self.streamed:n])
+            w.append(results.time[self.streamed:n], results.data[self.streamed:n], self._exact_cells(self.streamed, n))
             self.streamed = n
         self.files = w.close(results)
 
@@ -524,16 +566,29 @@ class _Recorder:
         return Results(self.times if full else self.times[:self.n].copy(), list(self.columns), list(self.units),
                        self.data if full else self.data[:self.n].copy(), complete, message, meta)
 
-    def _exact_columns(self) -> dict[str, dict[str, Any]]:
-        """Recorded 64-bit integer columns, exactly: ``{column: {"dtype": "int64", "values": [...]}}``
-        (JSON integers, so the metadata file keeps them exact too)."""
-        out: dict[str, dict[str, Any]] = {}
-        for key, rows in self.exact.items():
-            table = np.array(rows[:self.n])
-            for col in self.columns:
+    def _exact_layout(self) -> list[tuple[int, str, int]]:
+        """``(column index, "block.port", element)`` of every recorded 64-bit integer column."""
+        out = []
+        for key in self.exact:
+            for j, col in enumerate(self.columns):
                 if col == key or (col.startswith(key + "[") and col.endswith("]")):
-                    i = 0 if col == key else int(col[len(key) + 1:-1])
-                    out[col] = {"dtype": str(table.dtype), "values": [int(v) for v in table[:, i]]}
+                    out.append((j, key, 0 if col == key else int(col[len(key) + 1:-1])))
+        return out
+
+    def _exact_cells(self, start: int, stop: int) -> dict[int, list[int]]:
+        """Rows ``start:stop`` of the 64-bit integer columns, exactly: ``{column index: [int, ...]}``."""
+        out: dict[int, list[int]] = {}
+        for j, key, i in self._exact_layout():
+            out[j] = [int(row[i]) for row in self.exact[key][start:stop]]
+        return out
+
+    def _exact_columns(self) -> dict[str, dict[str, Any]]:
+        """Recorded 64-bit integer columns, exactly: ``{column: {"dtype": "int64", "values": [...]}}``."""
+        out: dict[str, dict[str, Any]] = {}
+        for j, key, i in self._exact_layout():
+            rows = self.exact[key][:self.n]
+            dtype = str(np.asarray(rows[0]).dtype) if rows else "int64"
+            out[self.columns[j]] = {"dtype": dtype, "values": [int(row[i]) for row in rows]}
         return out
 
 

@@ -81,7 +81,9 @@ def plant_folder(shared: Path, name: str) -> Path:
 
 def victim(env: dict[str, str], marker: Path) -> subprocess.CompletedProcess:
     """A fresh process of this user that loads the exit guard from the cache."""
-    code = "from cpgsim.harness import exit_guard, native; print(exit_guard.available(), native.cache_dir())"
+    code = ("import os; from cpgsim.harness import exit_guard, native; from cpgsim.components import private_store; "
+            "d = native.cache_dir(); print(exit_guard.available(), d, oct(os.stat(d).st_mode & 0o777), "
+            "private_store.untrusted_reason(d))")
     full = {k: v for k, v in os.environ.items() if k not in ("CPGSIM_CACHE", "XDG_CACHE_HOME")}
     full.update(env, CPGSIM_TEST_MARKER=str(marker))
     return subprocess.run([sys.executable, "-c", code], env=full, capture_output=True, text=True, timeout=120)
@@ -95,9 +97,10 @@ def test_a_folder_planted_by_another_user_is_refused(shared, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert not marker.exists(), "the planted library's constructor ran"
     assert f"cache folder {folder} not used" in proc.stderr and f"owned by user id {OTHER}" in proc.stderr
-    available, used = proc.stdout.split()
+    available, used, mode, reason = proc.stdout.split()
     assert available == "True" and Path(used) != folder
-    assert private_store.untrusted_reason(used) is None  # the fallback: a fresh private folder
+    assert reason == "None" and mode == "0o700"  # the fallback: a fresh private folder
+    assert not Path(used).exists(), "the private fallback folder outlived the process"
     assert proc.stderr.count("\n") == 1  # one line
 
 
@@ -112,7 +115,7 @@ def test_the_temporary_fallback_is_never_a_predictable_name(shared, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert not marker.exists(), "the planted library's constructor ran"
     used = Path(proc.stdout.split()[1])
-    assert used != folder and used.parent == shared and (used.stat().st_mode & 0o777) == 0o700
+    assert used != folder and used.parent == shared and proc.stdout.split()[2] == "0o700"
     assert "cannot be created" in proc.stderr
 
 

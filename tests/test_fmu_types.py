@@ -209,3 +209,94 @@ def test_scheduled_execution_fmu_is_refused_naming_the_clocks(tmp_path):
         zf.writestr("modelDescription.xml", md)
     with pytest.raises(ModelDescriptionError, match=r"Scheduled Execution FMU \(clocks: tick\).*clocks"):
         describe_fmu(fmu)
+
+
+# -- starts, parameters and free inputs beyond 2^53 (a float64 keeps only multiples of 2^10 above 2^62) ----
+BIG_C = r"""
+#define NX 0
+#define NZ 0
+#define NR 1
+#define NI 4
+#define NU 8
+#define NB 0
+static const int XVR[1] = {0};
+/*HOOKS*/
+static void outputs(M *m) { m->i[1] = m->i[0]; m->u[5] = m->u[4]; m->i[3] = m->i[2]; m->u[7] = m->u[6]; }
+static void model_init(M *m) {
+    m->i[0] = 4611686018427387905LL; m->u[4] = 18446744073709551615ULL; m->i[2] = 0; m->u[6] = 0; outputs(m); }
+static void model_deriv(M *m, double *dx) { }
+static void model_z(M *m, double *z) { }
+static void model_event(M *m) { outputs(m); }
+static int model_cs_step(M *m, double t, double h) { outputs(m); m->time = t + h; return 0; }
+"""
+
+BIG_MD = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="Big" instantiationToken="{3c0d5b8a-1e2f-4a6b-9c7d-8e9f0a1b2c3e}">
+  <CoSimulation modelIdentifier="Big"/>
+  <ModelVariables>
+    <Float64 name="time" valueReference="99" causality="independent" variability="continuous"/>
+    <Int64 name="k" valueReference="0" causality="parameter" variability="tunable" start="4611686018427387905"/>
+    <Int64 name="ko" valueReference="1" causality="output" variability="discrete"/>
+    <UInt64 name="uk" valueReference="4" causality="parameter" variability="tunable" start="18446744073709551615"/>
+    <UInt64 name="uko" valueReference="5" causality="output" variability="discrete"/>
+    <Int64 name="x" valueReference="2" causality="input" variability="discrete" start="4611686018427387907"/>
+    <Int64 name="xo" valueReference="3" causality="output" variability="discrete"/>
+    <UInt64 name="y" valueReference="6" causality="input" variability="discrete" start="9223372036854775813"/>
+    <UInt64 name="yo" valueReference="7" causality="output" variability="discrete"/>
+  </ModelVariables>
+  <ModelStructure>
+    <Output valueReference="1" dependencies=""/><Output valueReference="5" dependencies=""/>
+    <Output valueReference="3" dependencies=""/><Output valueReference="7" dependencies=""/>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+# the FMU's parameters start at their start values, its inputs at 0: the inputs' big values reached it from cpgsim
+K0, UK0, X0, Y0 = 2 ** 62 + 1, 2 ** 64 - 1, 2 ** 62 + 3, 2 ** 63 + 5
+
+
+@pytest.fixture(scope="module")
+def big_fmu(tmp_path_factory):
+    return build_c_fmu(tmp_path_factory.mktemp("big"), BIG_C, BIG_MD, 3, "Big")
+
+
+def _last(res, column: str) -> int:
+    values = res[column]
+    assert values.dtype.kind in "iu", column
+    return int(values[-1])
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_big_starts_and_parameters_reach_the_fmu_exactly(big_fmu, isolate):
+    blk = FmuBlock("b", big_fmu, isolate=isolate)
+    assert blk.parameters["k"].default == K0 and blk.inputs["y"].default == Y0
+    res = simulate(blk, t_end=0.2, dt=0.1)
+    assert _last(res, "b.xo") == X0 and _last(res, "b.yo") == Y0  # unconnected inputs: their start values
+    assert (_last(res, "b.ko"), _last(res, "b.uko")) == (K0, UK0)
+    blk.set(k=K0 + 2, uk=UK0 - 1)
+    res = simulate(blk, t_end=0.2, dt=0.1, inputs={"x": -2 ** 63, "y": 2 ** 63})
+    assert (_last(res, "b.ko"), _last(res, "b.uko")) == (K0 + 2, UK0 - 1)
+    assert (_last(res, "b.xo"), _last(res, "b.yo")) == (-2 ** 63, 2 ** 63)
+
+
+def test_a_time_series_of_big_integers_is_refused_not_rounded(big_fmu):
+    with pytest.raises(Exception, match=r"input .x.: a time series of integers beyond 2\^53"):
+        simulate(FmuBlock("b", big_fmu), t_end=0.1, dt=0.1, inputs={"x": [[X0, X0 + 2]]})
+
+
+def test_cli_set_writes_exact_integers_that_pandas_reads_back(big_fmu, tmp_path, capsys):
+    import pandas as pd
+
+    from cpgsim.harness.cli.main import main
+
+    out = tmp_path / "r.csv"
+    assert main(["simulate", str(big_fmu), "--t-end", "0.2", "--dt", "0.1", "-o", str(out),
+                 "--set", f"Big.k={K0 + 4}", "--set", f"Big.uk={UK0 - 3}"]) == 0
+    frame = pd.read_csv(out, dtype={"Big.ko": "int64", "Big.uko": "uint64", "Big.xo": "int64", "Big.yo": "uint64"})
+    assert int(frame["Big.ko"].iloc[-1]) == K0 + 4 and int(frame["Big.uko"].iloc[-1]) == UK0 - 3
+    assert int(frame["Big.xo"].iloc[-1]) == X0 and int(frame["Big.yo"].iloc[-1]) == Y0
+    capsys.readouterr()
+    assert main(["inspect", str(big_fmu)]) == 0
+    text = capsys.readouterr().out
+    assert f"start={X0}" in text and f"start={Y0}" in text and f"k{' ' * 23} [1] integer = {K0}" in text
+    assert f"= {UK0}" in text and "e+18" not in text and "e+19" not in text

@@ -117,7 +117,7 @@ def collect_variables(model: CompiledModel, fmi: int = 2) -> Variables:
     for slot in model.inputs.slots:
         name = slot.name[1:]
         port = model.free_inputs[name]
-        starts = np.zeros(port.size) if port.default is None else port.default_values()
+        starts = np.zeros(port.size) if port.default is None else port.float_default_values()
         for i, el in enumerate(_elements(slot)):
             items.append(Variable(el[1:], "input", slot.start + i, slot.kind, "input", kind_var(slot.kind), None,
                                   float(starts[i]), slot.unit, slot.description))

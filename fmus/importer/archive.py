@@ -18,6 +18,7 @@ stream, truncated member) is an :class:`~cpgsim.fmus.errors.FmuFileError` naming
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import stat
 import tempfile
@@ -159,6 +160,42 @@ def read_member(zf: zipfile.ZipFile, name: str, limit: int = MAX_XML_BYTES) -> b
     return data
 
 
+_swept: set[tuple[str, str]] = set()
+
+
+def private_scratch(prefix: str, workdir: str | os.PathLike | None = None) -> Path:
+    """A new folder ``<prefix><pid>.<random>`` under ``workdir`` (default: the system temp directory).
+
+    Its name carries this process's id, so the folders a process left when it died without cleaning up
+    (killed, or crashed inside an FMU running in-process) are recognised: the first call per folder and
+    prefix removes those whose process no longer runs, that are real folders and owned by this user
+    (another user's, a symlink or a live process's are never touched)."""
+    parent = Path(tempfile.gettempdir() if workdir is None else workdir)
+    key = (str(parent), prefix)
+    if key not in _swept:
+        _swept.add(key)
+        remove_stale_scratch(parent, prefix)
+    return Path(tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}.", dir=str(parent)))
+
+
+def remove_stale_scratch(parent: Path, prefix: str) -> list[Path]:
+    """Remove this user's ``<prefix><pid>.*`` folders in ``parent`` whose process has ended; returns them."""
+    from cpgsim.components.private_store import is_own_folder, pid_alive
+
+    pattern = re.compile(re.escape(prefix) + r"(\d+)\.")
+    removed = []
+    try:
+        entries = list(os.scandir(parent))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m and is_own_folder(entry.path) and not pid_alive(int(m.group(1))):
+            remove_tree(Path(entry.path))
+            removed.append(Path(entry.path))
+    return removed
+
+
 def safe_extract(path: str | os.PathLike, workdir: str | os.PathLike | None = None, what: str = "FMU",
                  prefix: str = "cpgsim_fmu_") -> Path:
     """Extract archive ``path`` into a new directory under ``workdir`` (default: the system temp
@@ -166,7 +203,7 @@ def safe_extract(path: str | os.PathLike, workdir: str | os.PathLike | None = No
     behind; the caller removes the directory (:func:`remove_tree`) when done."""
     with open_zip(path, what) as zf:
         infos = check_archive(zf, path, what)
-        dest = Path(tempfile.mkdtemp(prefix=prefix, dir=None if workdir is None else str(workdir)))
+        dest = private_scratch(prefix, workdir)
         try:
             root = dest.resolve()
             written = 0

@@ -75,7 +75,7 @@ class PortSpec:
     unit: str
     kind: str
     description: str
-    start: tuple[float, ...] | None
+    start: tuple[float | int, ...] | None  # integer types: exact Python ints
     element: Element
     fmi_names: tuple[str, ...]
     variability: str
@@ -85,7 +85,7 @@ class PortSpec:
         return int(math.prod(self.shape))
 
     @property
-    def default(self) -> float | tuple[float, ...] | None:
+    def default(self) -> float | int | tuple[float | int, ...] | None:
         """The port default (for an unconnected input): the start value, one number if it is uniform,
         else one per element."""
         if not self.start:
@@ -103,8 +103,8 @@ class ParamSpec:
     type: str
     kind: str
     unit: str
-    start: float | None
-    bounds: tuple[float, float]
+    start: float | int | None  # integer types: an exact Python int
+    bounds: tuple[float | int, float | int]
     description: str
     variability: str
 
@@ -120,7 +120,7 @@ class ValueParamSpec:
     vr: int
     type: str
     shape: tuple[int, ...]  # () for a String
-    start: tuple[float, ...] | str | None
+    start: tuple[float | int, ...] | str | None
     unit: str
     description: str
     variability: str
@@ -152,7 +152,33 @@ class ValueParamSpec:
             raise ParameterError(f"{where}: values must be finite")
         if kind_of(self.type) == "integer" and not np.all(arr == np.round(arr)):
             raise ParameterError(f"{where}: values must be integers")
+        if kind_of(self.type) == "integer":  # exact ints (an Int64 beyond 2^53 does not survive a float64)
+            return _exact_integers(value, self.type, where)
         return tuple(float(v) for v in arr.ravel())  # FMI 3 arrays are serialised row-major
+
+
+def _exact_integers(value: Any, fmi_type: str, where: str) -> tuple[int, ...]:
+    """``value`` (nested lists / array of integers) as exact Python ints, row-major, in ``fmi_type``'s range."""
+    import numpy as np
+
+    from cpgsim.components.core import ParameterError
+
+    out = [int(v) for v in np.asarray(value, dtype=object).ravel()]
+    lo, hi = INT_RANGES.get(fmi_type, (-2 ** 63, 2 ** 64 - 1))
+    bad = [v for v in out if not lo <= v <= hi]
+    if bad:
+        raise ParameterError(f"{where}: {bad[0]} is out of range for {fmi_type} [{lo}, {hi}]")
+    return tuple(out)
+
+
+def format_number(value: float | int) -> str:
+    """A number as ``inspect`` prints it: an integer exactly (all its digits), a float as the shortest
+    text that reads back to the same float64."""
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, int):
+        return str(value)
+    return repr(float(value))
 
 
 @dataclass
@@ -211,7 +237,8 @@ class FmuDescription:
                  f"binaries: {', '.join(self.platforms) or 'none'}"
                  + (", sources included" if self.has_sources else "")]
         if self.default_experiment:
-            lines.append("  default experiment: " + ", ".join(f"{k} {v:g}" for k, v in self.default_experiment.items()))
+            lines.append("  default experiment: " + ", ".join(f"{k} {format_number(v)}"
+                                                            for k, v in self.default_experiment.items()))
         for title, table in (("inputs", self.inputs), ("outputs", self.outputs)):
             lines.append(f"  {title} ({len(table)}):")
             for p in table.values():
@@ -225,8 +252,9 @@ class FmuDescription:
         lines.append(f"  parameters ({len(self.parameters)}):")
         for q in self.parameters.values():
             fmi = "" if q.fmi_name == q.name else f" (FMI {q.fmi_name})"
-            bounds = "" if q.bounds == (-math.inf, math.inf) else f" bounds=[{q.bounds[0]:g}, {q.bounds[1]:g}]"
-            start = "" if q.start is None else f" = {q.start:g}"
+            bounds = ("" if q.bounds == (-math.inf, math.inf)
+                      else f" bounds=[{format_number(q.bounds[0])}, {format_number(q.bounds[1])}]")
+            start = "" if q.start is None else f" = {format_number(q.start)}"
             lines.append(f"    {q.name:24s} [{q.unit}] {q.kind}{start}{bounds}{fmi}")
         if self.value_parameters:
             lines.append(f"  array and string parameters ({len(self.value_parameters)}):")
@@ -247,8 +275,8 @@ class FmuDescription:
         return "\n".join(lines)
 
 
-def _fmt(values: Sequence[float]) -> str:
-    return f"{values[0]:g}" if len(values) == 1 else "[" + ", ".join(f"{v:g}" for v in values[:6]) + (
+def _fmt(values: Sequence[float | int]) -> str:
+    return format_number(values[0]) if len(values) == 1 else "[" + ", ".join(format_number(v) for v in values[:6]) + (
         ", ...]" if len(values) > 6 else "]")
 
 
@@ -287,10 +315,11 @@ INT_RANGES = {"Integer": (-2**31, 2**31 - 1), "Enumeration": (-2**31, 2**31 - 1)
 _FLOAT_WORDS = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
 
 
-def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "Real") -> float:
+def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "Real") -> float | int:
     """The number in ``attribute`` of ``element`` (e.g. ``<Integer start>`` of variable 'n'), checked.
 
-    An integer type's value must be an integer within the type's range; a real one a float64 (an overflow
+    An integer type's value must be an integer within the type's range, returned as an exact Python
+    ``int`` (an Int64/UInt64 start such as 2^62 + 1 does not fit a float64); a real one a float64 (an overflow
     such as ``1e400`` is out of range; ``INF`` written as such stays infinite). Anything else is a
     :class:`ModelDescriptionError` naming the element and the attribute.
     """
@@ -304,7 +333,7 @@ def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "R
         lo, hi = INT_RANGES.get(fmi_type, (-2**63, 2**64 - 1))
         if not lo <= value <= hi:
             raise ModelDescriptionError(f"{where} is out of range for {fmi_type} [{lo}, {hi}]")
-        return float(value)
+        return value
     try:
         value = float(token)
     except ValueError:
@@ -327,7 +356,7 @@ def _count(value: Any, attribute: str) -> int:
     return n
 
 
-def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float, ...] | None:
+def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float | int, ...] | None:
     raw = var.start
     if raw is None:
         return None
@@ -634,8 +663,8 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
                   number_attribute(hi, element, "max", v.type) if hi is not None else math.inf)
         s0 = start[0] if start else None
         if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
-            skipped.append(f"bounds of parameter {v.name!r} ignored: start {s0:g} is outside "
-                           f"[{bounds[0]:g}, {bounds[1]:g}]")
+            skipped.append(f"bounds of parameter {v.name!r} ignored: start {format_number(s0)} is outside "
+                           f"[{format_number(bounds[0])}, {format_number(bounds[1])}]")
             bounds = (-math.inf, math.inf)
         if kind == "boolean":
             bounds = (0.0, 1.0)
@@ -681,7 +710,7 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
 def _value_param(v: Any, by_vr: dict[int, Any], taken: set[str]) -> ValueParamSpec | None:
     """An array parameter of fixed shape (Float/Int types) or a String parameter; None otherwise."""
     if v.type == "String" and not getattr(v, "dimensions", None):
-        start: tuple[float, ...] | str | None = None if v.start is None else str(v.start)
+        start: tuple[float | int, ...] | str | None = None if v.start is None else str(v.start)
         shape: tuple[int, ...] = ()
     elif kind_of(v.type) in ("real", "integer"):
         shape = _dims(v, by_vr)

@@ -5,7 +5,10 @@ call over a socket pair to ``python -m cpgsim.fmus.importer.isolation FD``, a ch
 is a fresh interpreter (not a fork: FMU libraries and CasADi state are never shared), its stdout
 goes to stderr (an FMU printing cannot corrupt the protocol) and it ignores SIGINT (the parent
 decides). It leads its own process group (``start_new_session``), killed as a whole when the run
-ends, so processes the FMU forks do not outlive it (one that calls ``setsid`` itself escapes: a limit). Its
+ends, and it is a child subreaper (Linux ``PR_SET_CHILD_SUBREAPER``): processes the FMU starts stay below
+it even after ``setsid``, and it ends them all when it ends. A lifeline pipe from the parent, watched by a
+thread in the child, ends the child and everything below it when the parent closes it or dies (also by
+SIGKILL, which no handler sees), so nothing the FMU started outlives cpgsim. Its
 stdout and stderr reach cpgsim's stderr through a pipe capped at :data:`OUTPUT_LIMIT` bytes; the rest
 is counted and reported in one line.
 
@@ -30,7 +33,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Mapping
@@ -41,10 +43,12 @@ from typing import Any
 import numpy as np
 
 from cpgsim.fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
-from cpgsim.fmus.importer.archive import remove_tree
+from cpgsim.fmus.importer.archive import private_scratch, remove_tree
 from cpgsim.harness.errors import StopRequested
 
 _ERRORS = {cls.__name__: cls for cls in (FmuRuntimeError, FmuCrashedError, FmuTimeoutError)}
+LIFELINE_GRACE = 2.0
+"""Seconds a child is given to end the processes its FMU started once its lifeline is cut (then SIGKILL)."""
 DEFAULT_CALL_TIMEOUT = 10.0
 """Seconds one call (``doStep`` with its input and output exchange) may take by default: 10^4 times a
 1 ms macro step in real time, far beyond any FMU meant for such steps."""
@@ -74,8 +78,7 @@ class IsolatedRuntime:
         self.args["path"] = str(Path(self.args["path"]).resolve())
         # the child extracts and works in a scratch directory the parent removes, even after a crash
         workdir = self.args.get("workdir")
-        self.scratch = Path(tempfile.mkdtemp(prefix="cpgsim_fmu_", dir=str(Path(workdir).resolve()) if workdir
-                                             else None)).resolve()
+        self.scratch = private_scratch("cpgsim_fmu_", Path(workdir).resolve() if workdir else None).resolve()
         self.args["workdir"] = str(self.scratch)
         self.path = Path(self.args["path"])
         self.name = self.args["instance_name"]
@@ -87,6 +90,9 @@ class IsolatedRuntime:
         self._outputs: dict[str, np.ndarray] | None = None
         self._time = 0.0
         parent, child = socket.socketpair()
+        # the lifeline: the child's watchdog thread reads it; it ends (EOF) when this process closes it or
+        # dies, however it dies (SIGKILL included), and the child then ends its whole process tree
+        life_read, self._lifeline = os.pipe()
         env = dict(os.environ)
         package = Path(__file__).resolve().parents[2]  # the cpgsim package (the repository root when editable)
         if package.name == "cpgsim":  # a regular install: the folder holding it is an import root for the child
@@ -96,16 +102,19 @@ class IsolatedRuntime:
         env.setdefault("PYTHONDONTWRITEBYTECODE", "1")
         try:
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "cpgsim.fmus.importer.isolation", str(child.fileno())],
-                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                [sys.executable, "-m", "cpgsim.fmus.importer.isolation", str(child.fileno()), str(life_read)],
+                pass_fds=(child.fileno(), life_read), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT, env=env, cwd=str(self.scratch), close_fds=True,
                 start_new_session=True)  # its own process group: ended as a whole with the run
             self._output = OutputForwarder(self.proc.stdout, f"FMU {self.path.name} (block {self.name!r})")
         except BaseException:
+            os.close(self._lifeline)
+            self._lifeline = -1
             remove_tree(self.scratch)
             raise
         finally:
             child.close()
+            os.close(life_read)
         self.conn = Connection(parent.detach())
 
     # -- protocol ---------------------------------------------------------------------------------
@@ -201,7 +210,19 @@ class IsolatedRuntime:
             self.kill()
         self._close_conn()
 
+    def _cut_lifeline(self) -> None:
+        if self._lifeline >= 0:
+            os.close(self._lifeline)
+            self._lifeline = -1
+
     def kill(self) -> None:
+        if self.proc.poll() is None:
+            self._cut_lifeline()  # the child's watchdog ends the processes the FMU started, even setsid ones
+            if not _stopped(self.proc.pid):
+                try:
+                    self.proc.wait(timeout=LIFELINE_GRACE)
+                except subprocess.TimeoutExpired:
+                    pass
         if self.proc.poll() is None:
             self.proc.kill()
             try:
@@ -223,6 +244,8 @@ class IsolatedRuntime:
     def _close_conn(self) -> None:
         if not self.conn.closed:
             self.conn.close()
+        if self.proc.poll() is not None:
+            self._cut_lifeline()
         if self.proc.poll() is not None:
             self._end_group()
             remove_tree(self.scratch)
@@ -287,6 +310,75 @@ def _has_fileno(stream: Any) -> bool:
 
 
 # -- the child ----------------------------------------------------------------------------------------
+_PR_SET_CHILD_SUBREAPER = 36
+
+
+def _become_subreaper() -> None:
+    """Make processes the FMU starts and orphans (even after ``setsid``) children of this process, so
+    :func:`_end_descendants` finds them (Linux; elsewhere only the process group is ended)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _descendants(root: int) -> list[int]:
+    """The processes below ``root`` (from ``/proc``: each one's parent), deepest last."""
+    parent_of: dict[int, int] = {}
+    try:
+        names = os.listdir("/proc")
+    except OSError:
+        return []
+    for name in names:
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/stat", "rb") as f:
+                    parent_of[int(name)] = int(f.read().rsplit(b")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+    found, frontier = [], [root]
+    while frontier:
+        below = [pid for pid, ppid in parent_of.items() if ppid in frontier and pid not in found]
+        found.extend(below)
+        frontier = below
+    return found
+
+
+def _end_descendants() -> None:
+    """SIGKILL every process below this one (rounds: a killed process's children come to this one)."""
+    for _ in range(20):
+        pids = _descendants(os.getpid())
+        if not pids:
+            return
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        for pid in pids:  # reap the direct children (the others are reaped by their own parents or by us)
+            try:
+                os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:
+                pass
+        time.sleep(0.01)
+
+
+def _watch_lifeline(fd: int) -> None:
+    """Block until the parent closes the lifeline (or dies), then end every descendant and this process."""
+    try:
+        while os.read(fd, 1):
+            pass
+    except OSError:
+        pass
+    _end_descendants()
+    try:
+        os.killpg(os.getpgrp(), signal.SIGKILL)
+    finally:
+        os._exit(3)
+
+
 def _serve(fd: int) -> None:
     from cpgsim.fmus.errors import one_line
     from cpgsim.fmus.importer.runtime import FmuRuntime
@@ -346,11 +438,16 @@ def _serve(fd: int) -> None:
 
 if __name__ == "__main__":
     os.dup2(2, 1)  # anything the FMU prints goes to stderr, never into the protocol
+    _become_subreaper()
+    if len(sys.argv) > 2:
+        threading.Thread(target=_watch_lifeline, args=(int(sys.argv[2]),), daemon=True).start()
     try:
         _serve(int(sys.argv[1]))
         sys.stderr.flush()
     except BaseException:  # noqa: BLE001 - e.g. the FMU closed our socket or stderr: the parent reports it
+        _end_descendants()
         os._exit(3)
+    _end_descendants()  # processes the FMU started (setsid ones too) end with it
     # the FMU is terminated and freed: skip interpreter finalisation, where libraries that embed
     # Python (PythonFMU) were seen to corrupt the heap
     os._exit(0)

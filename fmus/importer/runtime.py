@@ -214,7 +214,7 @@ class FmuRuntime:
                 if vspec is not None and vspec.type == "String":
                     self.fmu.setString([vspec.vr], [str(value)])
                 elif vspec is not None:
-                    self._set(vspec.type, (vspec.vr,), np.asarray(value, dtype=float).ravel())
+                    self._set(vspec.type, (vspec.vr,), as_values(value, vspec.type))
                 else:
                     spec = self.desc.parameters[name]
                     self._set(spec.type, (spec.vr,), np.array([value]))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import re
 from typing import Any
 
 
@@ -111,6 +112,15 @@ def parse_sets(items: list[str]) -> dict[str, Any]:
     return out
 
 
+_INTEGER = re.compile(r"\s*[+-]?[0-9]+\s*")
+
+
+def _number(text: str) -> float | int:
+    """An integer literal as an exact ``int`` (an FMI 3 UInt64 such as 18446744073709551615 does not
+    survive a float64), anything else as a float."""
+    return int(text) if _INTEGER.fullmatch(text) else float(text)
+
+
 def parse_value(text: str, where: str) -> Any:
     """A ``--set`` value: a number, an array (``[1,2;3,4]``, ``[1,2]``, ``1,2``) or a quoted string."""
     if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
@@ -118,11 +128,11 @@ def parse_value(text: str, where: str) -> Any:
     body = text[1:-1] if text.startswith("[") and text.endswith("]") else text
     if body is text and "," not in text:
         try:
-            return float(text)
+            return _number(text)
         except ValueError:
             raise CliError(f"{where}: value {text!r} is not a number (arrays: [1,2;3,4], strings: \"text\")") from None
     try:
-        rows = [[float(v) for v in row.split(",")] for row in body.split(";")]
+        rows = [[_number(v) for v in row.split(",")] for row in body.split(";")]
     except ValueError:
         raise CliError(f"{where}: {text!r} is not an array of numbers (e.g. [1,2;3,4] or 1,2,3)") from None
     if len({len(r) for r in rows}) != 1:

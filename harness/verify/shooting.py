@@ -84,7 +84,7 @@ def autonomous_system(model: CompiledModel, inputs: Mapping[str, Any] | None = N
         if name in inputs:
             val = np.atleast_1d(np.asarray(inputs[name], dtype=float)).ravel()
         elif port.default is not None:
-            val = port.default_values()
+            val = port.float_default_values()
         else:
             raise VerifyInputError(f"graph input {name!r} is free: verification needs an autonomous graph; "
                                    f"hold it constant with --input {name}=VALUE")
@@ -602,7 +602,7 @@ class _Verifier:
         m = self.model
         src = m.flat.sources.get(f"{path}.{port}")
         if src is None:
-            return float(blk.inputs[port].default_values()[0])
+            return float(blk.inputs[port].float_default_values()[0])
         if src.startswith("$"):
             return float(np.atleast_1d(self.report.inputs[src[1:]])[0])
         slot = m.signals_layout.index(src)

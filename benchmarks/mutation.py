@@ -40,6 +40,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "outcomes": ("harness/experiments/outcomes.py", ["tests/test_scenarios.py"]),
     "importer-values": ("fmus/importer/description.py", ["tests/test_fmu_import.py"]),
     "scenario": ("harness/experiments/scenario.py", ["tests/test_scenarios.py"]),
+    "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py"]),
 }
 
 

@@ -490,9 +490,21 @@ def _read_component(el: ET.Element, bname: str, unzipdir: Path, ssp: Path, isola
         if name not in by_fmi:
             raise SspError(f"SSP {ssp}: component {el.get('name')!r} has no parameter {name!r} "
                            f"(parameters: {', '.join(sorted(by_fmi)) or 'none'})")
-        v = 1.0 if value in ("true", "1") else 0.0 if typ == "Boolean" else float(value)
-        blk.set(**{by_fmi[name].name: v})
+        blk.set(**{by_fmi[name].name: _binding_value(typ, value, f"SSP {ssp}: parameter {name!r}")})
     return blk
+
+
+def _binding_value(typ: str, value: str, where: str) -> float | int:
+    """A parameter binding's value by its SSV type: Boolean 1.0/0.0, Integer/Enumeration an exact int (an
+    Int64 beyond 2^53 keeps every digit), Real a float."""
+    try:
+        if typ == "Boolean":
+            return 1.0 if value.strip() in ("true", "1") else 0.0
+        if typ in ("Integer", "Enumeration"):
+            return int(value)
+        return float(value)
+    except ValueError:
+        raise SspError(f"{where}: value {value!r} is not a valid {typ}") from None
 
 
 def _end(graph: Graph, names: dict[str, str], sys_cons: dict, element: str | None, connector: str | None,

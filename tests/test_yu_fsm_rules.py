@@ -1,0 +1,145 @@
+"""The gait FSM's rules one by one, on the FSM block alone with scripted leg flags (quick tier: no robot,
+no network). Each expected value comes from Yu 2019 (Table 2, Sec. 5.2, Y16) as the module docstring of
+:mod:`cpgsim.components.yu.fsm` transcribes it, worked out by hand here:
+
+- legs 0..5 = L1, L2, L3, R1, R2, R3; tripod (gamma 2) slot 0 = {L1, L3, R2} swings, {L2, R1, R3} stands;
+- Y16: omega_swing = gamma*pi/T_g, omega_stance = gamma*pi/((gamma - 1)*T_g), and the FSM's ``rate`` is
+  omega/omega1 with omega1 = 2*pi/T_net, so rate_swing = gamma*T_net/(2*T_g) and rate_stance =
+  gamma*T_net/(2*(gamma - 1)*T_g); a Prolong state freezes the clock (rate 0), a reflexing leg runs at
+  T_net/T_g;
+- the FSM samples every macro step; row ``k`` of an output shows the FSM after it has seen the inputs
+  of sample ``k``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpgsim.components.yu.fsm import STANCE, STANCE_PROLONG, SWING, SWING_PROLONG, YuGaitFSM
+from cpgsim.harness.simulate import simulate
+
+DT = 0.01
+A, B = [0, 2, 4], [1, 3, 5]  # tripod slot 0 and slot 1
+
+
+def run(steps: int, flags, gait: int = 1, **params):
+    """The FSM for ``steps`` samples; ``flags(k)`` gives ``{input: 6 values}`` at sample ``k`` (missing inputs
+    are 0). Returns ``(state, rate, slot, n_switch, atd, natd, atd_alien)`` as arrays over the samples."""
+    names = ("swing", "active", "landed", "gaveup", "lambda_td")
+    series = {n: np.zeros((6, steps + 1)) for n in names}
+    for k in range(steps + 1):
+        for n, v in flags(k).items():
+            series[n][:, k] = v
+    fsm = YuGaitFSM("fsm", gait=gait, **{"T_g": 5.0, "T_net": 5.0, "T_half": 1.0, **params})
+    res = simulate(fsm, t_end=steps * DT, dt=DT, inputs=series)
+    return tuple(res[f"fsm.{o}"] for o in ("state", "rate", "slot", "n_switch", "atd", "natd", "atd_alien"))
+
+
+def legs(*on: int) -> np.ndarray:
+    v = np.zeros(6)
+    v[list(on)] = 1.0
+    return v
+
+
+ALL = legs(0, 1, 2, 3, 4, 5)
+
+
+def test_the_first_sample_starts_slot_0_legs_in_swing_and_the_others_in_stance():
+    state, rate, slot, *_ = run(2, lambda k: {"swing": legs(*A)})
+    assert list(state[0]) == [SWING, STANCE, SWING, STANCE, SWING, STANCE] and slot[0] == 0
+
+
+@pytest.mark.parametrize("gait, gamma, first", [(1, 2, A), (2, 3, [2, 4]), (3, 6, [2])])
+def test_rates_are_yu_y16_swing_and_stance_frequencies_over_omega1(gait, gamma, first):
+    # ``first``: the legs of slot 0 (tripod {L1, L3, R2}; tetrapod {L3, R2}; wave {L3}), by the slot table
+    T_g, T_net = 4.0, 5.0
+    state, rate, *_ = run(2, lambda k: {"swing": legs(*first)}, gait=gait, T_g=T_g, T_net=T_net)
+    rest = [i for i in range(6) if i not in first]
+    assert np.all(state[1, first] == SWING) and np.all(state[1, rest] == STANCE)
+    assert np.allclose(rate[1, first], gamma * T_net / (2 * T_g), rtol=1e-12)
+    assert np.allclose(rate[1, rest], gamma * T_net / (2 * (gamma - 1) * T_g), rtol=1e-12)
+
+
+def test_a_swing_ends_in_swing_prolong_when_the_legs_swing_flag_falls_and_its_clock_stops():
+    # L1 swings until sample 5 (swing flag 1), then its flag falls; the standing legs' leaders stay before PEP
+    state, rate, *_ = run(8, lambda k: {"swing": legs(0, 2, 4) if k < 5 else legs(2, 4)})
+    assert np.all(state[:5, 0] == SWING) and np.all(state[5:, 0] == SWING_PROLONG) and np.all(rate[5:, 0] == 0.0)
+    assert np.all(state[5:, 2] == SWING) and np.all(state[5:][:, B] == STANCE)
+
+
+def test_a_reflex_sends_every_standing_leg_to_stance_prolong_and_its_end_resumes_them():
+    # wave (the reflex rate T_net/T_g differs from the swing rate 6*T_net/(2*T_g)): L3 swings in slot 0 and runs
+    # a reflex from sample 3 to 6; the reflexing leg keeps running at T_net/T_g
+    state, rate, *_ = run(10, lambda k: {"swing": legs(2), "active": legs(2) if 3 <= k <= 6 else np.zeros(6)},
+                          gait=3, T_g=4.0, T_net=5.0)
+    wave_a = [i for i in range(6) if i != 2]  # every leg but L3 (slot 0) stands
+    assert np.all(state[:3][:, wave_a] == STANCE) and np.all(state[3:7][:, wave_a] == STANCE_PROLONG)
+    assert np.all(rate[3:7][:, wave_a] == 0.0) and np.allclose(rate[3:7, 2], 5.0 / 4.0)
+    assert np.allclose(rate[:3, 2], 6 * 5.0 / (2 * 4.0)) and np.all(state[:, 2] == SWING)
+    assert np.all(state[7:][:, wave_a] == STANCE)  # resumed: their parts are not done and no reflex runs
+    assert np.allclose(rate[7:, 1], 6 * 5.0 / (2 * 5 * 4.0))  # back to the wave's stance rate
+
+
+def test_switch_needs_every_leg_ready_atd_and_no_reflex():
+    """Tripod exchange: slot-0 legs ended their swings (SwingProlong), the standing legs' leaders passed PEP
+    (their swing flag rose: stance done, StanceProlong), all six supported (ATD): the groups exchange."""
+    def flags(k):
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": ALL}
+    state, rate, slot, n_switch, atd, natd, alien = run(6, flags)
+    assert np.all(state[2, A] == SWING_PROLONG) and np.all(state[2, B] == STANCE_PROLONG)
+    assert atd[2] == 1 and natd[2] == 0 and np.all(alien[2] == 1) and slot[2] == 0
+    assert np.all(slot[3:] == 1) and np.all(n_switch[3:] == 1)  # one switch, at the first sample all were ready
+    assert np.all(state[3, A] == STANCE) and np.all(state[3, B] == SWING)
+
+
+@pytest.mark.parametrize("support", ["none", "landed", "gaveup"])
+def test_natd_blocks_the_exchange_unless_the_leg_landed_or_gave_up(support):
+    """L1 never touches down (lambda_td 0): NATD (0 < sum < 6) holds every leg; a latched touchdown
+    (``landed``) or a failed search waiting on its AEP (``gaveup``) counts as support (Table 2 as used here)."""
+    extra = {"landed": legs(0)} if support == "landed" else {"gaveup": legs(0)} if support == "gaveup" else {}
+
+    def flags(k):
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": legs(1, 2, 3, 4, 5), **extra}
+    state, rate, slot, n_switch, atd, natd, _ = run(6, flags)
+    assert np.all(natd == 1)  # 5 of 6 lambda_td: NATD whatever the latches say
+    if support == "none":
+        assert np.all(atd == 0) and n_switch[-1] == 0 and np.all(state[-1, A] == SWING_PROLONG)
+        assert np.all(state[-1, B] == STANCE_PROLONG)
+    else:
+        assert np.all(atd == 1) and n_switch[-1] == 1 and slot[-1] == 1
+
+
+def test_a_reflex_anywhere_blocks_the_exchange():
+    def flags(k):
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": ALL, "active": legs(0)}
+    *_, n_switch, atd, _, _ = run(6, flags)
+    assert atd[-1] == 1 and n_switch[-1] == 0
+
+
+def test_liftoff_needs_an_alien_touchdown():
+    """aTD_i: a leg of another slot touches down (lambda_td or landed; a leg that gave up does not count).
+    The slot-0 legs are supported only as searches given up, the standing legs touch down: ATD holds, but the
+    standing legs, who swing next, see no touchdown of another slot, so they may not lift off and the exchange
+    waits; a slot-0 touchdown from sample 4 releases it."""
+    def flags(k, release):
+        td = ALL if (release and k >= 4) else legs(*B)
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": td, "gaveup": legs(*A)}
+    state, _, slot, n_switch, atd, _, alien = run(8, lambda k: flags(k, False))
+    assert np.all(atd == 1) and np.all(alien[:, A] == 1) and np.all(alien[:, B] == 0)
+    assert n_switch[-1] == 0 and np.all(state[-1, B] == STANCE_PROLONG)
+    *_, n_switch, _, _, alien = run(8, lambda k: flags(k, True))
+    assert np.all(alien[4:, B] == 1) and n_switch[3] == 0 and n_switch[4] == 1
+
+
+def test_a_tetrapod_stance_part_ends_at_its_fraction_of_the_half_period():
+    """Tetrapod (gamma 3), slot 0: L1 and R3 (slot 2) stand with j = (0 - 2 - 1) mod 3 = 0, so their part ends at
+    the fraction (j + 1)/(gamma - 1) = 1/2 of T_half (minus p_tol); their stance rate is 3/4 (T_g = T_net), so
+    the network time reaches 0.5 - 1e-3 of T_half = 1 s after (0.499/0.75) s = 0.6653 s. The FSM integrates
+    that time from sample to sample: the transition comes within two samples after."""
+    state, rate, *_ = run(100, lambda k: {"swing": legs(2, 4)}, gait=2)
+    assert rate[1, 0] == pytest.approx(0.75) and state[1, 0] == STANCE
+    k = int(np.argmax(state[:, 0] == STANCE_PROLONG))
+    assert 0.6653 <= k * DT <= 0.6653 + 2 * DT + 1e-9, k
+    assert np.all(state[: k, 0] == STANCE) and np.all(state[k:, 0] == STANCE_PROLONG)
+    assert np.all(state[:, 1] == STANCE)  # L2 (slot 1, j = 1) stands to its PEP: target 1 is the stance's end

@@ -23,7 +23,7 @@ several MuJoCo steps the force is averaged, as in the DART plant.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -31,6 +31,7 @@ import numpy as np
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots.disturbance import Push
 from cpgsim.robots.hexapod import foot_positions_body, tilt_angle
 from cpgsim.robots.mjcf import ContactModel, mjcf
 from cpgsim.robots.plant import PlantCommon, declare_plant
@@ -45,8 +46,10 @@ _OTHER = 1000
 class MujocoHexapod(PlantCommon, CoSimBlock):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
-    Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle`` as
-    :class:`~cpgsim.robots.plant.DartHexapod`; ``contact`` a :class:`~cpgsim.robots.mjcf.ContactModel`
+    Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle``,
+    ``disturbances`` as :class:`~cpgsim.robots.plant.DartHexapod` (pushes are applied through
+    ``xfrc_applied`` at every MuJoCo step they cover, by the Python sub-steps: a run with pushes does not
+    use the native step loop); ``contact`` a :class:`~cpgsim.robots.mjcf.ContactModel`
     (its ``timestep`` is the MuJoCo step; ``do_step``'s ``dt`` must be a multiple of it). ``time_step``,
     if given, replaces ``contact.timestep``.
     """
@@ -56,8 +59,10 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
-                 settle: float = 0.0, native: bool = True, **params: float) -> None:
-        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle)
+                 settle: float = 0.0, native: bool = True, disturbances: Sequence[Push | Mapping] | None = None,
+                 **params: float) -> None:
+        self.name = name
+        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle, disturbances)
         contact = contact or ContactModel()
         if time_step is not None:
             if not (math.isfinite(time_step) and time_step > 0):
@@ -130,7 +135,8 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         self._n_steps = 0
         self._bind_readout()
         self._native = None
-        if self.native:
+        self._body_id = model.body("body").id
+        if self.native and not self.pushes:
             try:
                 from cpgsim.robots.mujoco_native import NativeMujocoStep
 
@@ -208,6 +214,9 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
             self._link_contact[:] = flags[1:] > 0.5
             return
         model, data = self.model, self.data
+        if self.pushes:
+            self._steps_with_pushes(n)
+            return
         if n == 1:
             mujoco.mj_step(model, data)
             self._read_contacts()
@@ -221,6 +230,31 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
             total += self._force_world
             body |= self._body_contact
             link |= self._link_contact
+        self._force_world[:] = total / n
+        self._body_contact = body
+        self._link_contact[:] = link
+
+    def _steps_with_pushes(self, n: int) -> None:
+        """``n`` MuJoCo steps with the active pushes set as the body's ``xfrc_applied`` (force at the body's
+        centre of mass plus the torque of its offset from there) before each; readings as :meth:`_substeps`."""
+        model, data, b = self.model, self.data, self._body_id
+        total = np.zeros(18)
+        body = False
+        link = np.zeros(6, dtype=bool)
+        for _ in range(n):
+            wrench = np.zeros(6)
+            for push in self.pushes_at(float(data.time)):
+                force = np.asarray(push.force_N)
+                point = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(push.point_m)
+                wrench[:3] += force
+                wrench[3:] += np.cross(point - data.xipos[b], force)
+            data.xfrc_applied[b] = wrench
+            mujoco.mj_step(model, data)
+            self._read_contacts()
+            total += self._force_world
+            body |= self._body_contact
+            link |= self._link_contact
+        data.xfrc_applied[b] = 0.0
         self._force_world[:] = total / n
         self._body_contact = body
         self._link_contact[:] = link

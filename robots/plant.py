@@ -60,6 +60,7 @@ import numpy as np
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry, leg_ik
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
 from cpgsim.robots.hexapod import HexapodModel, build_hexapod, tilt_angle
 from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
 from cpgsim.robots.terrain import Terrain, flat
@@ -155,8 +156,10 @@ class PlantCommon:
     _body_contact: bool
 
     def _describe(self, geometry: RobotGeometry, terrain: Terrain | None, q0: Sequence[float] | None,
-                  body_height: float | None, sense_shank: bool, settle: float) -> np.ndarray:
+                  body_height: float | None, sense_shank: bool, settle: float,
+                  disturbances: Sequence[Push | Mapping] | None = None) -> np.ndarray:
         """Check and keep the constructor arguments every engine takes; returns the start posture ``q0``."""
+        self.set_disturbances(disturbances)
         if not isinstance(geometry, RobotGeometry):
             raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
         if not (math.isfinite(settle) and settle >= 0):
@@ -201,6 +204,14 @@ class PlantCommon:
     def time(self) -> float:
         return self._t
 
+    def set_disturbances(self, disturbances: Sequence[Push | Mapping] | None) -> None:
+        """Replace the pushes (as the constructor's ``disturbances``); from the next :meth:`setup` on."""
+        self.pushes = as_pushes(disturbances, f"{self.name}: disturbances")
+
+    def pushes_at(self, t: float) -> list[Push]:
+        """The pushes (:mod:`cpgsim.robots.disturbance`) a world step starting at ``t`` feels."""
+        return active_pushes(self.pushes, t, self.time_step) if self.pushes else []
+
     def toe_force_world(self) -> np.ndarray:
         """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
         return self._force_world.reshape(6, 3).copy()
@@ -230,7 +241,10 @@ class DartHexapod(PlantCommon, CoSimBlock):
       multiple of it;
     - ``sense_shank``: count tibia contacts as toe forces (default ``True``);
     - ``settle``: seconds simulated in :meth:`setup` with the targets held at ``q0`` before the
-      clock is set to ``t0`` (so ``t0``'s outputs show a loaded, resting robot); default 0.
+      clock is set to ``t0`` (so ``t0``'s outputs show a loaded, resting robot); default 0;
+    - ``disturbances``: pushes on the body (:class:`~cpgsim.robots.disturbance.Push` or mappings with
+      ``start_s``, ``duration_s``, ``force_N`` in the world frame, ``point_m`` in the body frame),
+      applied at every world step they cover.
 
     Parameters: ``kp`` (N m/rad, > 0), ``kd`` (N m s/rad, > 0), ``friction`` (Coulomb coefficient
     of the robot's shapes, > 0; the ground has its terrain's), ``velocity_ff`` (0/1).
@@ -239,12 +253,13 @@ class DartHexapod(PlantCommon, CoSimBlock):
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,
                  q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
                  time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
-                 **params: float) -> None:
+                 disturbances: Sequence[Push | Mapping] | None = None, **params: float) -> None:
         if detector not in DETECTORS:
             raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
         if not (math.isfinite(time_step) and time_step > 0):
             raise ParameterError(f"time_step must be > 0, got {time_step!r}")
-        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle)
+        self.name = name
+        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle, disturbances)
         self.detector = detector
         self.time_step = float(time_step)
         self.world: dart.simulation.World | None = None
@@ -389,7 +404,9 @@ class DartHexapod(PlantCommon, CoSimBlock):
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
         self._update_servo_forces(dt)
         world, skel, forces = self.world, self._skel, self._forces
-        if n == 1:
+        if self.pushes:
+            self._steps_with_pushes(t, n)
+        elif n == 1:
             skel.setForces(forces)
             world.step()
             self._read_contacts()
@@ -410,6 +427,26 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self._t = t + dt
         self._n_steps += n
         self._update_outputs()
+
+    def _steps_with_pushes(self, t: float, n: int) -> None:
+        """``n`` world steps from ``t`` with the active pushes applied to the body at each (``world.step``
+        clears external forces as it clears the joint forces); contact readings as in :meth:`do_step`."""
+        body = self.model.body
+        total = np.zeros(18)
+        touched = False
+        link = np.zeros(6, dtype=bool)
+        for i in range(n):
+            self._skel.setForces(self._forces)
+            for push in self.pushes_at(t + i * self.time_step):
+                body.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
+            self.world.step()
+            self._read_contacts()
+            total += self._force_world
+            touched |= self._body_contact
+            link |= self._link_contact
+        self._force_world[:] = total / n
+        self._body_contact = touched
+        self._link_contact = link
 
     def _update_servo_forces(self, dt: float) -> None:
         """Joint forces for the next world steps: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).

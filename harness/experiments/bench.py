@@ -52,7 +52,10 @@ from cpgsim.harness.experiments.sweep import (
 from cpgsim.harness.results import atomic_write
 
 SUITES_PACKAGE = "cpgsim.harness.experiments.suites"
-SUITE_KEYS = {"name", "description", "seeds", "base_seed", "t_end", "criteria", "controllers", "terrains"}
+SUITE_KEYS = {"name", "description", "seeds", "base_seed", "t_end", "criteria", "controllers", "terrains", "row_label"}
+CELL_KEYS = ("features", "jitter_m", "disturbance", "set")
+"""What a row of the suite (``[terrains.NAME]``) may give: terrain features, their jitter, pushes on the body
+(``disturbance = [{start_s, duration_s, force_N, point_m}]``) and other scenario overrides."""
 
 
 def load_suite(spec: str | Path) -> dict[str, Any]:
@@ -85,8 +88,8 @@ def load_suite(spec: str | Path) -> dict[str, Any]:
         if not isinstance(c, dict) or "scenario" not in c or set(c) - {"scenario", "set"}:
             raise ScenarioError(f"controllers.{label} needs scenario = NAME and optionally set = {{...}} ({source})")
     for label, t in suite["terrains"].items():
-        if not isinstance(t, dict) or set(t) - {"features", "jitter_m"}:
-            raise ScenarioError(f"terrains.{label} takes features = {{...}} and jitter_m ({source})")
+        if not isinstance(t, dict) or set(t) - set(CELL_KEYS):
+            raise ScenarioError(f"terrains.{label} takes {', '.join(CELL_KEYS)} ({source})")
     suite.setdefault("name", Path(spec_s).stem)
     suite.setdefault("base_seed", 0)
     suite["source"] = source
@@ -102,6 +105,9 @@ def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str) -> tuple[
             sets[f"terrain.{name}.{key}"] = value
     if "jitter_m" in t:
         sets["terrain.jitter_m"] = t["jitter_m"]
+    if "disturbance" in t:
+        sets["disturbance"] = t["disturbance"]
+    sets.update(t.get("set", {}))
     for key, value in suite.get("criteria", {}).items():
         sets[f"criteria.{key}"] = value
     if "t_end" in suite:
@@ -170,6 +176,8 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
     doc = {"suite": suite["name"], "source": suite["source"], "seeds": seed_list, "t_end": suite.get("t_end"),
            "criteria": suite.get("criteria", {}), "controllers": list(suite["controllers"]),
            "terrains": {k: v.get("features", {}) for k, v in suite["terrains"].items()},
+           "row_label": suite.get("row_label", "terrain"),
+           "disturbances": {k: v["disturbance"] for k, v in suite["terrains"].items() if "disturbance" in v},
            "wall_time_s": time.perf_counter() - t0, **info, "cells": cells}
     atomic_write(out / "bench.json", lambda f: json.dump(doc, f, indent=2, default=_json_default), text=True)
     atomic_write(out / "bench.md", lambda f: f.write(markdown_table(doc)), text=True)
@@ -207,7 +215,7 @@ def markdown_table(doc: Mapping[str, Any]) -> str:
              "falls F / stalls S / crashed C; `=`: every trial gave the same outcome (a deterministic controller "
              "on a terrain the seed does not change: one experiment, not n, so its interval overstates what "
              "is known).", "",
-             "| terrain | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
+             f"| {doc.get('row_label', 'terrain')} | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
     for t in doc["terrains"]:
         row = []
         for c in ctrls:

@@ -21,6 +21,7 @@ import numpy as np
 
 from cpgsim.harness.experiments.plots import _rotation, leg_points_body
 from cpgsim.harness.results import Results, atomic_write
+from cpgsim.robots.disturbance import as_pushes
 
 FPS = 20  # replay frames per simulated second
 FORCE_SCALE = 0.004  # m of arrow per N
@@ -31,7 +32,9 @@ LEG_COLORS = ("#1f77b4", "#2ca02c", "#9467bd", "#d62728", "#8c564b", "#e377c2")
 REFLEX_MARKER = "#ff7f0e"
 ARROW_COLOR = "#555555"
 MAX_PLOT_POINTS = 1500  # per trace of the linked plots (what is drawn; the results keep every step)
-VIEWER_TRACES = [1, 2, 3, 4, 5, 6, 7, 8]  # body, six legs, force arrows (trace 0: terrain)
+VIEWER_TRACES = [1, 2, 3, 4, 5, 6, 7, 8, 9]  # body, six legs, force arrows, pushes (trace 0: terrain)
+PUSH_COLOR = "#e6a000"  # gold: no leg has it
+PUSH_SCALE = 0.006  # m of arrow per N of a push on the body (it ends at the point pushed)
 
 
 def _box_mesh(boxes, window: tuple[float, float, float, float]) -> dict[str, list]:
@@ -72,8 +75,10 @@ def _lines(segments: list[np.ndarray]) -> tuple[list, list, list]:
 BOX_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
 
 
-def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force: np.ndarray) -> list[dict]:
-    """The moving traces at one instant: body edges, each leg (L1..R3, its own colour), toe force arrows."""
+def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force: np.ndarray,
+                pushes: list | None = None) -> list[dict]:
+    """The moving traces at one instant: body edges, each leg (L1..R3, its own colour), toe force arrows, and
+    the pushes on the body then (:class:`~cpgsim.robots.disturbance.Push`: an arrow ending at the point pushed)."""
     R = _rotation(rpy)
     hl, hw, ht = geometry.body_length / 2, geometry.body_width / 2, geometry.body_thickness / 2
     corners = np.array([[sx * hw, sy * hl, sz * ht] for sz in (-1, 1) for sx, sy in ((-1, -1), (1, -1), (1, 1),
@@ -84,8 +89,11 @@ def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force
     legs = [_lines([pts[i]]) for i in range(6)]
     feet = pts[:, -1]
     arrows = _lines([np.array([feet[i], feet[i] + FORCE_SCALE * (R @ force[i])]) for i in range(6)])
+    hits = [pos + R @ np.asarray(p.point_m) for p in pushes or []]
+    shoves = _lines([np.array([hit - PUSH_SCALE * np.asarray(p.force_N), hit])
+                     for p, hit in zip(pushes or [], hits, strict=True)])
     styled = [(body, "#222222", 6, "body"), *((legs[i], LEG_COLORS[i], 7, LEG_NAMES[i]) for i in range(6)),
-              (arrows, ARROW_COLOR, 5, "toe forces")]
+              (arrows, ARROW_COLOR, 5, "toe forces"), (shoves, PUSH_COLOR, 12, "pushes")]
     return [{"type": "scatter3d", "mode": "lines", "x": _round(xs), "y": _round(ys), "z": _round(zs),
              "name": name, "line": {"color": color, "width": width}, "hoverinfo": "skip", "showlegend": False}
             for (xs, ys, zs), color, width, name in styled]
@@ -116,7 +124,13 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
     feet_world = res[f"{robot}.foot_position"].reshape(len(t), 6, 3)
     y_lo, y_hi = float(pos[:, 1].min()) - 0.4, float(pos[:, 1].max()) + 0.4
     terrain_trace = _box_mesh(terrain.boxes, (-0.45, 0.45, y_lo, y_hi))
-    first = robot_frame(geometry, q[idx[0]], pos[idx[0]], rpy[idx[0]], force[idx[0]])
+    pushes = as_pushes(scenario.doc.get("disturbance"))
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+
+    def pushing(k: int) -> list:  # the pushes felt at some step of the frame's interval
+        return [p for p in pushes if p.start_s <= float(t[k]) + 0.5 * dt
+                and float(t[k]) - step * dt < p.start_s + p.duration_s]
+    first = robot_frame(geometry, q[idx[0]], pos[idx[0]], rpy[idx[0]], force[idx[0]], pushing(int(idx[0])))
     events = summary.get("reflexes", [])
     ev_k = [int(np.argmin(np.abs(t - e["t"]))) for e in events]
     event_trace = {"type": "scatter3d", "mode": "markers", "name": "reflex events",
@@ -126,7 +140,8 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
                    "text": [f"{e['kind']} {e['leg']} at {e['t']:.2f} s" for e in events],
                    "marker": {"size": 5, "color": REFLEX_MARKER, "symbol": "diamond"}, "hoverinfo": "text"}
     frames = [{"data": [{k: d[k] for k in ("x", "y", "z")}
-                        for d in robot_frame(geometry, q[k], pos[k], rpy[k], force[k])]} for k in idx]
+                        for d in robot_frame(geometry, q[k], pos[k], rpy[k], force[k], pushing(int(k)))]}
+              for k in idx]
     z_lo, z_hi = -0.15, max(0.45, float(pos[:, 2].max()) + 2 * geometry.height)
     ranges = {"x": 0.9, "y": y_hi - y_lo, "z": z_hi - z_lo}
     scale = 2.0 / max(ranges.values())  # equal scale on the three axes, as in the world
@@ -137,7 +152,8 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
              "camera": {"eye": {"x": 1.5, "y": -1.3, "z": 0.9}}}
     viewer = {"data": [terrain_trace, *first, event_trace], "frames": frames,
               "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 30, "b": 0}, "height": 560,
-                         "title": {"text": "3D replay (drag to rotate; arrows: toe forces)", "font": {"size": 13}},
+                         "title": {"text": "3D replay (drag to rotate; arrows: toe forces"
+                                   + ("; gold: pushes on the body" if pushes else "") + ")", "font": {"size": 13}},
                          "uirevision": "keep", "showlegend": False}}
     times = [float(t[k]) for k in idx]
     plots = _plots(res, summary, idx, robot)

@@ -47,6 +47,12 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
     kind = scenario.doc["controller"]["kind"]
     setup = (fukuhara.build if kind == "fukuhara" else yu.build)(scenario)
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
+    if scenario.doc["disturbance"]:
+        from cpgsim.robots.disturbance import as_pushes
+
+        pushes = as_pushes(scenario.doc["disturbance"])
+        setup.graph.blocks[setup.robot].set_disturbances(pushes)
+        setup.info["disturbances"] = [p.as_dict() for p in pushes]
     return setup
 
 

@@ -31,6 +31,12 @@ A scenario file (the built-ins are ``harness/experiments/scenarios/*.toml``)::
     max_tilt_deg = 30.0
     min_distance_m = 0.3
 
+    [[disturbance]]                   # pushes on the body (cpgsim.robots.disturbance), any number
+    start_s = 6.0
+    duration_s = 0.2
+    force_N = [0.0, -20.0, 0.0]       # world frame: +y is the walking direction
+    point_m = [0.0, 0.0, 0.0]         # body frame (optional): where on the body
+
 Overrides (``cpgsim run NAME --set KEY=VALUE``, ``cpgsim sweep --set/--vary``): ``KEY`` is a dotted path
 into the document (``terrain.step.height``, ``robot.body_mass``, ``controller.Fcx``, ``t_end``); a path
 under ``controller.`` that is not a key of the schema is a controller graph parameter
@@ -161,6 +167,8 @@ SCHEMA: dict[str, Any] = {
                              "last second"),
     },
     "aliases": Field(dict, {}, doc="short --set keys: alias = 'full.key'"),
+    "disturbance": Field(list, [], doc="pushes on the body, [[disturbance]] tables: start_s, duration_s, "
+                         "force_N = [fx, fy, fz] (world frame), point_m = [x, y, z] (body frame, optional)"),
 }
 SECTIONS = tuple(k for k, v in SCHEMA.items() if isinstance(v, dict))
 
@@ -283,7 +291,7 @@ def validate(scenario: Scenario, overridden: bool = False) -> None:
         elif key in doc:
             doc[key] = spec.check(key, doc[key], _where(scenario, key, overridden))
         elif spec.default is not None:
-            doc[key] = spec.default
+            doc[key] = spec.default.copy() if isinstance(spec.default, (dict, list)) else spec.default
         elif key == "name" or (key == "t_end" and doc.get("controller", {}).get("kind") != "fukuhara"):
             raise ScenarioError(f"missing key {key!r} ({scenario.source})")  # fukuhara: t_end by speed setting
     if not _PLAIN_NAME.fullmatch(str(doc["name"])) or doc["name"] in (".", ".."):
@@ -295,6 +303,7 @@ def validate(scenario: Scenario, overridden: bool = False) -> None:
                                 f"{_where(scenario, 'aliases.' + alias, overridden)}")
     _check_params(scenario, overridden)
     _check_features(scenario, overridden)
+    _check_disturbances(scenario, overridden)
     crit = doc["criteria"]
     if crit["cross"] and crit["cross"] not in scenario.features():
         raise ScenarioError(f"criteria.cross = {crit['cross']!r} names no terrain feature "
@@ -351,6 +360,15 @@ def _check_features(scenario: Scenario, overridden: bool) -> None:
         key = re.search(r"terrain\.[\w\-]+(\.\w+)?", str(exc))
         at = _where(scenario, key.group(0), overridden) if key else f" ({scenario.source})"
         raise ScenarioError(f"{exc}{at}") from None
+
+
+def _check_disturbances(scenario: Scenario, overridden: bool) -> None:
+    from cpgsim.robots.disturbance import ParameterError, as_pushes
+
+    try:
+        as_pushes(scenario.doc["disturbance"])
+    except ParameterError as exc:
+        raise ScenarioError(f"{exc}{_where(scenario, 'disturbance', overridden)}") from None
 
 
 # -- overrides ---------------------------------------------------------------------------------------
@@ -423,6 +441,8 @@ def _toml_value(v: Any) -> str:
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):  # an inline table (the tables of a list such as disturbance)
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
     raise ScenarioError(f"cannot write {v!r} as TOML")
 
 

@@ -155,10 +155,10 @@ def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
     ]
     ground_mu = min(friction, terrain.friction)
     for k, b in enumerate(terrain.boxes):
-        half = (b.x1 - b.x0) / 2, (b.y1 - b.y0) / 2, b.thickness / 2
-        centre = (b.x0 + b.x1) / 2, (b.y0 + b.y1) / 2, b.top - b.thickness / 2
-        lines.append(f'    <geom name="ground_{k}" type="box" size="{_v(half)}" pos="{_v(centre)}" '
-                     f'{TERRAIN_COLLISION} friction="{ground_mu:.17g} 0 0" {geom_common}/>')
+        centre, size, angle = b.pose()
+        turn = f'euler="{angle:.17g} 0 0" ' if angle else ""
+        lines.append(f'    <geom name="ground_{k}" type="box" size="{_v(tuple(size / 2))}" pos="{_v(tuple(centre))}" '
+                     f'{turn}{TERRAIN_COLLISION} friction="{ground_mu:.17g} 0 0" {geom_common}/>')
     lines += ['    <body name="body" pos="0 0 0">', '      <freejoint name="root"/>',
               f'      {_inertial(masses["body"])}',
               f'      <geom name="body_box" type="box" size="'

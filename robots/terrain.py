@@ -1,10 +1,10 @@
 """Terrains for the robot scenarios (Yu 2019, Sec. 6: flat, step, ditches; plus bottomless gaps for
-Fukuhara 2022).
+Fukuhara 2022; stairs, random blocks and slopes for the benchmarks).
 
-A terrain is a list of static boxes in the world frame (``x`` lateral right, ``y`` forward, ``z``
-up; the undisturbed ground surface is ``z = 0`` and the robot starts at the origin facing ``+y``).
-:class:`Terrain` adds itself to a DART world as one immobile skeleton and answers ground-height
-queries (for plots, initial placement and tests) without DART.
+A terrain is a list of static boxes (axis-aligned, or turned about x for a slope) in the world frame
+(``x`` lateral right, ``y`` forward, ``z`` up; the undisturbed ground surface is ``z = 0`` and the robot
+starts at the origin facing ``+y``). :class:`Terrain` adds itself to a DART world as one immobile
+skeleton and answers ground-height queries (for plots, initial placement and tests) without DART.
 
 Sides: ``'right'`` is ``x >= 0`` (legs 4, 5, 6 = R1..R3), ``'left'`` is ``x <= 0``, ``'both'``
 is the whole width. Yu 6.1.1 uses a 40 mm step on the right side; Yu 6.1.2 ditches of 18, 40
@@ -39,7 +39,9 @@ class Extent:
 
 @dataclass(frozen=True)
 class GroundBox:
-    """An axis-aligned static box: footprint ``[x0, x1] x [y0, y1]``, top face at ``top``."""
+    """A static box: footprint ``[x0, x1] x [y0, y1]``, top face at ``top``; axis-aligned, or with
+    ``slope_deg`` a slab turned about the x axis whose top face rises from ``top`` at ``y0`` to
+    ``top + (y1 - y0) tan(slope)`` at ``y1`` (a ramp), ``thickness`` measured across the slab."""
 
     x0: float
     x1: float
@@ -48,9 +50,37 @@ class GroundBox:
     top: float
     thickness: float = 1.0
     obstacle: bool = False  # drawn in the obstacle colour
+    slope_deg: float = 0.0
 
     def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return (x >= self.x0) & (x <= self.x1) & (y >= self.y0) & (y <= self.y1)
+
+    def top_at(self, y: np.ndarray) -> np.ndarray:
+        """Height of the top face over ``y`` (inside the footprint)."""
+        if not self.slope_deg:
+            return np.full(np.shape(y), self.top)
+        return self.top + (np.asarray(y) - self.y0) * math.tan(math.radians(self.slope_deg))
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(centre, full size, rotation about x in rad) of the box in the world: what DART, MuJoCo and the
+        report build from (one description of the geometry)."""
+        a = math.radians(self.slope_deg)
+        run = self.y1 - self.y0
+        rise = run * math.tan(a)
+        mid = np.array([(self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2, self.top + rise / 2])
+        normal = np.array([0.0, -math.sin(a), math.cos(a)])
+        size = np.array([self.x1 - self.x0, run / math.cos(a), self.thickness])
+        return mid - normal * self.thickness / 2, size, a
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners (bottom face x0y0, x1y0, x1y1, x0y1, then the top face alike), shape (8, 3)."""
+        centre, size, a = self.pose()
+        c, s = math.cos(a), math.sin(a)
+        R = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+        half = size / 2
+        local = np.array([[sx * half[0], sy * half[1], sz * half[2]] for sz in (-1, 1)
+                          for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        return centre + local @ R.T
 
 
 @dataclass
@@ -72,7 +102,7 @@ class Terrain:
         xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         h = np.full(xa.shape, -np.inf)
         for b in self.boxes:
-            h = np.where(b.contains(xa, ya), np.maximum(h, b.top), h)
+            h = np.where(b.contains(xa, ya), np.maximum(h, b.top_at(ya)), h)
         return float(h) if h.ndim == 0 else h
 
     def add_to(self, world: dart.simulation.World) -> dart.dynamics.Skeleton:
@@ -81,12 +111,15 @@ class Terrain:
         _, body = skel.createWeldJointAndBodyNodePair()
         body.setName("ground")
         for k, b in enumerate(self.boxes):
-            size = np.array([b.x1 - b.x0, b.y1 - b.y0, b.thickness])
+            centre, size, angle = b.pose()
             shape = dart.dynamics.BoxShape(size)
             node = body.createShapeNode(shape, f"ground_{k}")
             T = dart.math.Isometry3()
             T.set_identity()
-            T.set_translation(np.array([(b.x0 + b.x1) / 2, (b.y0 + b.y1) / 2, b.top - b.thickness / 2]))
+            if angle:
+                c, s = math.cos(angle), math.sin(angle)
+                T.set_rotation(np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]))
+            T.set_translation(centre)
             node.setRelativeTransform(T)
             node.createVisualAspect().setColor(np.asarray(OBSTACLE_COLOR if b.obstacle else GROUND_COLOR))
             node.createCollisionAspect()
@@ -200,6 +233,8 @@ FEATURES: dict[str, dict[str, str]] = {
     "gap": {"width": "m, > 0 (bottomless)", "position_y": "m, near edge", "side": "right | left | both"},
     "stairs": {"rise": "m per stair, > 0", "run": "m per stair, > 0", "count": "stairs, >= 1",
                "position_y": "m, first stair", "side": "right | left | both"},
+    "slope": {"angle_deg": "deg, uphill, 0 < angle <= 45", "position_y": "m, foot of the ramp",
+              "length_m": "m, > 0, horizontal length of the ramp (a level top follows)", "side": "right | left | both"},
     "blocks": {"position_y": "m, near edge", "length": "m, > 0", "half_width": "m, > 0 (lateral extent)",
                "size": "m, block edge, > 0", "height_min": "m, >= 0", "height_max": "m, >= height_min",
                "seed": "integer", "side": "right | left | both"},
@@ -217,9 +252,15 @@ def far_edge_y(f: dict) -> float:
         return y + float(f["length"])
     if t == "stairs":
         return y + int(f["count"]) * float(f["run"])
+    if t == "slope":
+        return y + float(f["length_m"])
     return y
 
 
+MAX_SLOPE_DEG = 45.0
+"""Steepest slope (deg): beyond, the legs' friction (mu = 1 holds 45 deg) cannot hold the robot."""
+RAMP_THICKNESS = 0.05
+"""Thickness (m) of a slope's slab, across it."""
 MAX_STAIRS = 1000
 """Most stairs one ``stairs`` feature may have (each is a body of the terrain; a robot run crosses a few dozen)."""
 MAX_BLOCKS = 20_000
@@ -263,6 +304,11 @@ def _checked(f: dict, where: str) -> dict:
             out[key] = int(f[key])
         elif key == "position_y":
             out[key] = _finite(name, f[key])
+        elif key == "angle_deg":
+            v = _finite(name, f[key])
+            if not 0 < v <= MAX_SLOPE_DEG:
+                raise ParameterError(f"{name} must be in (0, {MAX_SLOPE_DEG:g}] degrees (uphill), got {v}")
+            out[key] = v
         elif key == "height_min":
             v = _finite(name, f[key])
             if v < 0:
@@ -346,6 +392,11 @@ def _raised_boxes(f: dict, ext: Extent) -> list[GroundBox]:
     if f["type"] == "step":
         h = f["height"]
         return [GroundBox(x0, x1, y, ext.y_max, h, ext.thickness + h, obstacle=True)]
+    if f["type"] == "slope":
+        run = f["length_m"]
+        h = run * math.tan(math.radians(f["angle_deg"]))
+        return [GroundBox(x0, x1, y, y + run, 0.0, RAMP_THICKNESS, obstacle=True, slope_deg=f["angle_deg"]),
+                GroundBox(x0, x1, y + run, ext.y_max, h, ext.thickness + h, obstacle=True)]
     if f["type"] == "stairs":
         out = []
         for k in range(f["count"]):

@@ -227,6 +227,10 @@ def markdown_table(doc: Mapping[str, Any]) -> str:
             row.append(f"{cell['successes']}/{cell['n']} ({lo:.0%}-{hi:.0%}), "
                        f"{'-' if speed is None else f'{100 * speed:.1f}'}{marks}{same}")
         lines.append(f"| {t} | " + " | ".join(row) + " |")
+    failing = [(c, t, by[(c, t)]) for t in doc["terrains"] for c in ctrls if by[(c, t)]["failed_criteria"]]
+    if failing:
+        lines += ["", "Failed criteria (the cells with a failed trial; the values are in bench.json):", ""]
+        lines += [f"- {c} x {t}: {', '.join(cell['failed_criteria'])}" for c, t, cell in failing]
     return "\n".join(lines) + "\n"
 
 

@@ -45,13 +45,20 @@ def _box_mesh(boxes, window: tuple[float, float, float, float]) -> dict[str, lis
         x0, x1, y0, y1 = max(b.x0, x0w), min(b.x1, x1w), max(b.y0, y0w), min(b.y1, y1w)
         if x0 >= x1 or y0 >= y1:
             continue
-        z1, z0 = b.top, max(b.top - b.thickness, -0.3)
         base = len(xs)
-        for z in (z0, z1):
-            for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1)):
-                xs.append(x)
-                ys.append(y)
-                zs.append(z)
+        if b.slope_deg:  # a ramp's slab as it stands (clipped in x only: it is short)
+            pts = b.corners()
+            pts[:, 0] = np.clip(pts[:, 0], x0w, x1w)
+            xs += pts[:, 0].tolist()
+            ys += pts[:, 1].tolist()
+            zs += pts[:, 2].tolist()
+        else:
+            z1, z0 = b.top, max(b.top - b.thickness, -0.3)
+            for z in (z0, z1):
+                for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1)):
+                    xs.append(x)
+                    ys.append(y)
+                    zs.append(z)
         faces = [(4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5), (2, 3, 7), (2, 7, 6),
                  (3, 0, 4), (3, 4, 7)]
         for a, c, d in faces:

@@ -87,3 +87,38 @@ def test_the_impulse_delivered_is_force_times_duration(engine):
     _, p_off, yaw_off = _flight(engine, [{**push, "force_N": [20.0, 0.0, 0.0], "point_m": [0.0, 0.1, 0.0]}])
     assert p_off[0] == pytest.approx(2.0, rel=1e-4) and yaw_off < -0.1  # r x F along -z: clockwise
     assert abs(yaw) < 0.05 * abs(yaw_off)  # at the body frame's origin, near the centre of mass: hardly a turn
+
+
+def test_a_suite_row_gives_its_pushes_to_every_controller():
+    from cpgsim.harness.experiments.bench import cell_sets, load_suite, markdown_table
+
+    suite = load_suite("push")
+    base, sets = cell_sets(suite, "fukuhara", "back-40N-swing")
+    assert base == "fukuhara-gaits" and sets["controller.setting"] == 1
+    assert sets["disturbance"] == [{"start_s": 6.25, "duration_s": 0.1, "force_N": [0.0, -40.0, 0.0]}]
+    assert "disturbance" not in cell_sets(suite, "yu", "none")[1]
+    cell = {"controller": "yu", "terrain": "back-40N-swing", "n": 1, "successes": 0, "ci95": [0.0, 0.79],
+            "median_speed_m_s": -0.01, "falls": 1, "stalls": 0, "crashed": 0, "distinct_outcomes": 1,
+            "failed_criteria": ["fell", "max_tilt_deg"]}
+    text = markdown_table({"suite": "s", "seeds": [0], "t_end": 14.0, "controllers": ["yu"], "row_label": "push",
+                           "terrains": {"back-40N-swing": {}}, "cells": [cell]})
+    assert "| push | yu |" in text and "| back-40N-swing | 0/1 (0%-79%), -1.0 F1 |" in text
+    assert "- yu x back-40N-swing: fell, max_tilt_deg" in text
+
+
+@pytest.mark.slow
+def test_a_push_that_throws_the_robot_over_fails_the_run(tmp_path):
+    """400 N sideways for 0.2 s (80 N s: 22 m/s for the 3.62 kg robot if nothing held it) throws it over:
+    exit 1, the fall named, the push in the summary."""
+    import json
+
+    from cpgsim.harness.cli.main import main
+
+    out = tmp_path / "run"
+    code = main(["run", "flat", "--set", "t_end=8", "--set",
+                 "disturbance=[{start_s = 6.0, duration_s = 0.2, force_N = [400.0, 0.0, 0.0]}]", "-o", str(out)])
+    summary = json.loads((out / "summary.json").read_text())
+    assert code == 1 and summary["fell"] and not summary["success"] and "fell" in summary["criteria_failed"]
+    assert summary["disturbances"] == [{"start_s": 6.0, "duration_s": 0.2, "force_N": [400.0, 0.0, 0.0],
+                                        "point_m": [0.0, 0.0, 0.0]}]
+    assert summary["fell_time_s"] is None or summary["fell_time_s"] >= 6.0

@@ -1,8 +1,11 @@
-"""Simulation results: named, unit-tagged columns, written atomically as CSV, npz and JSON metadata.
+"""Simulation results: named, unit-tagged columns, written atomically as Arrow, CSV, npz and JSON metadata.
 
-CSV header: ``time,<block>.<port>[<index>]`` (the index only for vector ports). The npz holds
-``time``, ``data``, ``columns``, ``units``, ``complete`` and ``message``; a CSV ``FILE.csv`` gets a
-sidecar ``FILE.meta.json`` with the same metadata, so a partial run is marked as such.
+``.arrow`` (:mod:`cpgsim.harness.results.arrow`) is the primary format: an Arrow IPC stream, columnar and
+binary, with native int64/uint64 columns and the units in its schema, streamed batch by batch (readable
+after a kill), with a sidecar ``FILE.meta.json`` like CSV's. CSV header: ``time,<block>.<port>[<index>]``
+(the index only for vector ports). The npz holds ``time``, ``data``, ``columns``, ``units``, ``complete``
+and ``message``; a CSV ``FILE.csv`` gets a sidecar ``FILE.meta.json`` with the same metadata, so a
+partial run is marked as such.
 
 :class:`ResultsWriter` streams a run to disk while it runs (the simulator flushes it at least every
 simulated second or every ``flush_seconds`` of wall time): the CSV grows in whole rows and its
@@ -112,13 +115,33 @@ class Results:
 
     # -- writing ------------------------------------------------------------------------------
     def save(self, path: str | Path) -> list[Path]:
-        """Write by suffix: ``.csv`` (plus ``.meta.json``), ``.npz``; returns the files written."""
+        """Write by suffix: ``.arrow`` or ``.csv`` (each plus ``.meta.json``), ``.npz``; returns the files written."""
         path = Path(path)
+        if path.suffix == ".arrow":
+            return [self.to_arrow(path), self._write_meta(path)]
         if path.suffix == ".csv":
             return [self.to_csv(path), self._write_meta(path)]
         if path.suffix == ".npz":
             return [self.to_npz(path)]
-        raise ResultsError(f"unknown results format {path.suffix!r} for {path} (use .csv or .npz)")
+        raise ResultsError(f"unknown results format {path.suffix!r} for {path} (use .arrow, .csv or .npz)")
+
+    def to_arrow(self, path: str | Path) -> Path:
+        """Write the table as an Arrow IPC stream (:mod:`cpgsim.harness.results.arrow`), atomically."""
+        from cpgsim.harness.results.arrow import write_table
+
+        path = Path(path)
+        exact = self.meta.get("exact_integers", {})
+        meta = csv_meta(self.meta)
+        f, tmp = temporary_file(path, text=False)
+        f.close()
+        try:
+            write_table(Path(tmp), self.time, self.columns, self.units, self.data, exact, meta)
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+        return path
 
     def to_csv(self, path: str | Path) -> Path:
         """Write the table as CSV (floats with 17 significant digits; 64-bit integer columns as the exact
@@ -164,6 +187,8 @@ class Results:
             with np.load(path, allow_pickle=False) as f:
                 return cls(f["time"], [str(c) for c in f["columns"]], [str(u) for u in f["units"]],
                            f["data"], bool(f["complete"]), str(f["message"]), json.loads(str(f["meta"])))
+        if path.suffix == ".arrow":
+            return cls._load_arrow(path)
         if path.suffix == ".csv":
             with open(path) as f:
                 header = f.readline().strip().split(",")
@@ -188,7 +213,25 @@ class Results:
             _read_exact_columns(meta, header, lines, path)
             return cls(table[:, 0], header[1:], units, table[:, 1:], meta.pop("complete", True),
                        meta.pop("message", ""), meta)
-        raise ResultsError(f"unknown results format {path.suffix!r} for {path}")
+        raise ResultsError(f"unknown results format {path.suffix!r} for {path} (use .arrow, .csv or .npz)")
+
+    @classmethod
+    def _load_arrow(cls, path: Path) -> Results:
+        from cpgsim.harness.results.arrow import read_table
+
+        doc = read_table(path)
+        meta_path = path.with_suffix(".meta.json")
+        side = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+        meta = {**doc["meta"], **side}
+        for key in ("units", "columns", "rows", "integer_columns"):
+            meta.pop(key, None)
+        if doc["exact"]:
+            meta["exact_integers"] = doc["exact"]
+        complete = bool(side.get("complete", doc["ended"])) and doc["ended"]
+        message = side.get("message", "" if doc["ended"] else "incomplete: the stream ends without its end marker")
+        meta.pop("complete", None)
+        meta.pop("message", None)
+        return cls(doc["time"], doc["columns"], doc["units"], doc["data"], complete, message, meta)
 
 
 def csv_rows(table: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> str:
@@ -292,20 +335,22 @@ def atomic_write(path: Path, writer, text: bool) -> None:
 
 
 def result_files(path: str | Path) -> list[Path]:
-    """Every file a results target ``FILE.csv`` / ``FILE.npz`` consists of (existing or not)."""
+    """Every file a results target ``FILE.arrow`` / ``FILE.csv`` / ``FILE.npz`` consists of (existing or not)."""
     path = Path(path)
     stem = path.with_suffix("")
-    if path.suffix == ".csv":
+    if path.suffix in (".csv", ".arrow"):
         return [path, Path(f"{stem}.meta.json")]
     return [path, Path(f"{stem}.partial.csv"), Path(f"{stem}.partial.meta.json")]
 
 
 class ResultsWriter:
-    """Stream results to ``path`` (``.csv`` or ``.npz``) while a run goes on (see the module docstring).
+    """Stream results to ``path`` (``.arrow``, ``.csv`` or ``.npz``) while a run goes on (see the module
+    docstring).
 
     ``open(columns, units, meta)`` starts the stream: into the target itself when it does not exist, else
-    (a rerun) into ``FILE.partial.csv`` beside it, which replaces the old file and sidecar only when the
-    run ends (a rerun killed midway leaves the previous results whole and the partial ones beside them);
+    (a rerun) into ``FILE.partial.arrow`` / ``FILE.partial.csv`` beside it, which replaces the old file and
+    sidecar only when the run ends (a rerun killed midway leaves the previous results whole and the partial
+    ones beside them);
     ``append(time, rows)`` adds rows (written at ``flush()``, or by
     ``maybe_flush()`` when ``flush_seconds`` of wall time have passed), ``close(results)`` writes the
     final files (``complete`` and ``message`` from ``results``) and returns them. A run that recorded no
@@ -314,11 +359,13 @@ class ResultsWriter:
 
     def __init__(self, path: str | Path, flush_seconds: float = 2.0) -> None:
         self.path = Path(path).absolute()  # a library that changes the working directory cannot misdirect it
-        if self.path.suffix not in (".csv", ".npz"):
-            raise ResultsError(f"unknown results format {self.path.suffix!r} for {self.path} (use .csv or .npz)")
-        self.stream_path = self.path if self.path.suffix == ".csv" else self.path.with_suffix(".partial.csv")
+        if self.path.suffix not in (".arrow", ".csv", ".npz"):
+            raise ResultsError(f"unknown results format {self.path.suffix!r} for {self.path} "
+                               "(use .arrow, .csv or .npz)")
+        self.stream_path = self.path if self.path.suffix != ".npz" else self.path.with_suffix(".partial.csv")
         self.flush_seconds = float(flush_seconds)
         self._file = None
+        self._arrow: Any = None  # an arrow.ArrowStream for a .arrow target
         self._pending: list[tuple[np.ndarray, Mapping[int, Sequence[int]] | None]] = []
         self._rows = 0
         self._last = _time.monotonic()
@@ -332,8 +379,8 @@ class ResultsWriter:
 
     def open(self, columns: Sequence[str], units: Sequence[str], meta: dict | None = None) -> ResultsWriter:
         self.columns, self.units, self.meta = list(columns), list(units), dict(meta or {})
-        if self.path.suffix == ".csv" and self.path.exists():  # a rerun (--force): the old file stays till the end
-            self.stream_path = self.path.with_suffix(".partial.csv")
+        if self.path.suffix != ".npz" and self.path.exists():  # a rerun (--force): the old file stays till the end
+            self.stream_path = self.path.with_suffix(".partial" + self.path.suffix)
         for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
             if f != self.path and f.exists():
                 f.unlink()  # a stream of an earlier run that did not finish
@@ -342,10 +389,16 @@ class ResultsWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path.parent)
         self._write_meta(False, "incomplete: the run had not finished when this file was last written", None)
-        fd = os.open(self.stream_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
-        self._file = os.fdopen(fd, "w")
-        self._file.write(",".join(["time", *self.columns]) + "\n")
-        self._file.flush()
+        if self.stream_path.suffix == ".arrow":
+            from cpgsim.harness.results.arrow import ArrowStream
+
+            self._arrow = ArrowStream(self.stream_path, self.columns, self.units,
+                                      self.meta.get("integer_columns", {}), csv_meta(self.meta))
+        else:
+            fd = os.open(self.stream_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
+            self._file = os.fdopen(fd, "w")
+            self._file.write(",".join(["time", *self.columns]) + "\n")
+            self._file.flush()
         self._last = _time.monotonic()
         return self
 
@@ -367,11 +420,16 @@ class ResultsWriter:
     def flush(self) -> None:
         """Write the pending rows as whole lines and push them to the disk."""
         self._last = _time.monotonic()
-        if self._file is None or not self._pending:
+        if (self._file is None and self._arrow is None) or not self._pending:
             return
         pending, self._pending = self._pending, []
-        text = "".join(csv_rows(table, exact) for table, exact in pending)
         try:
+            if self._arrow is not None:  # one record batch per pending block, each fsynced
+                for table, exact in pending:
+                    self._arrow.write(table, exact)
+                    self._rows += len(table)
+                return
+            text = "".join(csv_rows(table, exact) for table, exact in pending)
             self._file.write(text)
             self._rows += sum(len(table) for table, _ in pending)  # counted before the flush: a signal
             # during fsync must not lose them
@@ -383,9 +441,7 @@ class ResultsWriter:
     def close(self, results: Results) -> list[Path]:
         """Finish the stream with the run's ``results`` (their rows are those appended); returns the files."""
         self.flush()
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        self._close_stream(ended=True)
         self.meta = {**self.meta, **results.meta}
         if self._rows == 0:
             for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
@@ -410,7 +466,13 @@ class ResultsWriter:
         try:
             self.flush()
         finally:
-            if self._file is not None:
-                self._file.close()
-                self._file = None
+            self._close_stream(ended=False)
+
+    def _close_stream(self, ended: bool) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        if self._arrow is not None:
+            arrow, self._arrow = self._arrow, None
+            arrow.close() if ended else arrow.abandon()
 

@@ -67,12 +67,16 @@ class FmuBlock(CoSimBlock):
         self.path = Path(path)
         self.info = description if description is not None else describe_fmu(self.path, strict=strict)
         if kind == "auto":
-            kind = "cs" if self.info.cs_identifier else "me"
-        if kind not in ("cs", "me"):
-            raise ModelError(f"FMU block {name!r}: kind must be 'auto', 'cs' or 'me', got {kind!r}")
+            kind = "cs" if self.info.cs_identifier else ("me" if self.info.me_identifier else "se")
+        if kind not in ("cs", "me", "se"):
+            raise ModelError(f"FMU block {name!r}: kind must be 'auto', 'cs', 'me' or 'se', got {kind!r}")
         if kind not in self.info.kinds:
             raise FmuError(f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.info.kinds)})")
         check_binary(self.info, kind)
+        if self.info.clocks or kind == "se":
+            from cpgsim.fmus.importer.clocked import check_clocks
+
+            check_clocks(self.info, kind)
         if int(substeps) != substeps or substeps < 1:
             raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
         from cpgsim.fmus.importer.me import SOLVERS
@@ -170,9 +174,9 @@ class FmuBlock(CoSimBlock):
 
             rt = IsolatedRuntime(args, timeout=self.timeout)
         else:
-            from cpgsim.fmus.importer.runtime import FmuRuntime
+            from cpgsim.fmus.importer.clocked import make_runtime
 
-            rt = FmuRuntime(desc=self.info, **args)
+            rt = make_runtime(desc=self.info, **args)
         self._runtime = rt
         self._finalizer = weakref.finalize(self, _close, rt)
         rt.setup(float(t0), self.changed_parameters(), {})

@@ -289,6 +289,7 @@ def _has_fileno(stream: Any) -> bool:
 # -- the child ----------------------------------------------------------------------------------------
 def _serve(fd: int) -> None:
     from cpgsim.fmus.errors import one_line
+    from cpgsim.fmus.importer.clocked import make_runtime
     from cpgsim.fmus.importer.runtime import FmuRuntime
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -304,7 +305,7 @@ def _serve(fd: int) -> None:
                 value: Any = None
             elif what == "setup":
                 args, t0, params, inputs = payload
-                rt = FmuRuntime(**args)
+                rt = make_runtime(**args)
                 value = rt.setup(t0, params, inputs)
             elif what == "outputs":
                 assert rt is not None

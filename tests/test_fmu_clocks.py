@@ -307,6 +307,48 @@ def test_unsupported_clocks_are_refused_naming_the_clock(tmp_path, change, kind,
     assert "\n" not in str(info.value)
 
 
+def test_inspect_lists_output_clocks_and_run_refuses_them(tmp_path, capsys):
+    from cpgsim.harness.cli.main import main
+
+    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="6" causality="output" '
+                         'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
+    fmu = _xml_fmu(tmp_path, md)
+    assert main(["inspect", str(fmu)]) == 0
+    out = capsys.readouterr().out
+    assert "clocks (2):" in out and "input clock 'clk' (vr 5) constant, interval 0.025 s" in out
+    assert "output clock 'done' (vr 6) triggered, clocks attribute 5" in out
+    from cpgsim.fmus.importer.clocked import check_clocks
+
+    for kind in ("cs", "me"):
+        with pytest.raises(ClockError, match=r"output clock 'done' \(triggered\) is not supported"):
+            check_clocks(describe_fmu(fmu), kind)
+
+
+@pytest.mark.slow
+def test_a_block_with_an_output_clock_is_refused_when_built(clock_fmus, tmp_path):
+    from cpgsim.fmus.importer.block import FmuBlock
+
+    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="6" causality="output" '
+                         'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
+    fmu = _with_md(clock_fmus["hold"], tmp_path / "out_clock.fmu", md)
+    for kind in ("cs", "me"):
+        with pytest.raises(ClockError, match=r"out_clock\.fmu: output clock 'done' \(triggered\) is not supported"):
+            FmuBlock("h", fmu, kind=kind)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_clocked_fmu_runs_isolated(clock_fmus, kind):
+    """In a child process (the default for FMUs cpgsim did not build): the same ticks."""
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import simulate
+
+    res = simulate(FmuBlock("h", clock_fmus["hold"], kind=kind, isolate=True), t_end=0.5, dt=0.01,
+                   inputs={"u": lambda t: t})
+    assert res["h.n"][-1] == ticks_before(0.5, Fraction(1, 40)) == 20
+    assert float(res["h.t_last"][-1]) == 19 / 40
+
+
 def test_input_clock_of_a_cs_fmu_without_event_mode_is_refused(tmp_path):
     from cpgsim.fmus.importer.clocked import check_clocks
 
@@ -316,3 +358,72 @@ def test_input_clock_of_a_cs_fmu_without_event_mode_is_refused(tmp_path):
                                          r"event mode"):
         check_clocks(desc, "cs")
     check_clocks(desc, "me")  # model exchange needs no event mode flag
+
+
+# -- export with clocks: the sampled blocks as a clocked partition ---------------------------------------------
+@pytest.mark.slow
+def test_exported_clocked_toy_validates_and_matches_the_simulator(tmp_path):
+    """The edge-trigger + neuron graph of the export tests (discrete states of every kind, a reset, an
+    input), exported with clocks and run by cpgsim's clocked importer: the discrete outputs equal the
+    unclocked simulation's at every step, the continuous one within rounding (same RK4, same instants)."""
+    import fmpy
+    from fmpy.validation import validate_fmu
+    from test_fmu_export import pulses, reflex_toy
+
+    from cpgsim.fmus.export.exporter import export_fmu
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import simulate
+
+    fmu = export_fmu(reflex_toy(), tmp_path / "toy.fmu", fmi=3, kind="me", dt=1e-3, clocks=True)
+    assert validate_fmu(str(fmu.path)) == []
+    fmpy.read_model_description(str(fmu.path), validate=True)
+    desc = describe_fmu(fmu.path)
+    [clock] = desc.clocks
+    assert (clock.name, clock.causality, clock.variability, clock.interval) == ("sample", "input", "constant",
+                                                                                Fraction(1, 1000))
+    assert clock.vr == max(v.vr for v in fmu.variables.items) + 1  # after every other variable
+    blk = FmuBlock("f", fmu.path)
+    assert blk.kind == "me"
+    got = simulate(blk, t_end=5.0, dt=1e-3, inputs={"F": pulses})
+    ref = simulate(reflex_toy(), t_end=5.0, dt=1e-3, inputs={"F": pulses})
+    np.testing.assert_array_equal(got["f.count"], ref["count"])
+    np.testing.assert_array_equal(got["f.trig"], ref["trig"])
+    assert ref["count"][-1] == 2  # two pulses, two rising edges
+    np.testing.assert_allclose(got["f.x"], ref["x"], rtol=0, atol=1e-9)
+    assert blk._runtime is None  # terminated after the run
+    # fmpy 0.3.32 does not tick input clocks: it runs the FMU, and the sampled part never updates
+    out = fmpy.simulate_fmu(str(fmu.path), stop_time=2.0, step_size=1e-3, output=["count"])
+    assert out["count"][-1] == 0
+
+
+@pytest.mark.slow
+def test_exported_clocked_gait_fsm_switches_when_the_simulator_does(tmp_path):
+    """The six-leg controller with the Yu gait FSM, exported with clocks (-O0 keeps gcc short): the FSM's
+    slot switches (tripod, 2.5 s apart) happen at the same steps as in the unclocked simulation."""
+    from test_yu_fsm import forces
+
+    from cpgsim.components.yu.leg import hexapod_controller
+    from cpgsim.fmus.export.exporter import export_fmu
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import Simulator, simulate
+
+    fmu = export_fmu(hexapod_controller(), tmp_path / "ctl.fmu", fmi=3, kind="me", clocks=True, optimize="-O0")
+    got = simulate(FmuBlock("c", fmu.path), t_end=8.0, dt=1e-3, inputs={"toe_force": forces()})
+    ref = Simulator(hexapod_controller(), backend="casadi").run(8.0, inputs={"toe_force": forces()})
+    switches = got.time[1:][np.diff(got["c.n_switch"]) > 0]
+    assert list(switches) == list(ref.time[1:][np.diff(ref["n_switch"]) > 0])
+    assert len(switches) == 3 and np.allclose(switches, [2.5, 5.0, 7.5], atol=0.01)
+    np.testing.assert_array_equal(got["c.state"], ref["state"])
+    np.testing.assert_allclose(got["c.q_target"], ref["q_target"], rtol=0, atol=1e-9)
+
+
+def test_export_with_clocks_refuses_what_cannot_be_clocked(tmp_path, capsys):
+    from cpgsim.harness.cli.main import main
+
+    assert main(["export", "vdp", "-o", str(tmp_path / "a.fmu"), "--clocks"]) == 2
+    assert "--clocks needs FMI 3 (--fmi 3)" in capsys.readouterr().err
+    assert main(["export", "vdp", "-o", str(tmp_path / "a.fmu"), "--clocks", "--fmi", "3"]) == 2
+    assert "--clocks exports Model Exchange only (--kind me, got both)" in capsys.readouterr().err
+    assert main(["export", "vdp", "-o", str(tmp_path / "a.fmu"), "--clocks", "--fmi", "3", "--kind", "me"]) == 2
+    err = capsys.readouterr().err
+    assert "model 'vdp' has no sampled blocks" in err and len(err.strip().splitlines()) == 1

@@ -150,18 +150,21 @@ SE_MD = """<?xml version="1.0" encoding="UTF-8"?>
 HOLD_C = r"""
 #define NX 0
 #define NZ 0
-#define NR 4
-#define NI 5
+#define NR 5
+#define NI 7
 #define NU 0
 #define NB 6
 static const int XVR[1] = {0};
 /*HOOKS*/
-/* Float64: 1 u (input), 2 y (u at the last tick), 3 t_last; Int64: 4 n; clock 5 */
-static void model_init(M *m) { m->r[2] = -1; m->r[3] = -1; }
+/* Float64: 1 u (input), 2 y (u at the last tick), 3 t_last, 4 the FMU's next own time event; Int64: 4 n,
+   6 n_own (time events of its own, every 0.3 s); clock 5 */
+static void model_init(M *m) { m->r[2] = -1; m->r[3] = -1; m->r[4] = 0.3; }
 static void model_deriv(M *m, double *dx) { }
 static void model_z(M *m, double *z) { }
 static void model_event(M *m) {
-    if (m->b[5]) { m->r[2] = m->r[1]; m->r[3] = m->time; m->i[4]++; m->b[5] = 0; } }
+    if (m->b[5]) { m->r[2] = m->r[1]; m->r[3] = m->time; m->i[4]++; m->b[5] = 0; }
+    if (m->time >= m->r[4] - 1e-12) { m->i[6]++; m->r[4] += 0.3; }
+    m->next_defined = 1; m->next_time = m->r[4]; }
 static int model_cs_step(M *m, double t, double h) { m->time = t + h; return 0; }
 fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Clock v[]) {
     for (size_t k = 0; k < n; k++) { if (vr[k] != 5) return fmi3Error; ((M*)c)->b[5] = v[k]; } return fmi3OK; }
@@ -179,10 +182,11 @@ HOLD_MD = """<?xml version="1.0" encoding="UTF-8"?>
     <Float64 name="y" valueReference="2" causality="output" variability="discrete" clocks="5"/>
     <Float64 name="t_last" valueReference="3" causality="output" variability="discrete" clocks="5"/>
     <Int64 name="n" valueReference="4" causality="output" variability="discrete" clocks="5"/>
+    <Int64 name="n_own" valueReference="6" causality="output" variability="discrete"/>
   </ModelVariables>
   <ModelStructure>
     <Output valueReference="2" dependencies=""/><Output valueReference="3" dependencies=""/>
-    <Output valueReference="4" dependencies=""/>
+    <Output valueReference="4" dependencies=""/><Output valueReference="6" dependencies=""/>
   </ModelStructure>
 </fmiModelDescription>
 """
@@ -242,6 +246,24 @@ def test_a_tunable_clock_takes_its_interval_from_the_fmu(clock_fmus):
 
 
 @pytest.mark.slow
+def test_without_inputs_a_tick_on_a_communication_point_runs_at_once(clock_fmus, tmp_path):
+    """No input to wait for: the outputs recorded at t show the ticks in [0, t]."""
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import simulate
+
+    md = SE_MD.replace('<Float64 name="u" valueReference="2" causality="input" start="2"/>',
+                       '<Float64 name="u" valueReference="2" causality="parameter" variability="tunable" start="2"/>')
+    fmu = _with_md(clock_fmus["se"], tmp_path / "no_inputs.fmu", md)
+    blk = FmuBlock("p", fmu)
+    assert not blk.inputs
+    res = simulate(blk, t_end=1.0, dt=0.004)
+    n_fast = [ticks_before(x + 1e-6, Fraction(1, 100)) for x in res.time]  # ticks at or before x
+    assert list(res["p.n_fast"]) == n_fast and n_fast[0] == 1 and n_fast[-1] == 101
+    assert res["p.n_slow"][-1] == 41 and res["p.n_tune"][-1] == 26
+    assert res["p.order"][-1] == 312  # t = 1: tune, fast, slow
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["cs", "me"])
 @pytest.mark.parametrize("dt", [0.01, 0.025, 0.004])
 def test_clocked_sample_and_hold(clock_fmus, kind, dt):
@@ -263,6 +285,8 @@ def test_clocked_sample_and_hold(clock_fmus, kind, dt):
     # the tick times themselves are exact: the float nearest to k/40
     got = [float(v) for v, k in zip(res["h.t_last"], n, strict=True) if k]
     assert got == [(k - 1) / 40 for k in n if k]
+    # the FMU's own time events (every 0.3 s, announced by nextEventTime) are kept between the ticks
+    assert list(res["h.n_own"]) == [sum(1 for e in (0.3, 0.6, 0.9) if e < x - 1e-9) for x in t]
 
 
 def _with_md(src, dest, md: str):
@@ -310,13 +334,13 @@ def test_unsupported_clocks_are_refused_naming_the_clock(tmp_path, change, kind,
 def test_inspect_lists_output_clocks_and_run_refuses_them(tmp_path, capsys):
     from cpgsim.harness.cli.main import main
 
-    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="6" causality="output" '
+    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="9" causality="output" '
                          'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
     fmu = _xml_fmu(tmp_path, md)
     assert main(["inspect", str(fmu)]) == 0
     out = capsys.readouterr().out
     assert "clocks (2):" in out and "input clock 'clk' (vr 5) constant, interval 0.025 s" in out
-    assert "output clock 'done' (vr 6) triggered, clocks attribute 5" in out
+    assert "output clock 'done' (vr 9) triggered, clocks attribute 5" in out
     from cpgsim.fmus.importer.clocked import check_clocks
 
     for kind in ("cs", "me"):
@@ -328,7 +352,7 @@ def test_inspect_lists_output_clocks_and_run_refuses_them(tmp_path, capsys):
 def test_a_block_with_an_output_clock_is_refused_when_built(clock_fmus, tmp_path):
     from cpgsim.fmus.importer.block import FmuBlock
 
-    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="6" causality="output" '
+    md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="9" causality="output" '
                          'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
     fmu = _with_md(clock_fmus["hold"], tmp_path / "out_clock.fmu", md)
     for kind in ("cs", "me"):

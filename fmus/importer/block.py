@@ -18,7 +18,11 @@ at every macro step.
   (:mod:`cpgsim.fmus.importer.me`, :mod:`cpgsim.fmus.importer.runtime`). The compiler cannot put an FMU inside
   its CasADi functions, so ME states are not integrated in the same RK4 stages as the equation
   blocks: the coupling to the rest of the graph is sampled at the macro step, as for a CS FMU.
-- ``kind="auto"`` (default): CS if the FMU has it, else ME.
+- ``kind="se"``: an FMI 3 Scheduled Execution FMU: each model partition is activated at its input
+  clock's ticks (:mod:`cpgsim.fmus.importer.clocked`). FMI 3 CS (with event mode) and ME FMUs with
+  time-based input clocks have them ticked the same way; unsupported clocks are refused when the block
+  is built (:class:`~cpgsim.fmus.importer.clocks.ClockError`).
+- ``kind="auto"`` (default): CS if the FMU has it, else ME, else SE.
 - ``isolate=True``: the FMU runs in a child process (:mod:`cpgsim.fmus.importer.isolation`); a crash there
   (segmentation fault, abort) becomes an :class:`~cpgsim.fmus.errors.FmuCrashedError`, which the
   master reports with the results recorded so far, instead of killing the harness.
@@ -51,7 +55,7 @@ __all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation
 class FmuBlock(CoSimBlock):
     """An FMU as a co-simulation block (see the module docstring).
 
-    ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"`` or ``"me"``; ``substeps``: RK4
+    ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"``, ``"me"`` or ``"se"``; ``substeps``: RK4
     steps per macro step for ME; ``solver``: ``"rk4"`` or ``"cvode"`` for ME, with ``rtol``/``atol``
     for CVODE; ``isolate``: run in a child process; ``timeout``: seconds an
     isolated FMU may take for one call (None: no limit); ``workdir``: where the FMU is extracted

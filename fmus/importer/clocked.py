@@ -99,6 +99,8 @@ class ClockedRuntime(FmuRuntime):
         self.schedule: TickSchedule | None = None
         self.activations: collections.Counter[str] = collections.Counter()  # clock name -> ticks activated
         self._cs_event_mode = False
+        self._cs_next: Fraction | None = None  # CS: the next time event the FMU announced
+        self._after_tick_pending: list[tuple[int, Fraction]] = []  # ME: ticks set, counted after the iteration
 
     def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
         self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
@@ -175,7 +177,11 @@ class ClockedRuntime(FmuRuntime):
         c = self.by_vr[vr]
         self.activations[c.name] += 1
         if c.variability in ("tunable", "changing"):
-            value, qualifier = self._interval([vr])[0]
+            try:
+                value, qualifier = self._interval([vr])[0]
+            except Exception as exc:  # noqa: BLE001
+                raise self._fail(f"fmi3GetIntervalDecimal of clock {c.name!r} after its tick at "
+                                 f"t={float(at):.12g}", exc) from None
             if qualifier == _CHANGED:
                 assert self.schedule is not None
                 self.schedule.restart(vr, from_float(value), at)
@@ -228,8 +234,11 @@ class ClockedRuntime(FmuRuntime):
     def _cs_update(self, where: str) -> None:
         """Iterate ``fmi3UpdateDiscreteStates`` to convergence and enter step mode."""
         try:
+            self._cs_next = None
             for _ in range(1000):
-                needed, terminate, _n, _v, _d, _t = self.fmu.updateDiscreteStates()
+                needed, terminate, _n, _v, defined, next_time = self.fmu.updateDiscreteStates()
+                if defined:  # a time event of the FMU's own: the step stops there too
+                    self._cs_next = from_float(next_time)
                 if terminate:
                     self._terminated = True
                     raise StopRequested(f"{self._where(where)} asked to stop the simulation at t={self._time:.9g}",
@@ -252,17 +261,23 @@ class ClockedRuntime(FmuRuntime):
     # -- the runtime interface ----------------------------------------------------------------------------
     def get_outputs(self) -> dict:
         if self._state == "running" and not self.desc.inputs and not self._terminated and self.kind != "me":
-            self._fire(self._due())
-            if self.kind == "cs" and self._cs_event_mode:
-                self._cs_update(f"event at t={self._time:.9g}")
+            self._run_due()
         return super().get_outputs()
 
     def set_inputs(self, values: Any) -> None:
         super().set_inputs(values)
         if self.kind != "me" and not self._terminated:
-            self._fire(self._due())
-            if self.kind == "cs" and self._cs_event_mode:
-                self._cs_update(f"event at t={self._time:.9g}")
+            self._run_due()
+
+    def _run_due(self) -> None:
+        """SE/CS: the ticks (and, CS, the FMU's own time event) due now; CS back in step mode."""
+        self._fire(self._due())
+        if self.kind != "cs":
+            return
+        if self._cs_event_mode:
+            self._cs_update(f"event at t={self._time:.9g}")
+        if self._cs_next is not None and self._cs_next <= self._due():
+            self._cs_event(f"time event at t={self._time:.12g}")
 
     def do_step(self, t: float, dt: float) -> None:
         if self.kind != "se":
@@ -275,33 +290,69 @@ class ClockedRuntime(FmuRuntime):
 
     def _do_step3(self, t: float, dt: float) -> None:
         """CS: ``fmi3DoStep`` up to each tick inside the step, the tick's event, then on to the step's end."""
-        self._fire(self._due())
-        if self._cs_event_mode:
-            self._cs_update(f"event at t={t:.9g}")
+        self._run_due()
         sched = self._sched()
         t_end = t + dt
         before_end = from_float(t_end) - tolerance(t_end)
         cur = t
-        while (nt := sched.next_time()) is not None and nt < before_end:
-            tau = float(nt)
+        for _ in range(10_000_000):
+            nt = sched.next_time()
+            own = self._cs_next if self._cs_next is not None and self._cs_next > from_float(cur) else None
+            stops = [s for s in (nt, own) if s is not None and s < before_end]
+            if not stops:
+                break
+            at = min(stops)
+            tau = float(at)
             if tau > cur:
-                super()._do_step3(cur, _landing(cur, tau))
+                self._cs_step(cur, _landing(cur, tau))
                 cur = self._time = tau
-            self._fire(nt)
+            if at == nt:
+                self._fire(nt)
+            else:
+                self._cs_event(f"time event at t={tau:.12g}")
         # a tick the step's end stands for (t + dt off by rounding): end the step exactly on the tick
         end = float(nt) if nt is not None and nt <= from_float(t_end) + tolerance(t_end) else t_end
         if end > cur:
-            super()._do_step3(cur, _landing(cur, end))
+            self._cs_step(cur, _landing(cur, end))
         self._time = t_end
         if not self.desc.inputs:
-            self._fire(self._due())
-            if self._cs_event_mode:
-                self._cs_update(f"event at t={t_end:.9g}")
+            self._run_due()
+
+    def _cs_event(self, where: str) -> None:
+        """An event of the FMU's own (no clock ticks): event mode, iteration, step mode."""
+        try:
+            self.fmu.enterEventMode()
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"{where}: fmi3EnterEventMode", exc) from None
+        self._cs_event_mode = True
+        self._cs_update(where)
+        self._countdowns(from_float(self._time))
+
+    def _cs_step(self, t: float, h: float) -> None:
+        """``fmi3DoStep`` (called directly, as the base runtime does); an event the FMU reports at the step's
+        end (``eventHandlingNeeded``) is handled there at once."""
+        from ctypes import byref
+
+        from fmpy import fmi3
+
+        event, terminate, early, last = fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Float64()
+        status = self.fmu.dll.fmi3DoStep(self.fmu.component, t, h, fmi3.fmi3Boolean(True), byref(event),
+                                         byref(terminate), byref(early), byref(last))
+        if status > 2 or (status == 2 and not terminate.value):
+            from fmpy.fmi1 import FMICallException
+
+            raise FMICallException("fmi3DoStep", status)
+        if terminate.value:
+            t_last = float(last.value) if status == 2 or early.value else t + h
+            self._stop(min(max(t_last, t), t + h), "fmi3DoStep returned terminateSimulation")
+        self._time = t + h
+        if event.value:
+            self._cs_event(f"event reported by fmi3DoStep at t={t + h:.12g}")
 
     # -- model exchange: the ticks are time events ------------------------------------------------------
     def _me_start(self) -> None:
         super()._me_start()
-        self._after_tick_pending: list[tuple[int, Fraction]] = []
+        self._after_tick_pending = []
         self._sched()
 
     def _leave_event_mode(self) -> None:
@@ -318,7 +369,7 @@ class ClockedRuntime(FmuRuntime):
                 self._event_with_clocks(batch, batch[0][0])
                 batch = sched.pop_first(self._due())
         super()._leave_event_mode()
-        pending, self._after_tick_pending = getattr(self, "_after_tick_pending", []), []
+        pending, self._after_tick_pending = self._after_tick_pending, []
         for vr, at in pending:
             self._after_tick(vr, at)
         if pending:

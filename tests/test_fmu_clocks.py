@@ -451,3 +451,27 @@ def test_export_with_clocks_refuses_what_cannot_be_clocked(tmp_path, capsys):
     assert main(["export", "vdp", "-o", str(tmp_path / "a.fmu"), "--clocks", "--fmi", "3", "--kind", "me"]) == 2
     err = capsys.readouterr().err
     assert "model 'vdp' has no sampled blocks" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_failures_are_one_line_naming_the_fmu_the_clock_and_the_call(clock_fmus, tmp_path, capsys):
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.cli.main import main
+    from cpgsim.harness.simulate import CoSimulationError, simulate
+
+    # a partition the FMU does not know: fmi3ActivateModelPartition fails at the clock's first tick
+    md = SE_MD.replace('<Float64 name="period"', '<Clock name="bad" valueReference="24" causality="input" '
+                       'intervalVariability="constant" intervalDecimal="0.1" shiftDecimal="0.25"/>\n'
+                       '    <Float64 name="period"')
+    fmu = _with_md(clock_fmus["se"], tmp_path / "bad.fmu", md)
+    with pytest.raises(CoSimulationError) as info:
+        simulate(FmuBlock("p", fmu), t_end=1.0, dt=0.004)
+    msg = str(info.value)
+    assert "\n" not in msg and "bad.fmu" in msg
+    assert "fmi3ActivateModelPartition of clock 'bad' at t=0.25 failed" in msg
+    # the CLI: a refused clock is bad input (exit 2), one line
+    md = HOLD_MD.replace(' hasEventMode="true"', "").replace("<ModelExchange modelIdentifier=\"Hold\"/>", "")
+    fmu = _with_md(clock_fmus["hold"], tmp_path / "no_event_mode.fmu", md)
+    assert main(["simulate", str(fmu), "--t-end", "0.1", "--dt", "0.01", "-o", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "input clock 'clk' (constant)" in err and "no event mode" in err

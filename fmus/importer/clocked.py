@@ -105,6 +105,8 @@ class ClockedRuntime(FmuRuntime):
     def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
         self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
         self.schedule = None
+        self.activations.clear()
+        self._cs_next = None
         return super().setup(t0, params, inputs)
 
     def _instantiate_options(self) -> dict[str, Any]:

@@ -59,7 +59,7 @@ ANNOTATION = "org.cpgsim.simulation"
 OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 OMS_DEFAULT_STEP = 1e-3  # the fixed step OpenModelica's annotation states when export_ssp gets no dt
 _INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
-_IMPL = {"cs": "CoSimulation", "me": "ModelExchange"}
+_IMPL = {"cs": "CoSimulation", "me": "ModelExchange", "se": "ScheduledExecution"}
 
 for _p, _u in NS.items():
     ET.register_namespace(_p, _u)

@@ -196,10 +196,9 @@ def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):
     assert set(desc.value_parameters) == {"A", "label"}
 
 
-def test_scheduled_execution_fmu_is_refused_naming_the_clocks(tmp_path):
+def test_scheduled_execution_fmu_is_read_with_its_clocks(tmp_path):
+    """A Scheduled Execution FMU is imported (tests/test_fmu_clocks.py runs one); its clocks are listed."""
     import zipfile
-
-    from cpgsim.fmus.errors import ModelDescriptionError
 
     md = TYPES_MD.replace('<CoSimulation modelIdentifier="Types"/>', '<ScheduledExecution modelIdentifier="Types"/>')
     md = md.replace('<Float64 name="time"', '<Clock name="tick" valueReference="60" causality="input" '
@@ -207,8 +206,9 @@ def test_scheduled_execution_fmu_is_refused_naming_the_clocks(tmp_path):
     fmu = tmp_path / "se.fmu"
     with zipfile.ZipFile(fmu, "w") as zf:
         zf.writestr("modelDescription.xml", md)
-    with pytest.raises(ModelDescriptionError, match=r"Scheduled Execution FMU \(clocks: tick\).*clocks"):
-        describe_fmu(fmu)
+    desc = describe_fmu(fmu)
+    assert desc.kinds == ["se"] and [c.name for c in desc.clocks] == ["tick"]
+    assert "input clock 'tick' (vr 60) constant, interval 0.01 s" in desc.summary()
 
 
 # -- starts, parameters and free inputs beyond 2^53 (a float64 keeps only multiples of 2^10 above 2^62) ----

@@ -142,8 +142,9 @@ def _c_strings(values: list[str]) -> str:
 
 
 def generate_header(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ...],
-                    names: tuple[str, ...] = FUNCTIONS) -> str:
-    """``cpgsim_model.h``: sizes, start values, kinds, bounds, names and the function declarations."""
+                    names: tuple[str, ...] = FUNCTIONS, clock_vr: int | None = None) -> str:
+    """``cpgsim_model.h``: sizes, start values, kinds, bounds, names and the function declarations;
+    ``clock_vr``: the value reference of the sample clock (exported with clocks, FMI 3 ME)."""
     m = variables.model
     nx, nz, nu, np_, ny = m.states.size, m.dstates.size, m.inputs.size, m.params.size, m.signals_layout.size
     outputs = variables.of("output")
@@ -171,7 +172,9 @@ def generate_header(variables: Variables, identifier: str, guid: str, kinds: tup
         f"#define CPG_DT {float(m.dt)!r}",
         f"#define CPG_HAS_EVENTS {int(variables.has_events)}",
         f"#define CPG_HAS_ME {int('me' in kinds)}", f"#define CPG_HAS_CS {int('cs' in kinds)}",
-        f"#define CPG_SIGNAL_LOCALS {int(bool(variables.of('signal')))}", "",
+        f"#define CPG_SIGNAL_LOCALS {int(bool(variables.of('signal')))}",
+        f"#define CPG_CLOCKED {int(clock_vr is not None)}",
+        f"#define CPG_CLOCK_VR {-1 if clock_vr is None else int(clock_vr)}", "",
     ]
     lines += [] if set(names) == set(FUNCTIONS) else [
         "/* functions of an interface type this FMU was not exported for: never called (Instantiate refuses) */",

@@ -47,7 +47,7 @@ from cpgsim.components.core import Block
 from cpgsim.components.graph import Graph
 from cpgsim.fmus import trust
 from cpgsim.fmus.export import build
-from cpgsim.fmus.export.model_description import ExportError, Variables, collect_variables, model_description
+from cpgsim.fmus.export.model_description import ExportError, Variables, clock_vr, collect_variables, model_description
 from cpgsim.harness.compile import compile_graph
 
 KINDS = {"cs": ("cs",), "me": ("me",), "both": ("me", "cs")}
@@ -96,7 +96,8 @@ class ExportedFmu:
 
 def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str = "both", dt: float = 1e-3,
                substeps: int = 1, params: Mapping[str, Any] | None = None, name: str | None = None,
-               description: str | None = None, optimize: str | None = None) -> ExportedFmu:
+               description: str | None = None, optimize: str | None = None,
+               clocks: bool = False) -> ExportedFmu:
     """Export a block or graph as a native FMU at ``path``; returns an :class:`ExportedFmu`.
 
     ``fmi`` is 2 or 3; ``kind`` is ``"cs"`` (Co-Simulation), ``"me"`` (Model Exchange) or ``"both"``;
@@ -105,7 +106,9 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
     sets the model identifier (default: the graph's name); ``optimize`` the C compiler's optimization flag
     for the model code (default: ``-O2``, less for very large models, see
     :func:`cpgsim.fmus.export.build.auto_optimization`;
-    the results do not depend on it). Raises :class:`ExportError` (a
+    the results do not depend on it); ``clocks``: the sampled blocks' discrete updates run at the ticks of
+    an input clock ``sample`` (FMI 3 Model Exchange only, see :mod:`cpgsim.fmus.export.clocks`).
+    Raises :class:`ExportError` (a
     :class:`~cpgsim.components.core.ModelError`) for anything that cannot be exported.
     """
     if fmi not in (2, 3):
@@ -123,6 +126,10 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
             item.set(**{k[len(item.name) + 1:] if k.startswith(item.name + ".") else k: v for k, v in params.items()})
     model = compile_graph(item, dt, substeps, grouping="flat")  # straight-line C, SX dependency analysis
     variables = collect_variables(model, fmi)
+    if clocks:
+        from cpgsim.fmus.export.clocks import check_clocked_export
+
+        check_clocked_export(variables, fmi, kind, dt)
     identifier = model_identifier(name or model.name)
     kinds = KINDS[kind]
     desc = description or getattr(item, "description", "") or f"cpgsim model {model.name}"
@@ -134,8 +141,9 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         names = build.functions_for(kinds)
         model_c = build.generate_model_sources(model, identifier, src, names)
         guid = _guid(*model_c.values(), repr([(v.name, v.vr, v.kind, v.start) for v in variables.items]),
-                     str(fmi), kind, repr(dt), repr(substeps), identifier)
-        (src / "cpgsim_model.h").write_text(build.generate_header(variables, identifier, guid, kinds, names))
+                     str(fmi), kind, repr(dt), repr(substeps), identifier, "clocks" if clocks else "")
+        clock = clock_vr(variables) if clocks else None
+        (src / "cpgsim_model.h").write_text(build.generate_header(variables, identifier, guid, kinds, names, clock))
         for f in ("cpgsim_core.h", f"fmi{fmi}.c"):
             shutil.copy(build.TEMPLATES / f, src / f)
         for h in build.fmi_headers(fmi):
@@ -145,7 +153,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         if fmi == 3:
             (src / "buildDescription.xml").write_text(build.build_description(identifier, sources))
         xml = model_description(variables, fmi=fmi, identifier=identifier, guid=guid, kinds=kinds,
-                                description=desc, sources=sources, dt=dt, tool=_tool())
+                                description=desc, sources=sources, dt=dt, tool=_tool(), clocks=clocks)
         (staging / "modelDescription.xml").write_bytes(xml)
         out_dir = staging / "binaries" / bin_folder
         out_dir.mkdir(parents=True)

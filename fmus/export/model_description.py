@@ -293,12 +293,13 @@ def _type_attrs(v: Variable, fmi: int) -> dict[str, str]:
 
 
 def model_description(variables: Variables, *, fmi: int, identifier: str, guid: str, kinds: tuple[str, ...],
-                      description: str, sources: list[str], dt: float, tool: str) -> bytes:
-    """The ``modelDescription.xml`` bytes for FMI ``fmi`` (2 or 3) and interface ``kinds`` ("me", "cs")."""
+                      description: str, sources: list[str], dt: float, tool: str, clocks: bool = False) -> bytes:
+    """The ``modelDescription.xml`` bytes for FMI ``fmi`` (2 or 3) and interface ``kinds`` ("me", "cs");
+    ``clocks`` (FMI 3): declare the sample clock (:func:`clock_vr`) that ticks the discrete states."""
     if fmi == 2:
         return _fmi2(variables, identifier, guid, kinds, description, sources, dt, tool)
     if fmi == 3:
-        return _fmi3(variables, identifier, guid, kinds, description, dt, tool)
+        return _fmi3(variables, identifier, guid, kinds, description, dt, tool, clocks)
     raise ExportError(f"FMI version must be 2 or 3, got {fmi!r}")
 
 
@@ -355,8 +356,13 @@ def _fmi2(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ..
     return _finish(root)
 
 
+def clock_vr(variables: Variables) -> int:
+    """The value reference of the exported sample clock: after every other variable (dense, FMI 3)."""
+    return max((v.vr for v in variables.items), default=0) + 1
+
+
 def _fmi3(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ...], description: str,
-          dt: float, tool: str) -> bytes:
+          dt: float, tool: str, clocks: bool = False) -> bytes:
     m = variables.model
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": m.name, "instantiationToken": guid, "description": description,
@@ -379,7 +385,13 @@ def _fmi3(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ..
         attrs = {**_common_attrs(v), **_type_attrs(v, 3)}
         if v.category == "derivative":
             attrs["derivative"] = str(state_vr[v.index])
+        if clocks and v.category == "dstate":
+            attrs["clocks"] = str(clock_vr(variables))
         ET.SubElement(mv, tag[v.kind], attrs)
+    if clocks:
+        ET.SubElement(mv, "Clock", name="sample", valueReference=str(clock_vr(variables)), causality="input",
+                      intervalVariability="constant", intervalDecimal=repr(float(dt)),
+                      description="the sampled blocks' clock: their discrete states update at its ticks")
     ms = ET.SubElement(root, "ModelStructure")
     for v in variables.of("output"):
         ET.SubElement(ms, "Output", valueReference=str(v.vr),

@@ -18,7 +18,11 @@ at every macro step.
   (:mod:`cpgsim.fmus.importer.me`, :mod:`cpgsim.fmus.importer.runtime`). The compiler cannot put an FMU inside
   its CasADi functions, so ME states are not integrated in the same RK4 stages as the equation
   blocks: the coupling to the rest of the graph is sampled at the macro step, as for a CS FMU.
-- ``kind="auto"`` (default): CS if the FMU has it, else ME.
+- ``kind="se"``: an FMI 3 Scheduled Execution FMU: each model partition is activated at its input
+  clock's ticks (:mod:`cpgsim.fmus.importer.clocked`). FMI 3 CS (with event mode) and ME FMUs with
+  time-based input clocks have them ticked the same way; unsupported clocks are refused when the block
+  is built (:class:`~cpgsim.fmus.importer.clocks.ClockError`).
+- ``kind="auto"`` (default): CS if the FMU has it, else ME, else SE.
 - ``isolate=True``: the FMU runs in a child process (:mod:`cpgsim.fmus.importer.isolation`); a crash there
   (segmentation fault, abort) becomes an :class:`~cpgsim.fmus.errors.FmuCrashedError`, which the
   master reports with the results recorded so far, instead of killing the harness.
@@ -51,7 +55,7 @@ __all__ = ["FmuBlock", "describe_fmu", "fmu_blocks", "fmu_graph", "set_isolation
 class FmuBlock(CoSimBlock):
     """An FMU as a co-simulation block (see the module docstring).
 
-    ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"`` or ``"me"``; ``substeps``: RK4
+    ``path``: the ``.fmu`` file; ``kind``: ``"auto"``, ``"cs"``, ``"me"`` or ``"se"``; ``substeps``: RK4
     steps per macro step for ME; ``solver``: ``"rk4"`` or ``"cvode"`` for ME, with ``rtol``/``atol``
     for CVODE; ``isolate``: run in a child process; ``timeout``: seconds an
     isolated FMU may take for one call (None: no limit); ``workdir``: where the FMU is extracted
@@ -67,12 +71,16 @@ class FmuBlock(CoSimBlock):
         self.path = Path(path)
         self.info = description if description is not None else describe_fmu(self.path, strict=strict)
         if kind == "auto":
-            kind = "cs" if self.info.cs_identifier else "me"
-        if kind not in ("cs", "me"):
-            raise ModelError(f"FMU block {name!r}: kind must be 'auto', 'cs' or 'me', got {kind!r}")
+            kind = "cs" if self.info.cs_identifier else ("me" if self.info.me_identifier else "se")
+        if kind not in ("cs", "me", "se"):
+            raise ModelError(f"FMU block {name!r}: kind must be 'auto', 'cs', 'me' or 'se', got {kind!r}")
         if kind not in self.info.kinds:
             raise FmuError(f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.info.kinds)})")
         check_binary(self.info, kind)
+        if self.info.clocks or kind == "se":
+            from cpgsim.fmus.importer.clocked import check_clocks
+
+            check_clocks(self.info, kind)
         if int(substeps) != substeps or substeps < 1:
             raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
         from cpgsim.fmus.importer.me import SOLVERS
@@ -170,9 +178,9 @@ class FmuBlock(CoSimBlock):
 
             rt = IsolatedRuntime(args, timeout=self.timeout)
         else:
-            from cpgsim.fmus.importer.runtime import FmuRuntime
+            from cpgsim.fmus.importer.clocked import make_runtime
 
-            rt = FmuRuntime(desc=self.info, **args)
+            rt = make_runtime(desc=self.info, **args)
         self._runtime = rt
         self._finalizer = weakref.finalize(self, _close, rt)
         rt.setup(float(t0), self.changed_parameters(), {})

@@ -210,13 +210,19 @@ class FmuDescription:
     structural_parameters: list[str] = field(default_factory=list)
     # the modelDescription's <DefaultExperiment>: startTime, stopTime, stepSize, tolerance (absent: not set)
     default_experiment: dict[str, float] = field(default_factory=dict)
+    # FMI 3 clocks (:mod:`cpgsim.fmus.importer.clocks`): the Scheduled Execution interface, the <Clock>
+    # variables, and whether the CoSimulation interface has event mode (needed to tick input clocks)
+    se_identifier: str | None = None
+    clocks: list = field(default_factory=list)
+    event_mode: bool = False
 
     @property
     def kinds(self) -> list[str]:
-        return [k for k, ident in (("cs", self.cs_identifier), ("me", self.me_identifier)) if ident]
+        return [k for k, ident in (("cs", self.cs_identifier), ("me", self.me_identifier),
+                                   ("se", self.se_identifier)) if ident]
 
     def identifier(self, kind: str) -> str:
-        ident = self.cs_identifier if kind == "cs" else self.me_identifier
+        ident = {"cs": self.cs_identifier, "me": self.me_identifier, "se": self.se_identifier}.get(kind)
         if not ident:
             raise ModelDescriptionError(
                 f"FMU {self.path} has no {kind.upper()} interface (has: {', '.join(self.kinds)})")
@@ -268,6 +274,9 @@ class FmuDescription:
             lines.append(f"  structural parameters ({len(self.structural_parameters)}, fixed at their start values):")
             for line in self.structural_parameters:
                 lines.append(f"    {line}")
+        if self.clocks:
+            lines.append(f"  clocks ({len(self.clocks)}):")
+            lines.extend(f"    {c.line()}" for c in self.clocks)
         for s in self.skipped:
             lines.append(f"  skipped: {s}")
         for w in self.warnings:
@@ -508,6 +517,10 @@ def describe_fmu(path: str | Path, strict: bool = False) -> FmuDescription:
                 f"FMU {path}: cannot read modelDescription.xml: {one_line(problems[0])}") from None
     try:
         desc = _build(md, path, names)
+        if desc.fmi_version == 3:
+            from cpgsim.fmus.importer.clocks import read_clocks
+
+            desc.clocks, desc.event_mode = read_clocks(data)
     except ModelDescriptionError as exc:
         raise ModelDescriptionError(f"FMU {path}: {exc}") from None
     except (AttributeError, TypeError, ValueError, KeyError, IndexError) as exc:
@@ -550,14 +563,10 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         raise ModelDescriptionError(f"FMI version {md.fmiVersion} is not supported (need 2.0 or 3.0)")
     cs = md.coSimulation.modelIdentifier if md.coSimulation is not None else None
     me = md.modelExchange.modelIdentifier if md.modelExchange is not None else None
-    clocks = [v.name for v in md.modelVariables if v.type == "Clock"]
-    if not cs and not me:
-        if getattr(md, "scheduledExecution", None) is not None:
-            named = f" (clocks: {', '.join(clocks[:8])}{', ...' if len(clocks) > 8 else ''})" if clocks else ""
-            raise ModelDescriptionError(
-                f"is an FMI 3 Scheduled Execution FMU{named}: cpgsim does not activate clocks or model "
-                f"partitions; it imports CoSimulation and ModelExchange FMUs only")
-        raise ModelDescriptionError("declares neither CoSimulation nor ModelExchange")
+    se_md = getattr(md, "scheduledExecution", None)
+    se = se_md.modelIdentifier if se_md is not None else None
+    if not cs and not me and not se:
+        raise ModelDescriptionError("declares neither CoSimulation, ModelExchange nor ScheduledExecution")
     by_vr = {v.valueReference: v for v in md.modelVariables}
     taken: set[str] = set()
     skipped: list[str] = []
@@ -596,9 +605,10 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
     for g in final:
         v = g[0]
         kind = kind_of(v.type)
+        if v.type == "Clock":  # not a port: FmuDescription.clocks (cpgsim.fmus.importer.clocks)
+            continue
         if kind is None:
-            why = {"Clock": "clocks are not activated: the FMU runs as if the clock never ticks",
-                   "Binary": "Binary values are not supported"}.get(v.type, "not real/integer/boolean")
+            why = {"Binary": "Binary values are not supported"}.get(v.type, "not real/integer/boolean")
             skipped.append(f"{v.causality} {v.name!r} of type {v.type} ({why})")
             continue
         if len(g) > 1:
@@ -703,7 +713,7 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
         needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
         skipped=skipped, members=frozenset(members), value_parameters=value_params,
-        structural_parameters=structural)
+        structural_parameters=structural, se_identifier=se)
     return desc
 
 

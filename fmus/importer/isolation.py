@@ -381,6 +381,7 @@ def _watch_lifeline(fd: int) -> None:
 
 def _serve(fd: int) -> None:
     from cpgsim.fmus.errors import one_line
+    from cpgsim.fmus.importer.clocked import make_runtime
     from cpgsim.fmus.importer.runtime import FmuRuntime
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -396,7 +397,7 @@ def _serve(fd: int) -> None:
                 value: Any = None
             elif what == "setup":
                 args, t0, params, inputs = payload
-                rt = FmuRuntime(**args)
+                rt = make_runtime(**args)
                 value = rt.setup(t0, params, inputs)
             elif what == "outputs":
                 assert rt is not None

@@ -122,6 +122,10 @@ class FmuRuntime:
         self._out_groups = [(t, tuple(v), c[0], parts) for t, (v, parts, c) in groups.items()]
 
     # -- helpers -------------------------------------------------------------------------------
+    def _instantiate_options(self) -> dict[str, Any]:
+        """Extra arguments of fmpy's FMI 3 ``instantiate`` (the clocked runtime asks for event mode)."""
+        return {}
+
     def _where(self, what: str) -> str:
         return f"FMU {self.path.name} (instance {self.instance_name!r}) {what}"
 
@@ -182,8 +186,8 @@ class FmuRuntime:
         ident = self.desc.identifier(self.kind)
         kw = dict(guid=self.desc.guid, unzipDirectory=str(self.unzipdir), modelIdentifier=ident,
                   instanceName=self.instance_name)
-        cls = {(2, "cs"): fmi2.FMU2Slave, (2, "me"): fmi2.FMU2Model,
-               (3, "cs"): fmi3.FMU3Slave, (3, "me"): fmi3.FMU3Model}[(self.desc.fmi_version, self.kind)]
+        cls = {(2, "cs"): fmi2.FMU2Slave, (2, "me"): fmi2.FMU2Model, (3, "cs"): fmi3.FMU3Slave,
+               (3, "me"): fmi3.FMU3Model, (3, "se"): fmi3.FMU3ScheduledExecution}[(self.desc.fmi_version, self.kind)]
         try:
             self.fmu = cls(**kw)
         except Exception as exc:  # noqa: BLE001 - fmpy raises bare Exceptions for load failures
@@ -207,7 +211,7 @@ class FmuRuntime:
                 self._state = "instantiated"
                 self.fmu.setupExperiment(startTime=float(t0))
             else:
-                self.fmu.instantiate(loggingOn=True, logMessage=self._log3)
+                self.fmu.instantiate(loggingOn=True, logMessage=self._log3, **self._instantiate_options())
                 self._state = "instantiated"
             for name, value in (params or {}).items():
                 vspec = self.desc.value_parameters.get(name)

@@ -60,6 +60,7 @@ struct cpg_instance {
     cpg_calloc_fn calloc_fn;
     cpg_free_fn free_fn;
     double t0, t, next_event;
+    int clock_active;  /* CPG_CLOCKED: the sample clock ticks in this event mode (fmi3SetClock) */
     long long k;     /* CS: steps done since t0; ME: index of the next sampled update */
     int point_valid, sig_valid, der_valid;
     double *x, *z, *u, *p;       /* state at t (CS: before the update at t), inputs, parameters */
@@ -214,6 +215,7 @@ static void cpg_reset_values(cpg_instance *inst) {
     if (CPG_NU) memcpy(inst->u, CPG_U0, sizeof(double) * CPG_NU);
     if (CPG_NP) memcpy(inst->p, CPG_P0, sizeof(double) * CPG_NP);
     inst->t0 = inst->t = inst->next_event = 0.0;
+    inst->clock_active = 0;
     inst->k = 0;
     inst->phase = PH_INSTANTIATED;
     cpg_invalidate(inst);
@@ -455,14 +457,18 @@ static int cpg_get_derivatives(cpg_instance *inst, double *dx, size_t n) {
     return CPG_OK;
 }
 
-/* The sampled update as a time event. Sets *changed when continuous states were reset. */
+/* The sampled update as a time event -- or, exported with clocks (CPG_CLOCKED), at each tick of the input
+   clock `sample` that the importer sets active in this event mode (no time event is announced then).
+   Sets *changed when continuous states were reset. */
 static int cpg_event_update(cpg_instance *inst, int *changed, int *next_defined, double *next_time) {
-    int i;
+    int i, due;
     *changed = 0;
     *next_defined = 0;
     *next_time = 0.0;
     if (!CPG_HAS_EVENTS) return CPG_OK;
-    if (inst->t >= inst->next_event - CPG_TOL) {
+    due = CPG_CLOCKED ? inst->clock_active : inst->t >= inst->next_event - CPG_TOL;
+    inst->clock_active = 0;
+    if (due) {
         if (cpg_call(inst, CPG_FN_DISCRETE, "discrete", inst->t, inst->x, inst->z, inst->xn, inst->zn, NULL))
             return CPG_ERROR;
         if (cpg_check_finite(inst, inst->xn, inst->x, inst->zn, inst->t)) return CPG_ERROR;
@@ -476,8 +482,8 @@ static int cpg_event_update(cpg_instance *inst, int *changed, int *next_defined,
         cpg_logf(inst, CPG_OK, "logEvents", "sampled update at t=%.9g%s; next at t=%.9g", inst->t,
                  *changed ? " (continuous states reset)" : "", inst->next_event);
     }
-    *next_defined = 1;
-    *next_time = inst->next_event;
+    *next_defined = !CPG_CLOCKED;
+    *next_time = CPG_CLOCKED ? 0.0 : inst->next_event;
     return CPG_OK;
 }
 

@@ -308,9 +308,17 @@ fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const fmi3Clock values[]) {
-    (void)vr; (void)values;
+    size_t i;
     if (nvr == 0 && instance) return fmi3OK;
-    UNSUPPORTED("fmi3SetClock");
+    if (!CPG_CLOCKED) UNSUPPORTED("fmi3SetClock");
+    if (!allowed(instance, PH(PH_EVENT), "fmi3SetClock")) return fmi3Error;
+    for (i = 0; i < nvr; ++i) {
+        if (vr[i] != (fmi3ValueReference)CPG_CLOCK_VR)
+            return (fmi3Status)CPG_FAIL(INST, "fmi3SetClock: value reference %u is not a clock (the clock is %d)",
+                                        (unsigned)vr[i], CPG_CLOCK_VR);
+        INST->clock_active = values[i] ? 1 : 0;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
@@ -416,8 +424,17 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) { UNSUPPORTED("fmi3E
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                   fmi3Float64 intervals[], fmi3IntervalQualifier qualifiers[]) {
-    (void)vr; (void)nvr; (void)intervals; (void)qualifiers;
-    UNSUPPORTED("fmi3GetIntervalDecimal");
+    size_t i;
+    if (!CPG_CLOCKED) UNSUPPORTED("fmi3GetIntervalDecimal");
+    if (!instance) return fmi3Error;
+    for (i = 0; i < nvr; ++i) {  /* the constant sample clock: its interval never changes */
+        if (vr[i] != (fmi3ValueReference)CPG_CLOCK_VR)
+            return (fmi3Status)CPG_FAIL(INST, "fmi3GetIntervalDecimal: value reference %u is not a clock",
+                                        (unsigned)vr[i]);
+        intervals[i] = CPG_DT;
+        qualifiers[i] = fmi3IntervalUnchanged;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,

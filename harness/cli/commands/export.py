@@ -42,6 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="model identifier (default: the graph's or block's name)")
     p.add_argument("--opt", choices=("auto", "0", "1", "2", "3"), default="auto",
                    help="C optimization level of the model code (default auto: 2, less for very large models)")
+    p.add_argument("--clocks", action="store_true",
+                   help="FMI 3 Model Exchange: run the sampled blocks' discrete updates (the gait FSM ...) at the "
+                        "ticks of an input clock 'sample' of interval --dt instead of time events")
     add_set_argument(p)
 
 
@@ -78,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     item = load_item(args.item, args.name)
     params = parse_sets(args.sets)
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
-                        params=params, name=args.name, optimize=None if args.opt == "auto" else f"-O{args.opt}")
+                        params=params, name=args.name, optimize=None if args.opt == "auto" else f"-O{args.opt}",
+                        clocks=args.clocks)
     from cpgsim.harness.results import file_mode
 
     os.chmod(result.path, file_mode())  # the user's umask, like every other file cpgsim writes
@@ -86,5 +90,6 @@ def run(args: argparse.Namespace) -> int:
     counts = {c: len(variables.of(c)) for c in ("input", "output", "parameter", "state", "dstate")}
     kinds = {"cs": "co-simulation", "me": "model exchange", "both": "co-simulation + model exchange"}[args.kind]
     print(f"wrote {result.path} (FMI {args.fmi}.0, {kinds}; {counts['input']} inputs, {counts['output']} outputs, "
-          f"{counts['parameter']} parameters, {counts['state']} continuous and {counts['dstate']} discrete states)")
+          f"{counts['parameter']} parameters, {counts['state']} continuous and {counts['dstate']} discrete states"
+          + (f"; discrete states clocked by 'sample', interval {args.dt:g} s" if args.clocks else "") + ")")
     return 0

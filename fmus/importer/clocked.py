@@ -1,0 +1,382 @@
+"""Run FMI 3 FMUs with clocks: Scheduled Execution, and Co-Simulation / Model Exchange with input clocks.
+
+:class:`ClockedRuntime` is an :class:`~cpgsim.fmus.importer.runtime.FmuRuntime` that ticks the FMU's
+time-based input clocks at their exact tick times (:class:`~cpgsim.fmus.importer.clocks.TickSchedule`):
+
+- **Scheduled Execution** (``kind="se"``): each tick calls ``fmi3ActivateModelPartition(clock, time)``;
+  ticks of one instant run in priority order (smaller ``priority`` first), one partition after the
+  other in this thread (no preemption).
+- **Co-Simulation** (the FMU must declare ``hasEventMode``; it is instantiated with ``eventModeUsed``):
+  ``fmi3DoStep`` ends exactly at each tick inside the macro step; there the master enters event mode,
+  sets the ticking clocks with ``fmi3SetClock``, iterates ``fmi3UpdateDiscreteStates`` and returns to
+  step mode with ``fmi3EnterStepMode``.
+- **Model Exchange**: the ticks are time events: the solver stops exactly at each one, the clocks are
+  set in event mode before the event iteration.
+
+Intervals: ``constant`` from the modelDescription; ``fixed``, ``tunable`` and ``changing`` from
+``fmi3GetIntervalDecimal`` after initialisation (the modelDescription's value if the FMU does not
+answer), re-read after each tick of a ``tunable``/``changing`` clock (a changed interval counts from
+that tick); ``countdown`` clocks tick once each time ``fmi3GetIntervalDecimal`` (asked after
+initialisation and after every activation) says ``fmi3IntervalChanged``, that long after it.
+
+When a tick is activated: the inputs are those the master set at the last communication point at
+or before it (held over the macro step, as for any CS block). A tick at a communication point waits
+for the inputs at that point: it runs when the master sets them (for an FMU without inputs, at once),
+so outputs read at a point before the inputs are set show the values just before the tick there. The
+first tick (at the start time, for a clock without shift) therefore runs when the first inputs are set,
+and a run from 0 to T activates the ticks in [0, T) (plus the one at T if the FMU has no inputs).
+
+Refused (a :class:`~cpgsim.fmus.importer.clocks.ClockError` naming the FMU and the clock, when the block
+is built): ``triggered`` input clocks (cpgsim connects no clocks, nothing would tick them), output
+clocks (their ticks are not read), input clocks of a Co-Simulation FMU without ``hasEventMode``.
+"""
+
+from __future__ import annotations
+
+import collections
+from ctypes import c_int
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+from cpgsim.fmus.errors import FmuRuntimeError
+from cpgsim.fmus.importer.clocks import ClockError, TickSchedule, from_float, tolerance
+from cpgsim.fmus.importer.description import FmuDescription, describe_fmu
+from cpgsim.fmus.importer.runtime import FmuRuntime
+from cpgsim.harness.errors import StopRequested
+
+_CHANGED = 2  # fmi3IntervalChanged
+
+
+def _landing(t: float, target: float) -> float:
+    """The step size ``h`` with ``t + h == target`` in floating point (an FMU that adds the step to its time
+    lands exactly on the tick; ``target - t`` alone can miss it by one unit in the last place)."""
+    h = target - t
+    for _ in range(8):
+        miss = target - (t + h)
+        if miss == 0:
+            break
+        h += miss
+    return h
+
+
+def check_clocks(desc: FmuDescription, kind: str) -> None:
+    """Refuse (one line naming the FMU and the clock) clocks this importer cannot drive as ``kind``."""
+    name = Path(desc.path).name
+    for c in desc.clocks:
+        what = f"FMU {name}: {c.causality} clock {c.name!r} ({c.variability})"
+        if c.causality == "output":
+            raise ClockError(f"{what} is not supported: cpgsim does not read output clocks "
+                             f"({'of model partitions' if kind == 'se' else 'nothing consumes their ticks'})")
+        if c.causality != "input":
+            continue
+        if c.variability == "triggered":
+            raise ClockError(f"{what} is not supported: a triggered input clock ticks only when another FMU's "
+                             f"output clock triggers it, and cpgsim connects no clocks")
+        if c.variability == "constant" and c.interval is None:
+            raise ClockError(f"{what} declares no intervalDecimal (or intervalCounter and resolution)")
+        if kind == "cs" and not desc.event_mode:
+            raise ClockError(f"{what}: the CoSimulation interface has no event mode (hasEventMode is not "
+                             f"true), so the clock cannot be ticked; use its ModelExchange interface if it has one")
+
+
+def make_runtime(path: str | Path, kind: str, instance_name: str, desc: FmuDescription | None = None,
+                 strict: bool = False, **kw: Any) -> FmuRuntime:
+    """The runtime for an FMU: :class:`ClockedRuntime` for one with clocks (or Scheduled Execution)."""
+    desc = desc if desc is not None else describe_fmu(path, strict)
+    cls = ClockedRuntime if (desc.clocks or kind == "se") else FmuRuntime
+    return cls(path, kind, instance_name, desc=desc, strict=strict, **kw)
+
+
+class ClockedRuntime(FmuRuntime):
+    """An FMU instance whose input clocks cpgsim ticks (module docstring)."""
+
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        check_clocks(self.desc, self.kind)
+        self.clocks = [c for c in self.desc.clocks if c.causality == "input"]
+        self.by_vr = {c.vr: c for c in self.clocks}
+        self.schedule: TickSchedule | None = None
+        self.activations: collections.Counter[str] = collections.Counter()  # clock name -> ticks activated
+        self._cs_event_mode = False
+        self._cs_next: Fraction | None = None  # CS: the next time event the FMU announced
+        self._after_tick_pending: list[tuple[int, Fraction]] = []  # ME: ticks set, counted after the iteration
+
+    def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
+        self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
+        self.schedule = None
+        self.activations.clear()
+        self._cs_next = None
+        return super().setup(t0, params, inputs)
+
+    def _instantiate_options(self) -> dict[str, Any]:
+        return {"eventModeUsed": True} if self.kind == "cs" else {}
+
+    # -- intervals ----------------------------------------------------------------------------------
+    def _interval(self, vrs: list[int]) -> list[tuple[float, int]]:
+        """``fmi3GetIntervalDecimal`` for ``vrs``: (interval, qualifier) each."""
+        from fmpy import fmi3
+
+        n = len(vrs)
+        refs = (fmi3.fmi3ValueReference * n)(*vrs)
+        vals = (fmi3.fmi3Float64 * n)()
+        quals = (c_int * n)()
+        self.fmu.fmi3GetIntervalDecimal(self.fmu.component, refs, n, vals, quals)
+        return [(float(vals[i]), int(quals[i])) for i in range(n)]
+
+    def _shift(self, vr: int) -> float:
+        from fmpy import fmi3
+
+        refs = (fmi3.fmi3ValueReference * 1)(vr)
+        vals = (fmi3.fmi3Float64 * 1)()
+        self.fmu.fmi3GetShiftDecimal(self.fmu.component, refs, 1, vals)
+        return float(vals[0])
+
+    def _sched(self) -> TickSchedule:
+        """The schedule, started on first use after initialisation (intervals asked then)."""
+        if self.schedule is not None:
+            return self.schedule
+        s = TickSchedule(self.clocks)
+        t0 = from_float(self._time)
+        for c in self.clocks:
+            if c.variability == "countdown":
+                continue
+            interval, shift = c.interval, c.shift
+            if c.variability != "constant":
+                try:
+                    value, qualifier = self._interval([c.vr])[0]
+                    if qualifier != 0 or interval is None:
+                        interval = from_float(value)
+                except Exception as exc:  # noqa: BLE001 - not answered: the modelDescription's value
+                    if interval is None:
+                        raise self._fail(f"fmi3GetIntervalDecimal of clock {c.name!r}", exc) from None
+                try:
+                    shift = from_float(self._shift(c.vr))
+                except Exception:  # noqa: BLE001 - optional: the modelDescription's shift
+                    pass
+            if interval is None or interval <= 0:
+                raise FmuRuntimeError(self._where(f"clock {c.name!r}: no positive interval ({interval})"))
+            s.start(c.vr, interval, shift, t0)
+        self.schedule = s
+        self._countdowns(from_float(self._time))
+        return s
+
+    def _countdowns(self, now: Fraction) -> None:
+        """A countdown clock whose interval the FMU has just set ticks that long after ``now``."""
+        vrs = [c.vr for c in self.clocks if c.variability == "countdown"]
+        if not vrs:
+            return
+        try:
+            answers = self._interval(vrs)
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail("fmi3GetIntervalDecimal of the countdown clocks", exc) from None
+        for vr, (value, qualifier) in zip(vrs, answers, strict=True):
+            if qualifier == _CHANGED:
+                assert self.schedule is not None
+                self.schedule.add_once(vr, now + from_float(max(value, 0.0)))
+
+    def _after_tick(self, vr: int, at: Fraction) -> None:
+        c = self.by_vr[vr]
+        self.activations[c.name] += 1
+        if c.variability in ("tunable", "changing"):
+            try:
+                value, qualifier = self._interval([vr])[0]
+            except Exception as exc:  # noqa: BLE001
+                raise self._fail(f"fmi3GetIntervalDecimal of clock {c.name!r} after its tick at "
+                                 f"t={float(at):.12g}", exc) from None
+            if qualifier == _CHANGED:
+                assert self.schedule is not None
+                self.schedule.restart(vr, from_float(value), at)
+
+    # -- firing the ticks -------------------------------------------------------------------------------
+    def _fire(self, upto: Fraction) -> None:
+        """Activate every tick at or before ``upto``, instant by instant."""
+        sched = self._sched()
+        for _ in range(10_000_000):
+            batch = sched.pop_first(upto)
+            if not batch:
+                return
+            at = batch[0][0]
+            if self.kind == "se":
+                for _at, vr in batch:
+                    try:
+                        self.fmu.fmi3ActivateModelPartition(self.fmu.component, vr, float(at))
+                    except Exception as exc:  # noqa: BLE001
+                        raise self._fail(f"fmi3ActivateModelPartition of clock {self.by_vr[vr].name!r} "
+                                         f"at t={float(at):.12g}", exc) from None
+                    self._after_tick(vr, at)
+            else:
+                self._event_with_clocks(batch, at)
+            self._countdowns(at)
+        raise FmuRuntimeError(self._where(f"clocks: more than 10000000 ticks before t={float(upto):g}"))
+
+    def _event_with_clocks(self, batch: list[tuple[Fraction, int]], at: Fraction) -> None:
+        """CS: enter event mode (if not in it), set the clocks, iterate, back to step mode. ME: the same
+        inside :meth:`_leave_event_mode` (the solver stopped at the tick)."""
+        from fmpy import fmi3
+
+        vrs = [vr for _t, vr in batch]
+        where = f"event at the tick of {', '.join(self.by_vr[v].name for v in vrs)} (t={float(at):.12g})"
+        try:
+            if self.kind == "cs" and not self._cs_event_mode:
+                self.fmu.enterEventMode()
+                self._cs_event_mode = True
+            refs = (fmi3.fmi3ValueReference * len(vrs))(*vrs)
+            active = (fmi3.fmi3Clock * len(vrs))(*([True] * len(vrs)))
+            self.fmu.fmi3SetClock(self.fmu.component, refs, len(vrs), active)
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"{where}: fmi3SetClock", exc) from None
+        if self.kind == "cs":
+            self._cs_update(where)
+            for _t, vr in batch:
+                self._after_tick(vr, at)
+        else:  # ME: counted once the caller's event iteration has run
+            self._after_tick_pending.extend((vr, at) for _t, vr in batch)
+
+    def _cs_update(self, where: str) -> None:
+        """Iterate ``fmi3UpdateDiscreteStates`` to convergence and enter step mode."""
+        try:
+            self._cs_next = None
+            for _ in range(1000):
+                needed, terminate, _n, _v, defined, next_time = self.fmu.updateDiscreteStates()
+                if defined:  # a time event of the FMU's own: the step stops there too
+                    self._cs_next = from_float(next_time)
+                if terminate:
+                    self._terminated = True
+                    raise StopRequested(f"{self._where(where)} asked to stop the simulation at t={self._time:.9g}",
+                                        self._time)
+                if not needed:
+                    break
+            else:
+                raise FmuRuntimeError(self._where(f"{where}: the event iteration did not converge"))
+            self.fmu.enterStepMode()
+            self._cs_event_mode = False
+        except (FmuRuntimeError, StopRequested):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"{where}: fmi3UpdateDiscreteStates", exc) from None
+
+    def _due(self, inclusive: bool = True) -> Fraction:
+        t = self._time
+        return from_float(t) + tolerance(t) if inclusive else Fraction(t) - tolerance(t)
+
+    # -- the runtime interface ----------------------------------------------------------------------------
+    def get_outputs(self) -> dict:
+        if self._state == "running" and not self.desc.inputs and not self._terminated and self.kind != "me":
+            self._run_due()
+        return super().get_outputs()
+
+    def set_inputs(self, values: Any) -> None:
+        super().set_inputs(values)
+        if self.kind != "me" and not self._terminated:
+            self._run_due()
+
+    def _run_due(self) -> None:
+        """SE/CS: the ticks (and, CS, the FMU's own time event) due now; CS back in step mode."""
+        self._fire(self._due())
+        if self.kind != "cs":
+            return
+        if self._cs_event_mode:
+            self._cs_update(f"event at t={self._time:.9g}")
+        if self._cs_next is not None and self._cs_next <= self._due():
+            self._cs_event(f"time event at t={self._time:.12g}")
+
+    def do_step(self, t: float, dt: float) -> None:
+        if self.kind != "se":
+            return super().do_step(t, dt)
+        t_end = float(t) + float(dt)
+        self._fire(self._due())  # ticks at t not yet run (no inputs were set at t)
+        end = from_float(t_end)
+        self._fire(end + tolerance(t_end) if not self.desc.inputs else end - tolerance(t_end))
+        self._time = t_end
+
+    def _do_step3(self, t: float, dt: float) -> None:
+        """CS: ``fmi3DoStep`` up to each tick inside the step, the tick's event, then on to the step's end."""
+        self._run_due()
+        sched = self._sched()
+        t_end = t + dt
+        before_end = from_float(t_end) - tolerance(t_end)
+        cur = t
+        for _ in range(10_000_000):
+            nt = sched.next_time()
+            own = self._cs_next if self._cs_next is not None and self._cs_next > from_float(cur) else None
+            stops = [s for s in (nt, own) if s is not None and s < before_end]
+            if not stops:
+                break
+            at = min(stops)
+            tau = float(at)
+            if tau > cur:
+                self._cs_step(cur, _landing(cur, tau))
+                cur = self._time = tau
+            if at == nt:
+                self._fire(nt)
+            else:
+                self._cs_event(f"time event at t={tau:.12g}")
+        # a tick the step's end stands for (t + dt off by rounding): end the step exactly on the tick
+        end = float(nt) if nt is not None and nt <= from_float(t_end) + tolerance(t_end) else t_end
+        if end > cur:
+            self._cs_step(cur, _landing(cur, end))
+        self._time = t_end
+        if not self.desc.inputs:
+            self._run_due()
+
+    def _cs_event(self, where: str) -> None:
+        """An event of the FMU's own (no clock ticks): event mode, iteration, step mode."""
+        try:
+            self.fmu.enterEventMode()
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"{where}: fmi3EnterEventMode", exc) from None
+        self._cs_event_mode = True
+        self._cs_update(where)
+        self._countdowns(from_float(self._time))
+
+    def _cs_step(self, t: float, h: float) -> None:
+        """``fmi3DoStep`` (called directly, as the base runtime does); an event the FMU reports at the step's
+        end (``eventHandlingNeeded``) is handled there at once."""
+        from ctypes import byref
+
+        from fmpy import fmi3
+
+        event, terminate, early, last = fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Float64()
+        status = self.fmu.dll.fmi3DoStep(self.fmu.component, t, h, fmi3.fmi3Boolean(True), byref(event),
+                                         byref(terminate), byref(early), byref(last))
+        if status > 2 or (status == 2 and not terminate.value):
+            from fmpy.fmi1 import FMICallException
+
+            raise FMICallException("fmi3DoStep", status)
+        if terminate.value:
+            t_last = float(last.value) if status == 2 or early.value else t + h
+            self._stop(min(max(t_last, t), t + h), "fmi3DoStep returned terminateSimulation")
+        self._time = t + h
+        if event.value:
+            self._cs_event(f"event reported by fmi3DoStep at t={t + h:.12g}")
+
+    # -- model exchange: the ticks are time events ------------------------------------------------------
+    def _me_start(self) -> None:
+        super()._me_start()
+        self._after_tick_pending = []
+        self._sched()
+
+    def _leave_event_mode(self) -> None:
+        if self._in_event_mode and not self._terminated:
+            self._after_tick_pending = []
+            sched = self._sched()
+            batch = sched.pop_first(self._due())
+            if batch and float(batch[-1][0]) != self._time:  # the step end stood for the tick: be on it
+                try:
+                    self.fmu.setTime(float(batch[-1][0]))
+                except Exception as exc:  # noqa: BLE001
+                    raise self._fail(f"fmi3SetTime at the tick t={float(batch[-1][0]):.12g}", exc) from None
+            while batch:  # every tick due now (a late one included): one event iteration for all
+                self._event_with_clocks(batch, batch[0][0])
+                batch = sched.pop_first(self._due())
+        super()._leave_event_mode()
+        pending, self._after_tick_pending = self._after_tick_pending, []
+        for vr, at in pending:
+            self._after_tick(vr, at)
+        if pending:
+            self._countdowns(pending[-1][1])
+        nt = self._sched().next_time()
+        if nt is not None:
+            tick = float(nt)
+            self._next_event = tick if self._next_event is None else min(self._next_event, tick)

@@ -34,10 +34,7 @@ from typing import Any
 import numpy as np
 
 from cpgsim.components.private_store import pid_alive
-
-
-class ResultsError(ValueError):
-    """A results file is missing, malformed, or a column does not exist."""
+from cpgsim.harness.results.errors import ResultsError
 
 
 @dataclass

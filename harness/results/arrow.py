@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from cpgsim.harness.results.errors import ResultsError
+
 INTEGER_TYPES = ("int64", "uint64")
 
 
@@ -31,8 +33,6 @@ def _pa():
         import pyarrow as pa
         import pyarrow.ipc  # noqa: F401 - the submodule is not loaded by ``import pyarrow``
     except ImportError:  # pragma: no cover - a dependency of the project
-        from cpgsim.harness.results import ResultsError
-
         raise ResultsError("the .arrow results format needs pyarrow: pip install pyarrow") from None
     return pa
 
@@ -116,8 +116,6 @@ def read_table(path: Path) -> dict[str, Any]:
     """Every whole batch of ``path``: ``{time, columns, units, data, exact, meta, ended}`` (``ended``: the
     end-of-stream marker was read; False for a stream cut short, whose cut batch is left out)."""
     pa = _pa()
-    from cpgsim.harness.results import ResultsError
-
     batches = []
     ended = False
     try:

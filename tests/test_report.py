@@ -47,7 +47,7 @@ def test_cpgsim_report_rebuilds_it_and_refuses_a_wrong_directory(run_dir, tmp_pa
     assert main(["report", str(run_dir)]) == 0 and (run_dir / "report.html").stat().st_size > 1_000_000
     assert main(["report", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "results.npz does not exist" in err[0]
+    assert len(err) == 1 and "results.arrow does not exist" in err[0]
 
 
 def _browser(url: str, *args: str, user_dir: Path) -> subprocess.CompletedProcess:

@@ -95,7 +95,7 @@ def test_cli_graph_writes_svg(tmp_path):
     (["simulate", "network", "--set", "z1.eps=-1"], "z1.eps = -1 is out of bounds"),
     (["simulate", "network", "--set", "z1.eps"], "--set expects BLOCK.PARAM=VALUE"),
     (["simulate", "network", "--set", "z9.eps=1"], "no parameter matching 'z9.eps'"),
-    (["simulate", "network", "-o", "x.txt"], "must end in .csv or .npz"),
+    (["simulate", "network", "-o", "x.txt"], "must end in .arrow, .csv or .npz"),
     (["graph", "missing_file.py:build"], "does not exist"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):

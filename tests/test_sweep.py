@@ -44,7 +44,7 @@ def test_localcluster_sweep_matches_serial(tmp_path, client):
         oa = {k: v for k, v in a["outcome"].items() if k != "wall_time_s"}
         ob = {k: v for k, v in b["outcome"].items() if k != "wall_time_s"}
         assert oa == ob
-        ra, rb = Results.load(f"{a['dir']}/results.npz"), Results.load(f"{b['dir']}/results.npz")
+        ra, rb = Results.load(f"{a['dir']}/results.arrow"), Results.load(f"{b['dir']}/results.arrow")
         assert ra.columns == rb.columns and np.array_equal(ra.data, rb.data)  # bit for bit
     distances = [t["outcome"]["distance_m"] for t in tp]
     assert len(set(distances)) == 4  # different seeds, different trials
@@ -161,7 +161,7 @@ def test_sweep_on_a_cluster_whose_worker_does_not_share_the_client_disk(tmp_path
     trials = doc["groups"][0]["trials"]
     assert [t["status"] for t in trials] == ["ok", "ok"], [t.get("error") for t in trials]
     for t in trials:
-        res = Results.load(f"{t['dir']}/results.npz")  # written by the client from what the worker sent
+        res = Results.load(f"{t['dir']}/results.arrow")  # written by the client from what the worker sent
         assert res.time[-1] == pytest.approx(1.0) and "robot.body_position[1]" in res.columns
         assert json.loads((__import__("pathlib").Path(t["dir"]) / "summary.json").read_text())["seed"] == t["seed"]
         assert "files" not in t

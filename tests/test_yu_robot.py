@@ -76,7 +76,7 @@ def test_flat_walks_three_strides_in_20_s(flat_run):
     assert summary["distance_m"] >= 3 * summary["stride_length_m"], summary["distance_m"]
     assert summary["reflexes"] == []  # flat ground: no obstacle, no missing support
     assert abs(summary["lateral_drift_m"]) < 0.02
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     assert _tilt_deg(res).max() < 2.0  # the body stays level (static stability margin, see scenarios_yu)
     on_disk = json.loads((out / "summary.json").read_text())
     for key in ("scenario", "t_end", "distance_m", "fell", "reflexes", "wall_time_s", "real_time_factor"):
@@ -87,7 +87,7 @@ def test_flat_walks_three_strides_in_20_s(flat_run):
 
 def test_flat_tripod_groups_alternate(flat_run):
     _, out = flat_run
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     swing = res["controller.swing"] > 0.5
     late = res.time > 5.0
     a, b = swing[late][:, [0, 2, 4]], swing[late][:, [1, 3, 5]]
@@ -136,7 +136,7 @@ def test_step_each_right_leg_crosses_and_lands_on_the_step(step_run):
     """Each right leg's elevator swing lifts the foot to the raised clearance (80 mm, Y11) and ends on the
     step's top (an early touchdown there), at the edge or beyond."""
     summary, out = step_run
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     feet, mode = _feet(res), res["controller.mode"]
     first = {}
     for e in _elevators(summary):
@@ -156,7 +156,7 @@ def test_step_each_right_leg_crosses_and_lands_on_the_step(step_run):
 def test_step_robot_ends_past_the_step(step_run):
     summary, out = step_run
     assert not summary["fell"]
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     assert _tilt_deg(res).max() < 3.0  # the right legs stand 40 mm higher (height memory), the body stays level
     feet = _feet(res)[-1]
     for leg in RIGHT:
@@ -196,7 +196,7 @@ def test_ditches_trigger_searching_in_each_ditch(ditches_run):
     """Must show: searching reflexes in the ditches; any other search is a light touchdown at the end of a
     swing (vertical force below Fcz) that finds the ground at once."""
     summary, out = ditches_run
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     feet = _feet(res)
     searches = _searches(summary, res)
     assert {s["ditch"] for s in searches} >= {0, 1, 2}
@@ -211,7 +211,7 @@ def test_18mm_ditch_needs_one_search(ditches_run):
     """Must show: the 18 mm ditch is found by one search step (the first dip, within one follower period of
     the searching network, 1/(1.5*0.4) s), on its bottom."""
     summary, out = ditches_run
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     s18 = [s for s in _searches(summary, res) if s["ditch"] == 0]
     assert len(s18) == 1
     s = s18[0]
@@ -226,7 +226,7 @@ def test_80mm_ditch_ends_with_the_foot_back_at_its_aep(ditches_run):
     foot returns to its AEP: joint targets on the AEP angles, the foot (robot joint angles) within 3 mm of
     the nominal AEP, hanging over the ditch; then the leg withdraws onto the ground behind."""
     summary, out = ditches_run
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     s80 = [s for s in _searches(summary, res) if s["ditch"] == 2]
     assert len(s80) == 1
     s = s80[0]
@@ -255,7 +255,7 @@ def test_80mm_ditch_ends_with_the_foot_back_at_its_aep(ditches_run):
 def test_ditches_robot_keeps_walking(ditches_run):
     summary, out = ditches_run
     assert not summary["fell"]
-    res = Results.load(out / "results.npz")
+    res = Results.load(out / "results.arrow")
     assert _tilt_deg(res).max() < 3.0
     last_giveup = max(e["t"] for e in summary["reflexes"] if e["kind"] == "giveup")
     pos = res[f"{ROBOT}.body_position"][:, 1]

@@ -112,12 +112,14 @@ def _round(values: list) -> list:
 
 
 def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
-    """Write ``run_dir/report.html`` from ``results.npz``, ``summary.json`` and ``scenario.toml``."""
+    """Write ``run_dir/report.html`` from ``results.arrow`` (a run directory of an earlier version:
+    ``results.npz``), ``summary.json`` and ``scenario.toml``."""
     from cpgsim.harness.experiments.scenario import load
     from cpgsim.harness.experiments.setup import robot_geometry, terrain_of
 
     run = Path(run_dir)
-    res = Results.load(run / "results.npz")
+    res = Results.load(run / "results.arrow" if (run / "results.arrow").exists() or not (run / "results.npz").exists()
+                       else run / "results.npz")
     summary = json.loads((run / "summary.json").read_text()) if (run / "summary.json").exists() else {}
     scenario = load(run / "scenario.toml")
     geometry = robot_geometry(scenario)

@@ -3,12 +3,11 @@
 A scenario is a TOML document (:mod:`cpgsim.harness.experiments.scenario`; the built-ins are files in
 ``harness/experiments/scenarios/``); its ``controller.kind`` picks the builder (Yu:
 :func:`cpgsim.harness.experiments.yu.scenarios.build`, Fukuhara:
-:func:`cpgsim.harness.experiments.fukuhara.scenarios.build`),
-which returns a :class:`RunSetup`. :func:`run_scenario` runs it and writes into its directory
-``results.csv``/``results.npz``, ``summary.json`` (with the outcomes of :mod:`cpgsim.harness.experiments.outcomes`)
-and the PNGs of :mod:`cpgsim.harness.experiments.plots`. A run that fails midway still writes what it recorded,
-marks ``summary.json`` ``"complete": false`` with the error, and re-raises.
-"""
+:func:`cpgsim.harness.experiments.fukuhara.scenarios.build`), which returns a :class:`RunSetup`.
+:func:`run_scenario` runs it and writes into its directory ``results.arrow`` (and ``results.csv`` with
+``csv=True``), ``summary.json`` (with the outcomes of :mod:`cpgsim.harness.experiments.outcomes`) and the
+PNGs of :mod:`cpgsim.harness.experiments.plots`. A run that fails midway still writes what it recorded,
+marks ``summary.json`` ``"complete": false`` with the error, and re-raises. """
 
 from __future__ import annotations
 
@@ -63,12 +62,15 @@ def fell_from(res: Results, robot: str, max_tilt: float = math.pi / 4) -> tuple[
 
 def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
                  sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
-                 step_thread: bool | None = None, save_results: bool = True, **kw: Any) -> dict[str, Any]:
+                 step_thread: bool | None = None, save_results: bool = True, csv: bool = False,
+                 **kw: Any) -> dict[str, Any]:
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
     ``step_thread``: see :class:`~cpgsim.harness.simulate.Simulator`; ``save_results=False`` writes only the
-    summary and the scenario (a benchmark of hundreds of trials)."""
+    summary and the scenario (a benchmark of hundreds of trials). The results are streamed to
+    ``results.arrow`` (Arrow IPC, :mod:`cpgsim.harness.results.arrow`); ``csv=True`` also writes
+    ``results.csv`` at the end."""
     setup = build_scenario(name, sets, **kw)
     t_end = float(t_end if t_end is not None else setup.t_end)
     label = setup.scenario.name if setup.scenario is not None else str(name)
@@ -82,7 +84,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     error: SimulationError | None = None
     wall0 = time.perf_counter()
     try:
-        res = sim.run(t_end, progress=progress, stream=out / "results.csv" if save_results else None,
+        res = sim.run(t_end, progress=progress, stream=out / "results.arrow" if save_results else None,
                       meta={"scenario": label, **setup.info})
     except SimulationError as exc:
         error = exc
@@ -93,9 +95,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     interrupted = interruption(error) is not None
     if interrupted:
         plots = False  # Ctrl-C / SIGTERM: end within a moment, no pictures of a partial run
-    res.meta.update({"scenario": label, **setup.info})  # results.csv was streamed during the run
-    if save_results:
-        res.save(out / "results.npz")
+    res.meta.update({"scenario": label, **setup.info})  # results.arrow was streamed during the run
+    if save_results and csv:
+        res.to_csv(out / "results.csv")  # its sidecar is the stream's results.meta.json
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
     if error is not None:

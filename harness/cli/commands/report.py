@@ -1,7 +1,7 @@
 """Rebuild a run's report.html (3D replay, linked plots, summary) from the results files in DIR.
 
 cpgsim run writes report.html into every run directory; this remakes it (for example after an update),
-from DIR/results.npz, DIR/summary.json and DIR/scenario.toml. Example: cpgsim report runs/step
+from DIR/results.arrow, DIR/summary.json and DIR/scenario.toml. Example: cpgsim report runs/step
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ def run(args: argparse.Namespace) -> int:
     from cpgsim.harness.experiments.report import build_report
 
     run_dir = Path(args.run_dir)
-    for name in ("results.npz", "scenario.toml"):
+    for name in ("results.arrow", "scenario.toml"):
+        if name == "results.arrow" and (run_dir / "results.npz").is_file():
+            continue  # a run directory of an earlier version
         if not (run_dir / name).is_file():
             raise CliError(f"{run_dir / name} does not exist (is {run_dir} a directory written by cpgsim run?)")
     path = build_report(run_dir)

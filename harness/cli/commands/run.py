@@ -6,14 +6,13 @@ terrain.step.side=left, robot.body_mass=4, controller.Fcx=20, t_end=40, a contro
 controller.R1.reflex.x1_apex=0.5 (VALUE is a TOML value; a bare word is a string). --show prints
 the resolved scenario and exits.
 
-Writes results.csv/.npz, scenario.toml, summary.json (distance, fell, max tilt, stalled, waiting share,
-success, reflex events) and PNGs (gait diagram, foot paths, toe forces, body, snapshots) into the output
-directory. The run is built in DIR.partial beside it and replaces the previous run in DIR only when it
-is complete; cpgsim never empties a folder it did not write (no .cpgsim-run.json manifest), and a second
-run into a DIR that is being written is refused ("in use").
-Exit status 1 when a criterion of the scenario fails (pytest's convention; the last line names each
-failed criterion with its value and limit). Example: cpgsim run step -o runs/step --set terrain.step.height=0.05
-"""
+Writes results.arrow (Arrow IPC; --csv also results.csv), scenario.toml, summary.json (distance, fell,
+max tilt, stalled, waiting share, success, reflex events) and PNGs (gait diagram, foot paths, toe forces,
+body, snapshots) into the output directory. The run is built in DIR.partial beside it and replaces the
+previous run in DIR only when it is complete; cpgsim never empties a folder it did not write (no .cpgsim-
+run.json manifest), and a second run into a DIR that is being written is refused ("in use"). Exit status
+1 when a criterion of the scenario fails (pytest's convention; the last line names each failed criterion
+with its value and limit). Example: cpgsim run step -o runs/step --set terrain.step.height=0.05 """
 
 from __future__ import annotations
 
@@ -26,8 +25,8 @@ from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.experiments.scenario import builtin_descriptions, load
 from cpgsim.harness.simulate import SimulationError
 
-RUN_FILES = ["results.csv", "results.meta.json", "results.npz", "scenario.toml", "summary.json", "gait.png",
-             "feet_sagittal.png", "toe_forces.png", "body.png", "snapshots.png", "report.html"]
+RUN_FILES = ["results.arrow", "results.csv", "results.meta.json", "results.npz", "scenario.toml", "summary.json",
+             "gait.png", "feet_sagittal.png", "toe_forces.png", "body.png", "snapshots.png", "report.html"]
 """The files a run may write (listed in a run being built, so a killed one can be replaced later)."""
 
 NAME = "run"
@@ -40,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--t-end", type=positive_float, default=None, help="simulated time in s (same as --set t_end=)")
     p.add_argument("--seed", type=int, default=None, help="random seed (same as --set seed=)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--csv", action="store_true", help="also write results.csv (the results are in results.arrow; "
+                   "`cpgsim results DIR/results.arrow --csv` converts later)")
     p.add_argument("--list", action="store_true", help="list the built-in scenarios and exit")
     p.add_argument("--show", action="store_true", help="print the resolved scenario (TOML) and exit")
     add_scenario_set_argument(p)
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     failure: SimulationError | None = None
     with run_directory(out, RUN_FILES) as work:  # the previous run there stays until this one is complete
         try:
-            summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress)
+            summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress, csv=args.csv)
         except SimulationError as exc:
             if interruption(exc) is not None:
                 print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")
@@ -137,5 +138,6 @@ def print_summary(summary: dict, out: Path) -> None:
         print("  success")
     for phrase in failed_criteria(summary):  # one line per criterion: its value and its limit
         print(f"  FAILED: {phrase}")
-    print(f"  results: {out}/results.csv, {out}/summary.json, {out}/scenario.toml")
+    csv = f", {out}/results.csv" if (out / "results.csv").exists() else ""
+    print(f"  results: {out}/results.arrow{csv}, {out}/summary.json, {out}/scenario.toml")
     print("  pictures: " + ", ".join(f"{out}/{p}" for p in summary.get("pictures", [])))

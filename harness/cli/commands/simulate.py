@@ -1,7 +1,7 @@
-"""Simulate a graph at a fixed macro step and write its results (CSV or npz).
+"""Simulate a graph at a fixed macro step and write its results (Arrow, CSV or npz).
 
 GRAPH is a built-in name (see `cpgsim simulate --list`), path/to/module.py:function returning a
-Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.csv
+Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0.001 -o out.arrow
 
 The results are written while the run goes on (marked "complete": false in the metadata until it
 ends), so a run that is killed keeps what it recorded. An existing results file is refused unless
@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="macro step in s (default: the FMU's DefaultExperiment stepSize or the step an SSP "
                         "exported by cpgsim records, else 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
-    p.add_argument("-o", "--output", default="results.csv", help="results file: .csv or .npz")
+    p.add_argument("-o", "--output", default="results.arrow",
+                   help="results file: .arrow (Arrow IPC, the default), .csv or .npz")
     p.add_argument("--record", action="append", default=None, metavar="PATTERN",
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
@@ -132,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.graph:
         raise CliError("missing GRAPH (a built-in name or path/to/module.py:function)")
     out = Path(args.output)
-    if out.suffix not in (".csv", ".npz"):
-        raise CliError(f"output {out} must end in .csv or .npz")
+    if out.suffix not in (".arrow", ".csv", ".npz"):
+        raise CliError(f"output {out} must end in .arrow, .csv or .npz")
     from cpgsim.harness.rundir import output_lock
 
     with output_lock(out):  # one writer per output: a second run into it now is refused ("in use")

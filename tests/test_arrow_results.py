@@ -1,0 +1,88 @@
+"""Results as Arrow IPC streams: what pyarrow and pandas read back, a stream cut at any byte (a kill)
+readable up to its last whole batch and marked incomplete, and ``cpgsim results`` converting to CSV."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from cpgsim.harness.results import Results, ResultsWriter
+
+pa = pytest.importorskip("pyarrow")
+import pyarrow.ipc  # noqa: E402
+
+BIG = 2 ** 64 - 1  # a UInt64 no float64 holds
+
+
+def _results(n: int = 7) -> Results:
+    t = np.arange(n) * 0.1
+    ints = [BIG - k for k in range(n)]
+    data = np.column_stack([np.sin(t), np.cos(t), np.array(ints, dtype=float)])
+    return Results(t, ["a.x", "a.v[0]", "b.n"], ["m", "m/s", "1"], data, True, "",
+                   {"exact_integers": {"b.n": {"dtype": "uint64", "values": ints}}, "scenario": "s"})
+
+
+def test_other_readers_get_the_types_units_and_values(tmp_path):
+    res = _results()
+    res.save(tmp_path / "r.arrow")
+    table = pa.ipc.open_stream(pa.OSFile(str(tmp_path / "r.arrow"))).read_all()
+    assert table.column_names == ["time", "a.x", "a.v[0]", "b.n"]
+    assert table.schema.field("b.n").type == pa.uint64() and table.schema.field("a.x").type == pa.float64()
+    assert table.schema.field("a.v[0]").metadata[b"unit"] == b"m/s"
+    assert table.column("b.n").to_pylist() == [BIG - k for k in range(7)]  # exact, no float64 on the way
+    np.testing.assert_array_equal(table.column("a.x").to_numpy(), res["a.x"])  # bit for bit
+    frame = table.to_pandas()
+    assert str(frame["b.n"].dtype) == "uint64" and int(frame["b.n"].iloc[0]) == BIG
+    back = Results.load(tmp_path / "r.arrow")
+    assert back.complete and back["b.n"].dtype == np.uint64 and int(back["b.n"][0]) == BIG
+    assert back.unit("a.v[0]") == "m/s" and back.meta["scenario"] == "s"
+
+
+def test_a_stream_cut_anywhere_keeps_its_whole_batches_and_says_incomplete(tmp_path):
+    path = tmp_path / "s.arrow"
+    w = ResultsWriter(path).open(["a.x"], ["m"], {})
+    for k in range(5):  # five batches of 10 rows, each fsynced
+        t = np.arange(10 * k, 10 * k + 10) * 1e-3
+        w.append(t, np.sin(t)[:, None])
+        w.flush()
+    data = path.read_bytes()  # the run is killed now: no end marker, the sidecar says incomplete
+    assert not Results.load(path).complete and len(Results.load(path).time) == 50
+    rng = np.random.default_rng(0)
+    for cut in sorted(rng.integers(len(data) // 3, len(data), 12)):
+        path.write_bytes(data[:cut])
+        part = Results.load(path)
+        assert not part.complete and len(part.time) % 10 == 0 and len(part.time) <= 50
+        np.testing.assert_array_equal(part["a.x"], np.sin(np.arange(len(part.time)) * 1e-3))
+    w.abandon()
+
+
+def test_a_finished_stream_is_complete_and_a_rerun_replaces_it_only_at_the_end(tmp_path):
+    path = tmp_path / "r.arrow"
+    first = _results(3)
+    first.save(path)
+    w = ResultsWriter(path).open(list(first.columns), list(first.units), {"integer_columns": {"b.n": "uint64"}})
+    assert (tmp_path / "r.partial.arrow").exists() and len(Results.load(path).time) == 3  # the old one stays
+    second = _results(5)
+    w.append(second.time, second.data, {2: second.meta["exact_integers"]["b.n"]["values"]})
+    w.close(second)
+    back = Results.load(path)
+    assert back.complete and len(back.time) == 5 and int(back["b.n"][4]) == BIG - 4
+    assert not (tmp_path / "r.partial.arrow").exists()
+    assert json.loads((tmp_path / "r.meta.json").read_text())["integer_columns"] == {"b.n": "uint64"}
+
+
+def test_cli_results_converts_to_csv_that_a_csv_reader_gets_exactly(tmp_path, capsys):
+    from cpgsim.harness.cli.main import main
+
+    _results().save(tmp_path / "r.arrow")
+    assert main(["results", str(tmp_path / "r.arrow"), "--csv"]) == 0
+    out = capsys.readouterr().out
+    assert "7 rows x 3 columns" in out and "complete" in out
+    with open(tmp_path / "r.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["b.n"]) for r in rows] == [BIG - k for k in range(7)]
+    assert main(["results", str(tmp_path / "r.arrow"), "--csv"]) == 2  # exists: refused without --force
+    assert "exists (use --force" in capsys.readouterr().err

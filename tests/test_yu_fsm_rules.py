@@ -135,11 +135,88 @@ def test_liftoff_needs_an_alien_touchdown():
 def test_a_tetrapod_stance_part_ends_at_its_fraction_of_the_half_period():
     """Tetrapod (gamma 3), slot 0: L1 and R3 (slot 2) stand with j = (0 - 2 - 1) mod 3 = 0, so their part ends at
     the fraction (j + 1)/(gamma - 1) = 1/2 of T_half (minus p_tol); their stance rate is 3/4 (T_g = T_net), so
-    the network time reaches 0.5 - 1e-3 of T_half = 1 s after (0.499/0.75) s = 0.6653 s. The FSM integrates
-    that time from sample to sample: the transition comes within two samples after."""
-    state, rate, *_ = run(100, lambda k: {"swing": legs(2, 4)}, gait=2)
+    with T_half = 0.8 s the network time reaches (0.5 - 1e-3) * 0.8 = 0.3992 s after 0.3992 / 0.75 = 0.5323 s.
+    The FSM integrates that time from sample to sample: the transition comes within two samples after."""
+    state, rate, *_ = run(100, lambda k: {"swing": legs(2, 4)}, gait=2, T_half=0.8)
     assert rate[1, 0] == pytest.approx(0.75) and state[1, 0] == STANCE
     k = int(np.argmax(state[:, 0] == STANCE_PROLONG))
-    assert 0.6653 <= k * DT <= 0.6653 + 2 * DT + 1e-9, k
+    assert 0.5323 <= k * DT <= 0.5323 + 2 * DT + 1e-9, k
     assert np.all(state[: k, 0] == STANCE) and np.all(state[k:, 0] == STANCE_PROLONG)
     assert np.all(state[:, 1] == STANCE)  # L2 (slot 1, j = 1) stands to its PEP: target 1 is the stance's end
+
+
+class Legs:
+    """The FSM sampled one step at a time with flags chosen from its own outputs (a scripted robot):
+    :meth:`sample` applies ``flags`` (six values per input) and returns the outputs after the sample."""
+
+    def __init__(self, gait: int, **params) -> None:
+        from cpgsim.harness.compile import compile_graph
+
+        self.m = compile_graph(YuGaitFSM("fsm", gait=gait, **{"T_g": 5.0, "T_net": 5.0, "T_half": 1.0, **params}),
+                               dt=DT)
+        self.x, self.z, self.p = self.m.x0.copy(), self.m.z0.copy(), self.m.p0.copy()
+        self.k = 0
+
+    def sample(self, **flags) -> dict[str, np.ndarray]:
+        m = self.m
+        u = np.zeros(m.inputs.size)
+        for name, values in flags.items():
+            u[m.inputs.index("$" + name).slice] = values
+        t = self.k * DT
+        x, z = (np.asarray(a).ravel() for a in m.discrete(t, self.x, self.z, u, self.p))
+        y = np.asarray(m.signals(t, x, z, u, self.p)).ravel()
+        self.x, self.z, self.k = x, z, self.k + 1
+        return {name: y[m.signals_layout.index(f"fsm.{name}").slice] for name in ("state", "slot", "n_switch", "rate")}
+
+
+# the swing order of the module docstring's table (Yu Y16's slots as chosen here), written out by hand
+TETRAPOD_ORDER = [{2, 4}, {1, 3}, {0, 5}]  # {L3, R2}, {L2, R1}, {L1, R3}
+WAVE_ORDER = [{2}, {1}, {0}, {5}, {4}, {3}]  # L3, L2, L1, R3, R2, R1
+
+
+@pytest.mark.parametrize("gait, order", [(1, [set(A), set(B)]), (2, TETRAPOD_ORDER), (3, WAVE_ORDER)])
+def test_the_slots_follow_the_gait_tables_order_through_two_cycles(gait, order):
+    """A scripted robot: a swinging leg's swing ends 3 samples after it began, a standing leg's part of the
+    stance ends 3 samples after it began (its leader passes PEP: the swing flag rises and stays up while the
+    leg holds in StanceProlong), every foot is down. The legs that swing
+    in each slot must be the table's, in its order, twice round."""
+    legs = Legs(gait)
+    state, since = None, np.zeros(6)
+    swinging: list[set] = []
+    for _ in range(400):
+        if state is None:  # the first sample: swings begin (flag 1), stances are done at once
+            swing_flag = ALL
+        else:
+            swing_flag = np.select([state == SWING, state == STANCE, state == STANCE_PROLONG],
+                                   [since < 3, since >= 3, True], False).astype(float)
+        out = legs.sample(swing=swing_flag, lambda_td=ALL)
+        since = np.where(state is not None and out["state"] == state, since + 1, 0) if state is not None \
+            else np.zeros(6)
+        state = out["state"]
+        now = {i for i in range(6) if state[i] == SWING}
+        if now and (not swinging or now != swinging[-1]):
+            swinging.append(now)
+        if len(swinging) > 2 * len(order):
+            break
+    assert swinging[:2 * len(order)] == order * 2
+
+
+def test_a_reflex_that_aborted_a_stance_lets_the_landed_legs_start_their_stance_early():
+    """Module docstring, "Early stance after an aborted stance": the tripod's slot-0 legs have swung and
+    landed (SwingProlong, ``landed``); a reflex on L1 freezes the standing legs mid-stance (StanceProlong,
+    aborted). When it ends the standing legs resume, and the landed legs start their stance at once; without
+    the reflex they hold in SwingProlong until the switch."""
+    def run_(reflex: bool) -> np.ndarray:
+        legs = Legs(1)
+        states = []
+        for k in range(12):
+            active = legs_(0) if reflex and 4 <= k <= 6 else np.zeros(6)
+            out = legs.sample(swing=legs_(*A) if k < 2 else np.zeros(6), landed=legs_(*A), active=active,
+                              lambda_td=legs_(*A))
+            states.append(out["state"])
+        return np.array(states)
+    legs_ = legs
+    with_reflex, without = run_(True), run_(False)
+    assert np.all(without[2:][:, A] == SWING_PROLONG) and np.all(without[:, B] == STANCE)
+    assert np.all(with_reflex[4:7][:, B] == STANCE_PROLONG)
+    assert np.all(with_reflex[7:][:, B] == STANCE) and np.all(with_reflex[7:][:, A] == STANCE)

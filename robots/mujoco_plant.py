@@ -47,7 +47,8 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
     Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle``,
-    ``disturbances`` as :class:`~cpgsim.robots.plant.DartHexapod` (pushes are applied through
+    ``disturbances`` as :class:`~cpgsim.robots.plant.DartHexapod`; ``amputated``: leg indices whose links
+    touch nothing (Fukuhara 2022, Sec. 3.2: they keep their mass); (pushes are applied through
     ``xfrc_applied`` at every MuJoCo step they cover, by the Python sub-steps: a run with pushes does not
     use the native step loop); ``contact`` a :class:`~cpgsim.robots.mjcf.ContactModel`
     (its ``timestep`` is the MuJoCo step; ``do_step``'s ``dt`` must be a multiple of it). ``time_step``,
@@ -60,7 +61,7 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
                  settle: float = 0.0, native: bool = True, disturbances: Sequence[Push | Mapping] | None = None,
-                 **params: float) -> None:
+                 amputated: Sequence[int] = (), **params: float) -> None:
         self.name = name
         q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle, disturbances)
         contact = contact or ContactModel()
@@ -71,6 +72,9 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         self.contact = contact
         self.time_step = contact.timestep
         self.native = bool(native)
+        self.amputated = tuple(int(i) for i in amputated)
+        if any(not 0 <= i < 6 for i in self.amputated):
+            raise ParameterError(f"amputated legs must be leg indices 0-5, got {self.amputated}")
         self._native = None
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
@@ -106,6 +110,11 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         """Build the model, place the robot (lowest foot touching the ground), set the servos; clock at ``t0``."""
         self.terminate()
         model = mujoco.MjModel.from_xml_string(self.xml())
+        for i in self.amputated:  # an amputated leg keeps its links and mass but touches nothing
+            for link in ("coxa_box", "femur_box", "tibia_box", "foot"):
+                gid = model.geom(f"{LEG_NAMES[i]}_{link}").id
+                model.geom_contype[gid] = 0
+                model.geom_conaffinity[gid] = 0
         data = mujoco.MjData(model)
         self.model, self.data = model, data
         z = self.body_height if self.body_height is not None else self._touching_height()

@@ -12,7 +12,7 @@ import pytest
 from cpgsim.harness.results import Results, ResultsWriter
 
 pa = pytest.importorskip("pyarrow")
-import pyarrow.ipc  # noqa: E402
+import pyarrow.ipc  # noqa: E402, F401 - loads the submodule behind pa.ipc
 
 BIG = 2 ** 64 - 1  # a UInt64 no float64 holds
 

@@ -255,7 +255,8 @@ def plot_bench(doc: Mapping[str, Any], path: Path) -> Path:
     ax.set_yticks(range(len(terrs)), terrs, fontsize=8)
     ax.xaxis.tick_top()
     fig.colorbar(im, ax=ax, label="success ratio", fraction=0.04)
-    ax.set_title(f"{doc['suite']}: success per controller and {doc.get('row_label', 'terrain')} ({len(doc['seeds'])} seeds; "
+    rows = doc.get("row_label", "terrain")
+    ax.set_title(f"{doc['suite']}: success per controller and {rows} ({len(doc['seeds'])} seeds; "
                  "F falls, S stalls, C crashed)", fontsize=9, pad=28)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

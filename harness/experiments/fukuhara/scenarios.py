@@ -49,6 +49,7 @@ from cpgsim.harness.experiments.outcomes import crossing, fall
 from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
 from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
 from cpgsim.harness.results import Results
+from cpgsim.robots.engines import make_plant
 from cpgsim.robots.plant import DartHexapod
 from cpgsim.robots.terrain import Terrain
 
@@ -126,8 +127,9 @@ def initial_alpha(seed: int | None, geometry: RobotGeometry = YU_SIM) -> np.ndar
 
 def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: dict[str, float],
                 amputated: tuple[str, ...] = (), terrain: Terrain | None = None,
-                geometry: RobotGeometry = YU_SIM) -> tuple[Graph, dict, dict, np.ndarray]:
-    """Controller + plant graph; returns (graph, scenario options, controller overrides, initial alpha)."""
+                geometry: RobotGeometry = YU_SIM, engine: str = "dart") -> tuple[Graph, dict, dict, np.ndarray]:
+    """Controller + plant graph (``engine``: ``"dart"`` or ``"mujoco"``); returns (graph, scenario options,
+    controller overrides, initial alpha)."""
     opts, ctrl_params, paths = _split_sets(sets, options)
     setting = _setting(opts.get("setting", 1))
     omega_sw, omega_st = SPEED_SETTINGS[setting]
@@ -137,9 +139,13 @@ def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: di
     alpha0 = initial_alpha(seed, geometry)
     set_initial(ctrl, alpha0)
     q0 = initial_joint_targets(geometry, alpha0, cut)
-    robot = AmputatedHexapod("robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
-                             settle=SETTLE)
-    g = Graph(name.replace("-", "_"), f"Fukuhara controller + DART hexapod ({name})")
+    if engine == "dart":
+        robot = AmputatedHexapod("robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
+                                 settle=SETTLE)
+    else:
+        robot = make_plant(engine, "robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
+                           settle=SETTLE)
+    g = Graph(name.replace("-", "_"), f"Fukuhara controller + {engine} hexapod ({name})")
     g.add(ctrl)
     g.add(robot)
     g.connect("ctrl.q_target", "robot.q_target")
@@ -303,9 +309,6 @@ def build(scenario: Scenario) -> RunSetup:
     amputation (``controller.case``, 3.2), gap crossing (``criteria.cross`` names the gap, 3.3)."""
     doc = scenario.doc
     ctrl_table, crit = doc["controller"], doc["criteria"]
-    if doc["robot"].get("engine", "dart") != "dart":
-        raise ScenarioError(f"robot.engine = {doc['robot']['engine']!r}: the fukuhara scenarios (amputated legs) run "
-                            f"on DART only so far ({scenario.source})")
     geometry = robot_geometry(scenario)
     terrain = terrain_of(scenario, geometry)
     case = int(ctrl_table.get("case", 0))
@@ -314,7 +317,8 @@ def build(scenario: Scenario) -> RunSetup:
     opts0 = {"setting": 1.0, "transient": 15.0}
     try:
         graph, opts, ctrl_params, alpha0 = closed_loop(scenario.name, _sets_of(scenario), seed, opts0,
-                                                       amputated=amputated, terrain=terrain, geometry=geometry)
+                                                       amputated=amputated, terrain=terrain, geometry=geometry,
+                                                       engine=doc["robot"].get("engine", "dart"))
     except ScenarioError:
         raise
     except ModelError as exc:

@@ -222,10 +222,17 @@ def test_mjcf_terrain_of_every_feature_has_the_terrains_heights():
     assert hits > 300 and holes > 0
 
 
-def test_fukuhara_scenarios_refuse_mujoco():
+@pytest.mark.slow  # a 6 s Fukuhara run
+def test_fukuhara_amputation_runs_on_mujoco_with_the_cut_legs_touching_nothing():
+    """Fukuhara 2022, Sec. 3.2: the middle legs (case 1: L2, R2) are taken out; on MuJoCo their geoms do not
+    collide, so their toe force is exactly zero all run, while the four others carry the robot's weight
+    (35.5 N) between them."""
     from cpgsim.harness.experiments.runner import build_scenario
-    from cpgsim.harness.experiments.scenario import ScenarioError, builtin_names, load
+    from cpgsim.harness.simulate import Simulator
 
-    name = next(n for n in builtin_names() if load(n).doc["controller"]["kind"] == "fukuhara")
-    with pytest.raises(ScenarioError, match="DART only"):
-        build_scenario(name, {"robot.engine": "mujoco"})
+    setup = build_scenario("fukuhara-amputation", {"robot.engine": "mujoco", "controller.case": 1})
+    res = Simulator(setup.graph, dt=1e-3, record=["robot.toe_force"]).run(6.0)
+    force = res["robot.toe_force"].reshape(len(res.time), 6, 3)
+    assert np.all(force[:, [1, 4]] == 0.0)  # L2, R2
+    fz = force[:, [0, 2, 3, 5], 2].sum(axis=1)
+    assert np.median(fz[len(fz) // 2:]) == pytest.approx(setup.geometry.mass * 9.81, rel=0.1)

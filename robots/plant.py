@@ -581,6 +581,19 @@ class PlantSnapshot:
     def replace(self, **changes) -> PlantSnapshot:
         return dataclasses.replace(self, **changes)
 
+    def interpolate(self, other: PlantSnapshot, tau: float) -> PlantSnapshot:
+        """``other`` with positions and velocities moved back to ``self + tau (other - self)`` in time: the 18
+        joint angles by cubic Hermite from their velocities, the body's free joint and every velocity linearly
+        (everything else, the contact readings of the last step included, is ``other``'s)."""
+        d = other.t - self.t
+        pos = self.positions + tau * (other.positions - self.positions)
+        h00, h10, h01, h11 = (2 * tau**3 - 3 * tau**2 + 1, tau**3 - 2 * tau**2 + tau, -2 * tau**3 + 3 * tau**2,
+                              tau**3 - tau**2)
+        pos[6:] = (h00 * self.positions[6:] + h10 * d * self.velocities[6:] + h01 * other.positions[6:]
+                   + h11 * d * other.velocities[6:])
+        vel = self.velocities + tau * (other.velocities - self.velocities)
+        return dataclasses.replace(other, positions=pos, velocities=vel)
+
 
 def _readout_for(geometry: RobotGeometry):
     """The readout function of a geometry (built once per geometry and process)."""

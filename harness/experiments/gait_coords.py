@@ -66,7 +66,7 @@ class HexapodCoordinates:
             body += [f"q.{n}" for n in joint_names] + [f"qd.{n}" for n in joint_names]
             scales += [0.01] * 18 + [0.1] * 18
         self.names = body + [names[i] for i in self.ctrl_idx]
-        self.scales = np.array(scales + [0.1] * self.ctrl_idx.size)
+        self.scales = np.array(scales + [1.0] * self.ctrl_idx.size)  # Van der Pol amplitude 1
         self.removed = ["body forward position (world y)", "body lateral position (world x)", "body yaw"]
         self.left_out = ["controller discrete states (FSM, reflex timers/counters, converter holds, sensor filters)",
                          "servo targets and the last step's contact readings",

@@ -36,7 +36,8 @@ def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = Non
             continue  # the conjugate of the previous one moves the same coordinates
         vec = est.vectors[:, k]
         leading.append({"multiplier": [float(lam.real), float(lam.imag)], "modulus": float(abs(lam)),
-                        "moves": coords.describe(np.abs(vec))})
+                        "moves": coords.describe(np.abs(vec)),
+                        "units": "components relative to the largest, in units of each coordinate's scale"})
     nonsmooth = r.nonsmooth_columns(NONSMOOTH_TOL)
     pert = r.perturbation
     return {
@@ -122,27 +123,28 @@ def plot_gait(run: GaitRun, path: Path) -> Path:
     ax[0].set_title(f"Floquet multipliers ({'stable' if r.stable else 'not stable'})")
     ax[0].legend(loc="lower left", fontsize=8)
     d = leading_real_direction(est)
-    i = int(np.argmax(np.abs(d)))
-    name = run.coords.names[i]
-    seq = [*r.transient_states, *r.perturbation.get("trajectory", [])]
-    star = r.fixed_point.r[i]
-    pts = np.array([[a[i], b[i]] for a, b in zip(r.transient_states[:-1], r.transient_states[1:], strict=True)])
-    pert = r.perturbation.get("trajectory", [])
-    pp = np.array([[a[i], b[i]] for a, b in zip(pert[:-1], pert[1:], strict=True)]) if len(pert) > 1 else None
-    vals = np.array([s[i] for s in seq] + [star])
+    scale = run.coords.scales
+    star = r.fixed_point.r
+
+    def xi(v: np.ndarray) -> float:  # the coordinate along the leading eigenvector (scaled units)
+        return float(d @ ((v - star) / scale))
+
+    trans = [xi(v) for v in r.transient_states]
+    pert = [xi(v) for v in r.perturbation.get("trajectory", [])]
+    vals = np.array([*trans, *pert, 0.0])
     lo, hi = vals.min(), vals.max()
-    pad = 0.1 * (hi - lo or abs(star) or 1.0)
-    ax[1].plot([lo - pad, hi + pad], [lo - pad, hi + pad], "k--", lw=0.8, label="r' = r")
+    pad = 0.1 * (hi - lo or 1e-3)
     lam = est.multipliers[0]
-    ax[1].plot([lo - pad, hi + pad], [star + abs(lam) * (lo - pad - star), star + abs(lam) * (hi + pad - star)],
-               ":", color="gray", label=f"slope |lambda_max| = {abs(lam):.3f}")
-    if pts.size:
-        ax[1].plot(pts[:, 0], pts[:, 1], "s", label="transient strides")
-    if pp is not None:
-        ax[1].plot(pp[:, 0], pp[:, 1], "o-", label="perturbed strides")
-    ax[1].plot([star], [star], "r*", ms=12, label="fixed point")
-    ax[1].set_xlabel(f"{name} at section n")
-    ax[1].set_ylabel(f"{name} at section n+1")
+    grid = np.array([lo - pad, hi + pad])
+    ax[1].plot(grid, grid, "k--", lw=0.8, label="xi' = xi")
+    ax[1].plot(grid, lam.real * grid, ":", color="gray", label=f"slope lambda_max = {lam.real:.3f}")
+    if len(trans) > 1:
+        ax[1].plot(trans[:-1], trans[1:], "s", label="transient strides")
+    if len(pert) > 1:
+        ax[1].plot(pert[:-1], pert[1:], "o-", label="perturbed strides")
+    ax[1].plot([0.0], [0.0], "r*", ms=12, label="fixed point")
+    ax[1].set_xlabel("xi_n (along the leading eigenvector, scaled)")
+    ax[1].set_ylabel("xi_n+1")
     ax[1].set_title("return map along the leading eigenvector")
     ax[1].legend(fontsize=8)
     dist = np.array(r.perturbation["distances"])

@@ -27,6 +27,7 @@ import numpy as np
 
 from cpgsim.harness.experiments.gait_coords import LEGS, HexapodCoordinates
 from cpgsim.harness.experiments.runner import build_scenario
+from cpgsim.harness.experiments.scenario import ScenarioError
 from cpgsim.harness.experiments.setup import RunSetup
 from cpgsim.harness.simulate import Simulator
 from cpgsim.harness.verify.gait import GaitOptions, GaitResult, analyze
@@ -80,7 +81,7 @@ def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: G
     setup = build_scenario(scenario, sets)
     if setup.terrain.params.get("features"):
         names = ", ".join(setup.terrain.params["features"])
-        raise GaitError(f"scenario {scenario!r} has terrain features ({names}): the stride map needs flat ground, "
+        raise ScenarioError(f"scenario {scenario!r} has terrain features ({names}): the stride map needs flat ground, "
                         "where the forward and lateral position and the yaw are neutral")
     robot = setup.robot
     record = [SECTION_STATE, f"{robot}.toe_force", "controller.fsm.state", f"{robot}.body_rpy"]
@@ -98,7 +99,7 @@ def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: G
     coords = HexapodCoordinates(sim.model, robot, SECTION_STATE, joints=joints)
     if progress:
         o = options or GaitOptions()
-        n = len(coords.names) * (2 if o.central else 1) * (2 + (1 if o.newton else 0))
+        n = len(coords.names) * (2 if o.central else 1) * 2
         progress(f"one stride: {base.period:.3f} s simulated, {stride_wall:.2f} s wall; {len(coords.names)} "
                  f"coordinates, about {n} strides for the Jacobians (~{n * stride_wall / 60:.1f} min)")
     result = analyze(stride_map, coords, base.state, options, contact_signature(setup.thresholds, robot), progress)

@@ -46,7 +46,7 @@ class Coordinates(Protocol):
 
 @dataclass
 class GaitOptions:
-    h: tuple[float, float] = (1e-3, 1e-4)  # finite-difference steps, times each coordinate's scale
+    h: tuple[float, float] = (0.05, 0.02)  # finite-difference steps, times each coordinate's scale
     central: bool = False
     tol: float = 1e-4  # transient done when |P(r) - r| / scale < tol
     transient: int = 6  # most transient strides

@@ -25,9 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--joints", action="store_true",
                    help="gait: perturb and measure the 18 joint angles and velocities too (81 coordinates, not 44)")
     g.add_argument("--central", action="store_true", help="gait: central differences (twice the strides)")
-    g.add_argument("--fd-steps", default="1e-2,1e-3", metavar="H1,H2",
+    g.add_argument("--fd-steps", default="0.05,0.02", metavar="H1,H2",
                    help="gait: the two finite-difference steps, in units of each coordinate's scale "
-                        "(default 1e-2,1e-3)")
+                        "(default 0.05,0.02: see docs/verification.md on the 1 ms grid)")
     g.add_argument("--warmup", type=float, default=10.0, help="gait: seconds simulated before the transient (10)")
     g.add_argument("--transient", type=int, default=4, help="gait: most transient strides (4)")
     g.add_argument("--study", default=None, metavar="KEY=V1,V2,...",

@@ -48,8 +48,9 @@ def test_jacobian_newton_and_decay_of_a_linear_map():
     fixed = rm.newton(P, fp, est.matrix, scale, steps=2)
     exact = np.linalg.solve(np.eye(2) - a, b)
     assert np.allclose(fixed.r, exact, atol=1e-12) and fixed.newton_steps >= 1
-    pert = rm.perturbation_decay(P, fixed, rm.leading_real_direction(est), scale, 1e-2, 5)
-    assert pert["measured"] == pytest.approx(rho, rel=1e-6)
+    # distances shrink by exactly rho per stride in the coordinates where the map is a rotation-scaling
+    pert = rm.perturbation_decay(P, fixed, rm.leading_real_direction(est), np.ones(2), 1e-2, 5)
+    assert pert["measured"] == pytest.approx(rho, rel=1e-9) and pert["strides_used"] == 5
 
 
 def test_compare_multipliers_pairs_by_nearest():

@@ -10,8 +10,9 @@ servo targets and contact readings). Of it, :class:`HexapodCoordinates` perturbs
 - ``body.w[0..2]``, ``body.v[0..2]``: the free joint's velocities (angular, linear), which DART expresses
   in the body frame, so they do not depend on the heading either;
 - with ``joints=True``: the 18 joint angles and 18 joint velocities (leg-major);
-- the controller's continuous states (the Van der Pol neurons of the six legs) except the section's own
-  coordinate (held at the section level by construction).
+- the controller's continuous states (Yu: the Van der Pol neurons of the six legs; Fukuhara: each leg's
+  alpha target and horizontal-force filter) except the section's own coordinate (held at the section
+  level by construction).
 
 Left out (held at the base state's values when a coordinate is perturbed, measured nowhere): the
 controller's discrete states (FSM states, reflex timers and counters, converter holds, sensor filters),
@@ -32,6 +33,9 @@ from cpgsim.harness.simulate import Snapshot
 from cpgsim.robots.plant import rotation_from_rpy, rpy_from_rotation
 
 JOINTS = ("alpha", "beta", "gamma")
+STATE_SCALES = {"rad": 0.1, "N": 1.0}
+"""The scale of a controller state by its unit (joint targets vary by tenths of a radian, force filters by
+newtons); other units (the Van der Pol neurons' ``1`` and ``1/s``, amplitude 1) scale by 1."""
 LEGS = ("L1", "L2", "L3", "R1", "R2", "R3")
 
 
@@ -66,7 +70,8 @@ class HexapodCoordinates:
             body += [f"q.{n}" for n in joint_names] + [f"qd.{n}" for n in joint_names]
             scales += [0.01] * 18 + [0.1] * 18
         self.names = body + [names[i] for i in self.ctrl_idx]
-        self.scales = np.array(scales + [1.0] * self.ctrl_idx.size)  # Van der Pol amplitude 1
+        units = [model.states.index(names[i]).unit for i in self.ctrl_idx]
+        self.scales = np.array(scales + [STATE_SCALES.get(u, 1.0) for u in units])
         self.removed = ["body forward position (world y)", "body lateral position (world x)", "body yaw"]
         self.left_out = ["controller discrete states (FSM, reflex timers/counters, converter holds, sensor filters)",
                          "servo targets and the last step's contact readings",

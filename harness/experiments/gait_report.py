@@ -24,6 +24,10 @@ def _pairs(values: np.ndarray) -> list[list[float]]:
     return [[float(v.real), float(v.imag)] for v in values]
 
 
+def _ratios(d: list[float]) -> list[float | None]:
+    return [d[k + 1] / d[k] if d[k] > 0 else None for k in range(len(d) - 1)]
+
+
 def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = None) -> dict[str, Any]:
     """The contents of ``gait.json``."""
     r = run.result
@@ -54,6 +58,8 @@ def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = Non
                          "distances": pert["distances"], "strides_used": pert["strides_used"],
                          "noise_floor": pert["noise_floor"]},
         "stable": r.stable,
+        "status": r.status()[0],
+        "status_reason": r.status()[1],
         "section": {"signal": run.section.signal, "level": run.section.level, "direction": run.section.direction,
                     "description": run.section.describe(),
                     "why": "a continuous controller state: its crossing is interpolated within the 1 ms step "
@@ -67,8 +73,10 @@ def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = Non
             {coords.names[i] for e in r.estimates for i in e.signature_changed}),
             "tolerance": NONSMOOTH_TOL, "handled": HANDLING},
         "leading_eigenvectors": leading,
-        "fixed_point": {"residual_scaled": r.fixed_point.residual, "newton_steps": r.fixed_point.newton_steps,
-                        "transient_residuals": r.fixed_point.history},
+        "fixed_point": {"r": r.fixed_point.r.tolist(), "residual_scaled": r.fixed_point.residual,
+                        "newton_steps": r.fixed_point.newton_steps, "transient_residuals": r.fixed_point.history,
+                        "linearisation_distance": r.linearisation_distance},
+        "recovery_from_start": {**run.recovery, "ratios": _ratios(run.recovery["distances"])},
         "strides_evaluated": r.strides,
         "wall_time_s": {"one_stride": run.stride_wall_s, "warmup": run.warmup_s, "total": run.wall_s,
                         **{k: float(v) for k, v in r.timing.items()}},
@@ -77,7 +85,9 @@ def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = Non
 
 def format_gait(doc: dict[str, Any]) -> str:
     """The console text of a gait document."""
-    lines = [f"gait of {doc['scenario']}: {'STABLE' if doc['stable'] else 'NOT STABLE'} limit cycle",
+    verdict = {"stable": "STABLE limit cycle", "unstable": "UNSTABLE periodic gait",
+               "inconclusive": "INCONCLUSIVE (no smooth periodic gait found)"}[doc["status"]]
+    lines = [f"gait of {doc['scenario']}: {verdict}: {doc['status_reason']}",
              f"  section         {doc['section']['description']}",
              f"  period          {doc['period_s']:.6f} s",
              f"  removed         {', '.join(doc['removed_directions'])}",
@@ -92,6 +102,9 @@ def format_gait(doc: dict[str, Any]) -> str:
     measured = "n/a" if p["measured"] is None else f"{p['measured']:.4f}"
     lines.append(f"  perturbation    predicted {p['predicted']:.4f}, measured {measured} per stride "
                  f"(over {p['strides_used']} strides)")
+    rec = doc["recovery_from_start"]
+    lines.append("  from the start  distance to the fixed point at each crossing: "
+                 + ", ".join(f"{d:.3g}" for d in rec["distances"]))
     ns = doc["nonsmooth"]
     if ns["columns"]:
         lines.append(f"  non-smooth      {len(ns['columns'])} column(s): {', '.join(ns['columns'][:6])}"
@@ -120,7 +133,7 @@ def plot_gait(run: GaitRun, path: Path) -> Path:
     ax[0].set_aspect("equal")
     ax[0].set_xlabel("Re")
     ax[0].set_ylabel("Im")
-    ax[0].set_title(f"Floquet multipliers ({'stable' if r.stable else 'not stable'})")
+    ax[0].set_title(f"Floquet multipliers ({r.status()[0]})")
     ax[0].legend(loc="lower left", fontsize=8)
     d = leading_real_direction(est)
     scale = run.coords.scales

@@ -22,7 +22,7 @@ from cpgsim.harness.verify.stride import SectionError
 
 
 def study(scenario: str, sets: Mapping[str, Any] | None, key: str, values: Sequence[Any],
-          options: GaitOptions | None = None, joints: bool = False, warmup: float = 10.0,
+          options: GaitOptions | None = None, joints: bool = False, warmup: float | None = None,
           progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
     """One row per value: ``value``, ``period_s``, ``max_abs_multiplier``, ``stable``, ``fd_agreement``,
     ``perturbation`` (predicted, measured), or ``error``."""
@@ -39,6 +39,7 @@ def study(scenario: str, sets: Mapping[str, Any] | None, key: str, values: Seque
         r = run.result
         rows.append({"value": value, "period_s": r.period,
                      "max_abs_multiplier": float(np.max(np.abs(r.multipliers))), "stable": r.stable,
+                     "status": r.status()[0],
                      "fd_agreement": r.fd_agreement,
                      "perturbation": {"predicted": r.perturbation["predicted"],
                                       "measured": r.perturbation["measured"]},

@@ -34,6 +34,13 @@ from cpgsim.harness.verify.gait import GaitOptions, GaitResult, analyze
 from cpgsim.harness.verify.stride import Section, SectionError, Stride, StrideMap
 
 SECTION_STATE = "controller.L1.network.z1.x"
+SECTIONS = {
+    # controller kind: (section state, discrete per-leg state column of leg {i} / {leg} for the signature)
+    "yu": (SECTION_STATE, "controller.fsm.state[{i}]"),
+    "fukuhara": ("ctrl.L1.alpha", "ctrl.{leg}.mode"),
+}
+"""The section per controller kind: Yu's front-left leader neuron crossing 0 upwards (once per gait cycle);
+Fukuhara's front-left alpha joint target (integrated, continuous) crossing 0 upwards (once per swing)."""
 
 
 class GaitError(SectionError):
@@ -52,11 +59,13 @@ class GaitRun:
     warmup_s: float
     wall_s: float
     base_stride: Stride
+    recovery: dict[str, list[float]]  # section crossings from the scenario's start: times, distances to r*
 
 
 def contact_signature(thresholds: Mapping[str, float], robot: str = "robot",
-                      controller: str = "controller") -> Callable[[Stride], Any]:
-    """The stride's contact sequence (module docstring) as a hashable value."""
+                      leg_state: str = "controller.fsm.state[{i}]") -> Callable[[Stride], Any]:
+    """The stride's contact sequence (module docstring) as a hashable value; ``leg_state`` names the
+    column of leg ``{i}`` (0-5) / ``{leg}`` (L1..R3) whose switches count too."""
     fcz = float(thresholds.get("Fcz", 2.0))
 
     def signature(s: Stride) -> tuple:
@@ -64,7 +73,7 @@ def contact_signature(thresholds: Mapping[str, float], robot: str = "robot",
         out = []
         for i in range(len(LEGS)):
             fz = s.rows[:, cols[f"{robot}.toe_force[{3 * i + 2}]"]] > fcz
-            state = s.rows[:, cols[f"{controller}.fsm.state[{i}]"]]
+            state = s.rows[:, cols[leg_state.format(i=i, leg=LEGS[i])]]
             out.append((tuple(np.flatnonzero(fz[1:] & ~fz[:-1]).tolist()),
                         tuple(np.flatnonzero(np.diff(state) != 0).tolist())))
         return tuple(out)
@@ -73,10 +82,11 @@ def contact_signature(thresholds: Mapping[str, float], robot: str = "robot",
 
 
 def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: GaitOptions | None = None,
-                joints: bool = False, warmup: float = 10.0, t_max: float = 30.0,
+                joints: bool = False, warmup: float | None = None, t_max: float = 30.0,
                 progress: Callable[[str], None] | None = None) -> GaitRun:
     """Verify the walking gait of ``scenario`` (module docstring); ``warmup`` s are simulated from the
-    scenario's start before the first section crossing (the start of the transient)."""
+    scenario's start before the first section crossing (the start of the transient; default: the
+    scenario's ``controller.transient``, else 10 s)."""
     w_all = time.perf_counter()
     setup = build_scenario(scenario, sets)
     if setup.terrain.params.get("features"):
@@ -84,30 +94,46 @@ def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: G
         raise ScenarioError(f"scenario {scenario!r} has terrain features ({names}): the stride map needs flat ground, "
                         "where the forward and lateral position and the yaw are neutral")
     robot = setup.robot
-    record = [SECTION_STATE, f"{robot}.toe_force", "controller.fsm.state", f"{robot}.body_rpy"]
+    ctrl = setup.scenario.doc["controller"] if setup.scenario is not None else {"kind": "yu"}
+    section_state, leg_state = SECTIONS[ctrl["kind"]]
+    if warmup is None:
+        warmup = float(ctrl.get("transient", 10.0))
+    record = [section_state, f"{robot}.toe_force", leg_state.format(i="*", leg="*").replace("[*]", ""),
+              f"{robot}.body_rpy"]
     sim = Simulator(setup.graph, dt=1e-3, record=record).prepare()
-    section = Section(SECTION_STATE, 0.0, 1, min_time=0.5)
-    w0 = time.perf_counter()
-    warm = sim.run(warmup)
-    _check_upright(warm, robot, "the warm-up")
-    warmup_s = time.perf_counter() - w0
+    section = Section(section_state, 0.0, 1, min_time=0.5)
+    coords = HexapodCoordinates(sim.model, robot, section_state, joints=joints)
     stride_map = StrideMap(sim, section, t_max=t_max)
-    first = stride_map(sim.snapshot())  # onto the section
+    # from the scenario's start (standing, t = 0) stride by stride through the warm-up: the section states
+    # on the way are the recovery from the start, compared with the multipliers afterwards
     w0 = time.perf_counter()
-    base = stride_map(first.state)  # one whole stride: its wall time sets the budget
+    sim.run(sim.dt)
+    from_start = [stride_map(sim.snapshot())]
+    while from_start[-1].state.t < warmup:
+        from_start.append(stride_map(from_start[-1].state))
+        _check_upright(from_start[-1], robot, "the warm-up")
+    warmup_s = time.perf_counter() - w0
+    w0 = time.perf_counter()
+    base = stride_map(from_start[-1].state)  # one whole stride: its wall time sets the budget
     stride_wall = time.perf_counter() - w0
-    coords = HexapodCoordinates(sim.model, robot, SECTION_STATE, joints=joints)
+    _check_upright(base, robot, "the first stride")
     if progress:
         o = options or GaitOptions()
         n = len(coords.names) * (2 if o.central else 1) * 2
         progress(f"one stride: {base.period:.3f} s simulated, {stride_wall:.2f} s wall; {len(coords.names)} "
                  f"coordinates, about {n} strides for the Jacobians (~{n * stride_wall / 60:.1f} min)")
-    result = analyze(stride_map, coords, base.state, options, contact_signature(setup.thresholds, robot), progress)
-    return GaitRun(result, setup, section, coords, stride_wall, warmup_s, time.perf_counter() - w_all, base)
+    result = analyze(stride_map, coords, base.state, options, contact_signature(setup.thresholds, robot, leg_state),
+                     progress)
+    star = result.fixed_point.r
+    recovery = {"t_s": [s.info["t_cross"] for s in [*from_start, base]],
+                "distances": [float(np.linalg.norm((coords.reduce(s.state) - star) / coords.scales))
+                              for s in [*from_start, base]]}
+    return GaitRun(result, setup, section, coords, stride_wall, warmup_s, time.perf_counter() - w_all, base, recovery)
 
 
-def _check_upright(res, robot: str, what: str) -> None:
-    rpy = res[f"{robot}.body_rpy"]
-    tilt = float(np.max(np.abs(rpy[:, :2])))
+def _check_upright(stride: Stride, robot: str, what: str) -> None:
+    cols = [stride.columns.index(f"{robot}.body_rpy[{k}]") for k in (0, 1)]
+    rpy = stride.rows[:, cols]
+    tilt = float(np.max(np.abs(rpy))) if rpy.size else 0.0
     if tilt > np.radians(45):
         raise GaitError(f"the robot fell during {what} (tilt {np.degrees(tilt):.0f} deg): no periodic gait")

@@ -77,7 +77,24 @@ class GaitResult:
 
     @property
     def stable(self) -> bool:
-        return bool(np.all(np.abs(self.multipliers) < 1.0))
+        """All multipliers inside the unit circle, at a fixed point the iteration found (see :meth:`status`)."""
+        return self.status()[0] == "stable"
+
+    def status(self, agreement_max: float = 0.5, residual_max: float = 0.1) -> tuple[str, str]:
+        """``("stable" | "unstable" | "inconclusive", why)``. Inconclusive: the fixed point was not found
+        (scaled residual ``|P(r*) - r*|`` above ``residual_max``) or the two step sizes' multipliers
+        disagree by more than ``agreement_max`` (the map is not smooth at these scales), so the
+        multipliers say nothing."""
+        radius = float(np.max(np.abs(self.multipliers))) if self.multipliers.size else 0.0
+        if self.fixed_point.residual > residual_max:
+            return "inconclusive", (f"no fixed point: |P(r) - r| = {self.fixed_point.residual:.3g} (scaled) after "
+                                    f"the transient and Newton, above {residual_max:g}")
+        if self.fd_agreement > agreement_max:
+            return "inconclusive", (f"the stride map is not smooth at the finite-difference steps: their multipliers "
+                                    f"differ by {self.fd_agreement:.3g} of the spectral radius")
+        if radius < 1.0:
+            return "stable", f"all multipliers inside the unit circle (max |lambda| = {radius:.4g})"
+        return "unstable", f"max |lambda| = {radius:.4g} >= 1"
 
     def nonsmooth_columns(self, tol: float) -> list[str]:
         names = self.coordinates.names

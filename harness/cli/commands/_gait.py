@@ -28,7 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--fd-steps", default="0.05,0.02", metavar="H1,H2",
                    help="gait: the two finite-difference steps, in units of each coordinate's scale "
                         "(default 0.05,0.02: see docs/verification.md on the 1 ms grid)")
-    g.add_argument("--warmup", type=float, default=10.0, help="gait: seconds simulated before the transient (10)")
+    g.add_argument("--warmup", type=float, default=None,
+                   help="gait: seconds simulated before the transient (default: the scenario's controller.transient, "
+                        "else 10)")
     g.add_argument("--transient", type=int, default=4, help="gait: most transient strides (4)")
     g.add_argument("--study", default=None, metavar="KEY=V1,V2,...",
                    help="gait: also the parameter study of max |lambda| and period against a scenario key, "
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = args.scenario
     if not scenario:
         raise CliError("verify gait needs a SCENARIO (a built-in name such as flat, or FILE.toml)")
-    if args.warmup <= 0 or args.transient < 1:
+    if (args.warmup is not None and args.warmup <= 0) or args.transient < 1:
         raise CliError("--warmup must be > 0 and --transient >= 1")
     sets = parse_scenario_sets(args.sets)
     h = _steps(args.fd_steps)

@@ -109,6 +109,31 @@ def test_ball_save_restore_is_bit_identical():
     assert np.array_equal(a.data, b.data) and np.array_equal(a.data, straight.data)
 
 
+def test_a_block_that_cannot_save_its_state_is_named():
+    from cpgsim.components.core import CoSimBlock
+    from cpgsim.harness.errors import SimulationError
+
+    class Opaque(CoSimBlock):
+        def declare(self) -> None:
+            self.add_output("y", 1, "1")
+
+        def get_outputs(self):
+            return {"y": np.zeros(1)}
+
+        def set_inputs(self, values) -> None:
+            pass
+
+        def do_step(self, t: float, dt: float) -> None:
+            pass
+
+    g = Graph("opaque_loop", "a block without snapshot")
+    g.add(Opaque("box"))
+    sim = Simulator(g, dt=1e-3)
+    sim.run(0.01)
+    with pytest.raises(SimulationError, match="block 'box' \\(Opaque\\) cannot save its state"):
+        sim.snapshot()
+
+
 def test_a_section_never_crossed_is_a_one_line_error():
     smap, sim = ball_map(0.6, 2.0, t_max=0.5)
     smap.section = Section("ball.x", -1.0, -1, min_time=0.05)  # x only grows: never crosses -1 downwards
@@ -188,7 +213,11 @@ def test_cli_verify_gait_flat(tmp_path, capsys):
     # Yu's FSM: the tripod cycle is T_g = 5 s (Y16); the closed loop keeps it within a few ms
     assert doc["period_s"] == pytest.approx(5.0, abs=0.02)
     mods = [abs(complex(*m)) for m in doc["multipliers"]]
-    assert doc["stable"] and max(mods) < 1
+    assert doc["stable"] and doc["status"] == "stable" and max(mods) < 1
+    # the slowest mode is the CPG network's own follower mode (shooting + CVODES, docs/verification.md:
+    # 0.778805), once per leg: the mechanics and the FSM-corrected leg phases decay faster
+    assert max(mods) == pytest.approx(0.778805, abs=3e-3)
+    assert sum(abs(m - 0.778805) < 3e-3 for m in mods) == 6
     assert len(doc["multipliers"]) == len(doc["coordinates"]) == 44
     assert doc["fd_agreement"] < 0.2
     p = doc["perturbation"]
@@ -196,3 +225,17 @@ def test_cli_verify_gait_flat(tmp_path, capsys):
     assert "body yaw" in doc["removed_directions"]
     text = capsys.readouterr().out
     assert "STABLE" in text and "perturbation" in text
+
+
+@pytest.mark.slow
+def test_gait_study_over_the_fsm_period():
+    """Yu's tripod FSM scales the whole network's clock by T_net/T_g (Y16, swing and stance alike for
+    gamma = 2): the gait period follows T_g and the multipliers per stride do not change."""
+    from cpgsim.harness.experiments.gait_study import study
+
+    rows = study("flat", {}, "controller.*.fsm.T_g", [4.0, 6.0])
+    assert [r["value"] for r in rows] == [4.0, 6.0]
+    for r in rows:
+        assert r["status"] == "stable"
+        assert r["period_s"] == pytest.approx(r["value"], rel=2e-3)
+        assert r["max_abs_multiplier"] == pytest.approx(0.778805, abs=5e-3)

@@ -1,7 +1,7 @@
 """Parameter study of the walking gait: period and max |lambda| of the closed loop against one scenario key.
 
 Each value is a full :func:`~cpgsim.harness.experiments.gait_verify.verify_gait` (the key set with
-``--set`` semantics, e.g. ``controller.*.fsm.T_g``), run one after the other in this process (a batch:
+``--set`` semantics, e.g. ``controller.fsm.T_g``), run one after the other in this process (a batch:
 the machine's cores are the co-simulation's; each value costs about as much as ``cpgsim verify gait``).
 A value whose gait cannot be verified (the robot falls, the section is never crossed) is a row with
 its ``error`` and no numbers.

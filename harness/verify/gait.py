@@ -11,7 +11,8 @@ finite-difference machinery of :mod:`cpgsim.harness.verify.return_map`:
    ``signature`` (e.g. the contact sequence) are reported as non-smooth;
 3. Newton corrections of the fixed point with the first Jacobian (not re-linearised: the distance from
    the Jacobians' point to the corrected fixed point is reported, ``linearisation_distance``);
-4. the perturbation along the leading eigenvector: measured decay per stride against ``|lambda_max|``.
+4. the perturbation along the leading eigenvector from the corrected fixed point: measured decay per
+   stride against ``|lambda_max|``.
 
 The map from reduced coordinates is ``P(r) = reduce(stride(embed(base, r)))`` with ``base`` the
 section state being linearised about (its unreduced parts: discrete states, neutral directions, held).
@@ -114,12 +115,10 @@ class ReducedMap:
         self.base = base
         self.signature = signature
         self.calls = 0
-        self.last: Stride | None = None
 
     def __call__(self, r: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
         self.calls += 1
         s = self.stride_map(self.coords.embed(self.base, r))
-        self.last = s
         info = {"period": s.period, "state": s.state}
         if self.signature is not None:
             info["signature"] = self.signature(s)
@@ -134,7 +133,6 @@ def analyze(stride_map: StrideMap, coords: Coordinates, start: Snapshot, options
     scale = np.asarray(coords.scales, dtype=float)
     timing: dict[str, float] = {}
     w0 = time.perf_counter()
-    base = start
     transient: list[np.ndarray] = [coords.reduce(start)]
     # 1. transient: iterate the full state (no embedding), so nothing is held while it converges
     state, r = start, coords.reduce(start)
@@ -165,7 +163,7 @@ def analyze(stride_map: StrideMap, coords: Coordinates, start: Snapshot, options
     agreement = rm.compare_multipliers(est.multipliers, est2.multipliers)
     col_norm = np.maximum(np.linalg.norm(est.matrix, axis=0), 1e-12 * max(np.abs(est.matrix).max(), 1e-300))
     disagreement = np.linalg.norm(est.matrix - est2.matrix, axis=0) / col_norm
-    # 4. perturbation along the leading eigenvector
+    # 3. perturbation along the leading eigenvector
     w0 = time.perf_counter()
     pert = rm.perturbation_decay(P, fp, rm.leading_real_direction(est), scale, o.perturb_eps, o.perturb_strides,
                                  progress)

@@ -19,7 +19,7 @@ Examples:
   cpgsim verify network --x0 z1.x=1          # legs 2, 4, 6 leader start [1, 0]
   cpgsim verify --sweep -o out/sweep          # eps x b table of docs/verification.md
   cpgsim verify gait flat -o out/gait         # the Yu tripod's walking gait (about 3 minutes)
-  cpgsim verify gait flat --study controller.*.fsm.T_g=4,5,6 -o out/gait-study
+  cpgsim verify gait flat --study controller.fsm.T_g=4,5,6 -o out/gait-study
 """
 
 from __future__ import annotations

@@ -51,6 +51,7 @@ def test_jacobian_newton_and_decay_of_a_linear_map():
     # distances shrink by exactly rho per stride in the coordinates where the map is a rotation-scaling
     pert = rm.perturbation_decay(P, fixed, rm.leading_real_direction(est), np.ones(2), 1e-2, 5)
     assert pert["measured"] == pytest.approx(rho, rel=1e-9) and pert["strides_used"] == 5
+    assert pert["measured_from_start"] == pytest.approx(rho, rel=1e-9)
 
 
 def test_compare_multipliers_pairs_by_nearest():

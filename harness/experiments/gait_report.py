@@ -54,7 +54,8 @@ def gait_document(run: GaitRun, scenario: str, sets: dict[str, Any] | None = Non
         "fd_agreement": r.fd_agreement,
         "fd_steps": [est.h, est2.h],
         "fd_scheme": "central" if est.central else "forward",
-        "perturbation": {"predicted": pert["predicted"], "measured": pert["measured"], "eps": pert["eps"],
+        "perturbation": {"predicted": pert["predicted"], "measured": pert["measured"],
+                         "measured_from_start": pert["measured_from_start"], "eps": pert["eps"],
                          "distances": pert["distances"], "strides_used": pert["strides_used"],
                          "noise_floor": pert["noise_floor"]},
         "stable": r.stable,
@@ -100,8 +101,9 @@ def format_gait(doc: dict[str, Any]) -> str:
         lines.append(f"    |lambda| {v['modulus']:.4f}: moves {', '.join(v['moves'])}")
     p = doc["perturbation"]
     measured = "n/a" if p["measured"] is None else f"{p['measured']:.4f}"
+    first = "n/a" if p["measured_from_start"] is None else f"{p['measured_from_start']:.4f}"
     lines.append(f"  perturbation    predicted {p['predicted']:.4f}, measured {measured} per stride "
-                 f"(over {p['strides_used']} strides)")
+                 f"(strides 1-{p['strides_used']}; {first} including the first)")
     rec = doc["recovery_from_start"]
     lines.append("  from the start  distance to the fixed point at each crossing: "
                  + ", ".join(f"{d:.3g}" for d in rec["distances"]))

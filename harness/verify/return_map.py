@@ -13,7 +13,7 @@ the Jacobian is formed in scaled coordinates ``D^-1 J D``, which has the same ei
   step sizes (paired by modulus), relative to the spectral radius.
 - :func:`perturbation_decay`: start at ``r* + eps v`` (``v`` the leading eigenvector) and measure the
   per-stride decay of ``|r_n - r*|``: the geometric mean over the strides that stay above the noise
-  floor (the fixed point's residual), to compare with ``|lambda_max|``.
+  floor (the fixed point's residual), from the first stride on, to compare with ``|lambda_max|``.
 """
 
 from __future__ import annotations
@@ -128,9 +128,13 @@ def leading_real_direction(est: JacobianEstimate) -> np.ndarray:
 
 def perturbation_decay(P: MapFn, fp: FixedPoint, direction: np.ndarray, scale: np.ndarray, eps: float,
                        strides: int, progress: Progress | None = None) -> dict[str, Any]:
-    """Start at ``r* + eps D direction``, run ``strides`` strides; ``measured`` is the geometric-mean decay per
-    stride of the scaled distance to ``r*`` over the strides whose distance stays above ten times the fixed
-    point's residual (the noise floor), ``distances`` the distances (stride 0 = the perturbation)."""
+    """Start at ``r* + eps D direction``, run ``strides`` strides and measure the per-stride decay of the scaled
+    distance to ``r*`` over the strides whose distance stays above ten times the fixed point's residual (the
+    noise floor): ``measured`` from stride 1 on (the geometric mean of ``d_n+1 / d_n``; the first stride
+    also carries the decay of faster modes that an inexact eigenvector excites -- with a degenerate
+    leading multiplier, as in the six legs' identical CPGs, the computed eigenvector is a poorly determined
+    member of its eigenspace), ``measured_from_start`` from stride 0; ``distances`` (stride 0 = the
+    perturbation) and ``trajectory`` (the coordinates)."""
     r = fp.r + eps * direction * scale
     dist = [float(np.linalg.norm((r - fp.r) / scale))]
     trajectory = [r]
@@ -144,9 +148,10 @@ def perturbation_decay(P: MapFn, fp: FixedPoint, direction: np.ndarray, scale: n
     last = 0
     while last + 1 < len(dist) and dist[last + 1] > floor:
         last += 1
-    measured = (dist[last] / dist[0]) ** (1.0 / last) if last else None
+    from_start = (dist[last] / dist[0]) ** (1.0 / last) if last else None
+    measured = (dist[last] / dist[1]) ** (1.0 / (last - 1)) if last >= 2 else from_start
     return {"eps": eps, "distances": dist, "strides_used": last, "noise_floor": floor, "measured": measured,
-            "trajectory": trajectory}
+            "measured_from_start": from_start, "trajectory": trajectory}
 
 
 def modulus_sorted(values: Sequence[complex]) -> list[complex]:

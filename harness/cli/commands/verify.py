@@ -60,7 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
     p.add_argument("--sweep", action="store_true",
                    help="run the eps x b sweep of a single neuron against Yu Y4 (docs/verification.md)")
-    from cpgsim.harness.cli.commands import _gait
+    from cpgsim.harness.cli import gait_command as _gait
 
     _gait.add_arguments(p)
 
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from cpgsim.harness.verify.shooting import verify
 
     if args.graph == "gait" and not args.sweep:
-        from cpgsim.harness.cli.commands import _gait
+        from cpgsim.harness.cli import gait_command as _gait
 
         return _gait.run(args)
     if args.scenario:

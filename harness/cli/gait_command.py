@@ -3,8 +3,8 @@
 Writes ``DIR/gait.json`` and ``DIR/gait.png`` (a run directory: cpgsim replaces only what it wrote), and
 with ``--study KEY=V1,V2,...`` ``DIR/study.json`` and ``DIR/study.png`` (max |lambda| and period
 against a scenario key). Exit status: 0 a stable gait; 1 no stable gait (not stable, the robot fell,
-the section was never crossed); 2 bad input (unknown scenario, malformed options). Used by
-:mod:`cpgsim.harness.cli.commands.verify` (the leading ``_`` keeps it out of the command list).
+the section was never crossed); 2 bad input (unknown scenario, malformed options). The ``gait`` mode of
+:mod:`cpgsim.harness.cli.commands.verify` (kept outside ``commands/``, which holds one module per command).
 """
 
 from __future__ import annotations

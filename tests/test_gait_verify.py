@@ -238,5 +238,7 @@ def test_gait_study_over_the_fsm_period():
     assert [r["value"] for r in rows] == [4.0, 6.0]
     for r in rows:
         assert r["status"] == "stable"
-        assert r["period_s"] == pytest.approx(r["value"], rel=2e-3)
-        assert r["max_abs_multiplier"] == pytest.approx(0.778805, abs=5e-3)
+        # the network's own period (CVODES shooting, docs/verification.md: 5.0019786 s at T_net = 5 s) scaled
+        # by T_g / T_net, plus one 1 ms grid step of waiting at each of the cycle's two slot switches
+        assert r["period_s"] == pytest.approx(5.0019786 * r["value"] / 5.0 + 0.002, abs=1e-5)
+        assert r["max_abs_multiplier"] == pytest.approx(0.778805, abs=3e-3)

@@ -23,7 +23,7 @@ GAIT_FILES = ["gait.json", "gait.png", "study.json", "study.png"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("verify gait SCENARIO (the closed loop's walking gait)")
     g.add_argument("--joints", action="store_true",
-                   help="gait: perturb and measure the 18 joint angles and velocities too (81 coordinates, not 44)")
+                   help="gait: perturb and measure the 18 joint angles and velocities too (Yu: 80 coordinates, not 44)")
     g.add_argument("--central", action="store_true", help="gait: central differences (twice the strides)")
     g.add_argument("--fd-steps", default="0.05,0.02", metavar="H1,H2",
                    help="gait: the two finite-difference steps, in units of each coordinate's scale "

@@ -129,7 +129,8 @@ class Simulator:
         """
         m = self.model
         if resume is not None:
-            t0, x0 = self._resume(resume), None
+            t0, x0 = self._check_resume(resume), None
+        self._last_t = None  # snapshot() refuses a run that did not finish
         n = horizon_steps(t0, t_end, m.dt)
         columns, units, picks = self._record_layout()
         n_free = sum(port.size for port in m.free_inputs.values())
@@ -152,6 +153,11 @@ class Simulator:
         stop = None
         try:
             if cs:
+                for path, blk in cs.items():  # each block starts in its saved state (consumed by its setup)
+                    if resume is not None:
+                        blk.resume_from(resume.blocks[path])
+                    elif hasattr(blk, "resume_from"):
+                        blk.resume_from(None)
                 stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
             else:
                 self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
@@ -187,8 +193,8 @@ class Simulator:
         the sampled update at that time, as :attr:`final_state`) and each co-simulation block's own
         (``last_snapshot``, kept when the block terminated). ``run(..., resume=snapshot)`` continues it."""
         final = getattr(self, "final_state", None)
-        if final is None:
-            raise SimulationError("no run to take a snapshot of")
+        if final is None or getattr(self, "_last_t", None) is None:
+            raise SimulationError("no finished run to take a snapshot of")
         blocks = {}
         for path, blk in self._cosim_blocks.items():
             snap = getattr(blk, "last_snapshot", None)
@@ -197,7 +203,8 @@ class Simulator:
             blocks[path] = snap
         return Snapshot(self._last_t, final[0].copy(), final[1].copy(), blocks)
 
-    def _resume(self, snap: Snapshot) -> float:
+    def _check_resume(self, snap: Snapshot) -> float:
+        """The start time of a run resumed from ``snap``; refuses a snapshot of another model."""
         m = self.model
         if snap.x.shape != (m.states.size,) or snap.z.shape != (m.dstates.size,):
             raise ModelError(f"snapshot of {snap.x.size} + {snap.z.size} states does not fit the model "
@@ -205,7 +212,6 @@ class Simulator:
         for path, blk in self._cosim_blocks.items():
             if path not in snap.blocks or not hasattr(blk, "resume_from"):
                 raise ModelError(f"snapshot has no state for co-simulation block {path!r}")
-            blk.resume_from(snap.blocks[path])
         return float(snap.t)
 
     # -- setup helpers ---------------------------------------------------------------------------

@@ -429,7 +429,10 @@ class DartHexapod(PlantCommon, CoSimBlock):
         """Keep the final state (:attr:`last_snapshot`), then drop the world (contacts of a removed world must
         not be touched again: reading them segfaulted)."""
         if self.world is not None:
-            self.last_snapshot = self.snapshot()
+            try:
+                self.last_snapshot = self.snapshot()
+            except (AttributeError, ModelError):  # a setup that failed half-way: nothing to continue from
+                self.last_snapshot = None
         self.world = None
         self.model = None
         self._shapes = []

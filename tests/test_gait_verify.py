@@ -201,6 +201,9 @@ def test_verify_gait_bad_input_is_one_line(tmp_path, capsys):
     assert "terrain features" in capsys.readouterr().err
     assert main(["verify", "gait", "flat", "--fd-steps", "0.01", "-o", str(tmp_path / "d")]) == 2
     assert not (tmp_path / "d").exists()
+    pytest.importorskip("mujoco")
+    assert main(["verify", "gait", "flat", "--set", "robot.engine=mujoco", "-o", str(tmp_path / "e")]) == 2
+    assert "cannot save its exact state" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -100,6 +100,10 @@ def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: G
         warmup = float(ctrl.get("transient", 10.0))
     record = [section_state, f"{robot}.toe_force", leg_state.format(i="*", leg="*").replace("[*]", ""),
               f"{robot}.body_rpy"]
+    plant = setup.graph.blocks.get(robot)
+    if plant is not None and not hasattr(plant, "snapshot"):
+        raise ScenarioError(f"scenario {scenario!r}: the {type(plant).__name__} plant cannot save its exact state "
+                            "(only the DART plant can so far): use robot.engine = \"dart\"")
     sim = Simulator(setup.graph, dt=1e-3, record=record).prepare()
     section = Section(section_state, 0.0, 1, min_time=0.5)
     coords = HexapodCoordinates(sim.model, robot, section_state, joints=joints)

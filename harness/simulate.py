@@ -12,11 +12,13 @@ the results recorded before it (``exc.results``, marked incomplete).
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import functools
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -43,7 +45,7 @@ MAX_STEPS = 200_000_000
 STREAM_FLUSH_SECONDS = 2.0
 """A streamed run (``Simulator.run(stream=...)``) writes what it recorded at least this often (wall time)."""
 
-__all__ = ["CoSimulationError", "SimulationDiverged", "SimulationError", "Simulator", "simulate"]
+__all__ = ["CoSimulationError", "SimulationDiverged", "SimulationError", "Simulator", "Snapshot", "simulate"]
 
 InputValue = float | Sequence[float] | np.ndarray | Callable[[float], Any]
 
@@ -113,7 +115,7 @@ class Simulator:
 
     def run(self, t_end: float, inputs: Mapping[str, InputValue] | None = None, t0: float = 0.0,
             x0: Mapping[str, Any] | None = None, progress: bool = False, stream: str | Path | None = None,
-            meta: Mapping[str, Any] | None = None) -> Results:
+            meta: Mapping[str, Any] | None = None, resume: Snapshot | None = None) -> Results:
         """Simulate from ``t0`` to ``t_end``; returns results at every macro step, ``t0..t_end``.
 
         ``t_end - t0`` must be a whole number of macro steps (a horizon that is not is an error naming
@@ -121,14 +123,22 @@ class Simulator:
         goes on (:class:`cpgsim.harness.results.ResultsWriter`: at least every simulated second or
         ``STREAM_FLUSH_SECONDS`` of wall time), marked incomplete until the run ends; a run that stops
         early keeps what was recorded there too. ``meta`` is added to the results' metadata.
+        ``resume``: continue from a :class:`Snapshot` (:meth:`snapshot` of an earlier run): the run starts
+        at its time with its states and every co-simulation block in its saved state (``t0`` and ``x0``
+        are not used).
         """
         m = self.model
+        if resume is not None:
+            t0, x0 = self._check_resume(resume), None
+        self._last_t = None  # snapshot() refuses a run that did not finish
         n = horizon_steps(t0, t_end, m.dt)
         columns, units, picks = self._record_layout()
         n_free = sum(port.size for port in m.free_inputs.values())
         check_memory(n + 1, len(columns) + n_free + 1)  # recorded table, free inputs and the time grid
         times = t0 + m.dt * np.arange(n + 1)
         x, z = self._initial_states(x0)
+        if resume is not None:
+            x[:], z[:] = resume.x, resume.z
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
         self._exact_free = self._exact_free_inputs(inputs or {})
@@ -147,6 +157,11 @@ class Simulator:
         stop = None
         try:
             if cs:
+                for path, blk in cs.items():  # each block starts in its saved state (consumed by its setup)
+                    if resume is not None:
+                        blk.resume_from(resume.blocks[path])
+                    elif hasattr(blk, "resume_from"):
+                        blk.resume_from(None)
                 stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
             else:
                 self._run_horizon(times, x, z, p, u_free, picks, rec, progress)
@@ -176,6 +191,32 @@ class Simulator:
             rec.finish(res)
         self.written = getattr(rec, "files", [])
         return res
+
+    def snapshot(self) -> Snapshot:
+        """The exact state at the end of the last run: its time, the continuous and discrete states (before
+        the sampled update at that time, as :attr:`final_state`) and each co-simulation block's own
+        (``last_snapshot``, kept when the block terminated). ``run(..., resume=snapshot)`` continues it."""
+        final = getattr(self, "final_state", None)
+        if final is None or getattr(self, "_last_t", None) is None:
+            raise SimulationError("no finished run to take a snapshot of")
+        blocks = {}
+        for path, blk in self._cosim_blocks.items():
+            snap = getattr(blk, "last_snapshot", None)
+            if snap is None:
+                raise SimulationError(f"co-simulation block {path!r} ({type(blk).__name__}) cannot save its state")
+            blocks[path] = snap
+        return Snapshot(self._last_t, final[0].copy(), final[1].copy(), blocks)
+
+    def _check_resume(self, snap: Snapshot) -> float:
+        """The start time of a run resumed from ``snap``; refuses a snapshot of another model."""
+        m = self.model
+        if snap.x.shape != (m.states.size,) or snap.z.shape != (m.dstates.size,):
+            raise ModelError(f"snapshot of {snap.x.size} + {snap.z.size} states does not fit the model "
+                             f"({m.states.size} + {m.dstates.size})")
+        for path, blk in self._cosim_blocks.items():
+            if path not in snap.blocks or not hasattr(blk, "resume_from"):
+                raise ModelError(f"snapshot has no state for co-simulation block {path!r}")
+        return float(snap.t)
 
     # -- setup helpers ---------------------------------------------------------------------------
     def _initial_states(self, x0: Mapping[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -391,6 +432,7 @@ class Simulator:
         finally:
             bar.close()
         self.final_state = (x, z)
+        self._last_t = float(times[-1])
 
     def _diverged(self, x_bad: np.ndarray, x_prev: np.ndarray, t: float, rec: _Recorder, picks) -> None:
         names = self.model.states.names()
@@ -431,6 +473,7 @@ class Simulator:
             if hasattr(step, "stop_thread"):
                 step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
+        self._last_t = float(times[rec.n - 1]) if rec.n else float(times[0])
         return stop
 
 
@@ -452,6 +495,20 @@ def _input_series(name: str, value: InputValue, size: int, times: np.ndarray) ->
     if not np.all(np.isfinite(arr)):
         raise ModelError(f"input {name!r} contains non-finite values")
     return arr
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The exact state of a simulation at time ``t`` (:meth:`Simulator.snapshot`): continuous states ``x``,
+    discrete states ``z`` and each co-simulation block's saved state by path."""
+
+    t: float
+    x: np.ndarray
+    z: np.ndarray
+    blocks: dict[str, Any]
+
+    def replace(self, **changes: Any) -> Snapshot:
+        return dataclasses.replace(self, **changes)
 
 
 class _CasadiStep:

@@ -50,9 +50,11 @@ centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi f
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import dartpy as dart
 import numpy as np
@@ -265,6 +267,8 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self.world: dart.simulation.World | None = None
         self.model: HexapodModel | None = None
         self._q_target = q0_arr.copy()
+        self._resume: PlantSnapshot | None = None
+        self.last_snapshot: PlantSnapshot | None = None
         super().__init__(name, **params)
 
     # -- declaration ------------------------------------------------------------------------------
@@ -344,10 +348,61 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self._body_contact = False
         self._link_contact = np.zeros(6, dtype=bool)
         self._bind_readout()
+        resume, self._resume = self._resume, None
+        if resume is not None:
+            if abs(resume.t - float(t0)) > 0.5 * self.time_step:
+                raise ModelError(f"{self.name}: resuming a state saved at t = {resume.t} in a run from t0 = {t0}")
+            self.restore(resume)
+            return
         self._settle(self.settle)
         world.setTime(float(t0))
         self._t = float(t0)
         self._update_outputs()
+
+    # -- exact state ------------------------------------------------------------------------------
+    def snapshot(self) -> PlantSnapshot:
+        """Everything the next steps depend on: the skeleton's generalized positions and velocities, the
+        clock, the servo targets (and the previous ones, for ``velocity_ff``) and the contact readings of
+        the last step (the outputs at this time). DART keeps no other state between world steps that
+        changes the result (collision detection and the LCP contact solve start afresh every step: the
+        tests check ``restore`` -> run against the uninterrupted run bit for bit)."""
+        if self.world is None:
+            raise ModelError(f"{self.name}: snapshot before setup")
+        return PlantSnapshot(
+            t=self._t, positions=np.array(self._skel.getPositions()), velocities=np.array(self._skel.getVelocities()),
+            q_target=self._q_target.copy(), q_target_prev=np.array(self._q_target_prev, dtype=float),
+            target_changed=self._target_changed, ff_active=self._ff_active, forces=self._forces.copy(),
+            force_world=self._force_world.copy(), body_contact=self._body_contact,
+            link_contact=self._link_contact.copy(), n_steps=self._n_steps)
+
+    def restore(self, snap: PlantSnapshot) -> None:
+        """Put a set-up plant into the state ``snap`` (see :meth:`snapshot`)."""
+        if self.world is None:
+            raise ModelError(f"{self.name}: restore before setup")
+        n = self._skel.getNumDofs()
+        if snap.positions.shape != (n,) or snap.velocities.shape != (n,):
+            raise ModelError(f"{self.name}: a snapshot of {snap.positions.size} dofs does not fit {n} dofs")
+        self._skel.setPositions(snap.positions.copy())
+        self._skel.setVelocities(snap.velocities.copy())
+        self._skel.resetAccelerations()
+        self._skel.clearExternalForces()
+        self._skel.clearConstraintImpulses()
+        self.world.setTime(float(snap.t))
+        self._t = float(snap.t)
+        self._q_target = snap.q_target.copy()
+        self._q_target_prev = snap.q_target_prev.copy()
+        self._target_changed = snap.target_changed
+        self._ff_active = snap.ff_active
+        self._forces[:] = snap.forces
+        self._force_world[:] = snap.force_world
+        self._body_contact = snap.body_contact
+        self._link_contact[:] = snap.link_contact
+        self._n_steps = snap.n_steps
+        self._update_outputs()
+
+    def resume_from(self, snap: PlantSnapshot | None) -> None:
+        """Make the next :meth:`setup` start in ``snap`` (no settling) instead of the initial posture."""
+        self._resume = snap
 
     def _bind_readout(self) -> None:
         """The compiled sensor readout (:mod:`cpgsim.robots.readout`) on this plant's buffers."""
@@ -386,7 +441,13 @@ class DartHexapod(PlantCommon, CoSimBlock):
         return float(np.max(ground[ok] + self.geometry.leg.foot_radius - feet[ok, 2]))
 
     def terminate(self) -> None:
-        """Drop the world (contacts of a removed world must not be touched again: reading them segfaulted)."""
+        """Keep the final state (:attr:`last_snapshot`), then drop the world (contacts of a removed world must
+        not be touched again: reading them segfaulted)."""
+        if self.world is not None:
+            try:
+                self.last_snapshot = self.snapshot()
+            except (AttributeError, ModelError):  # a setup that failed half-way: nothing to continue from
+                self.last_snapshot = None
         self.world = None
         self.model = None
         self._shapes = []
@@ -536,6 +597,42 @@ class DartHexapod(PlantCommon, CoSimBlock):
         if not np.all(np.isfinite(pos)):
             return True
         return tilt_angle(_free_to_transform(pos[:6]).matrix()[:3, :3]) > max_tilt
+
+
+@dataclass(frozen=True)
+class PlantSnapshot:
+    """The exact state of a :class:`DartHexapod` at time ``t`` (:meth:`DartHexapod.snapshot`): generalized
+    positions and velocities (free joint of the body first: rotation vector, translation; then the 18
+    joints), the servo targets and the last step's contact readings."""
+
+    t: float
+    positions: np.ndarray
+    velocities: np.ndarray
+    q_target: np.ndarray
+    q_target_prev: np.ndarray
+    target_changed: bool
+    ff_active: bool
+    forces: np.ndarray
+    force_world: np.ndarray
+    body_contact: bool
+    link_contact: np.ndarray
+    n_steps: int
+
+    def replace(self, **changes) -> PlantSnapshot:
+        return dataclasses.replace(self, **changes)
+
+    def interpolate(self, other: PlantSnapshot, tau: float) -> PlantSnapshot:
+        """``other`` with positions and velocities moved back to ``self + tau (other - self)`` in time: the 18
+        joint angles by cubic Hermite from their velocities, the body's free joint and every velocity linearly
+        (everything else, the contact readings of the last step included, is ``other``'s)."""
+        d = other.t - self.t
+        pos = self.positions + tau * (other.positions - self.positions)
+        h00, h10, h01, h11 = (2 * tau**3 - 3 * tau**2 + 1, tau**3 - 2 * tau**2 + tau, -2 * tau**3 + 3 * tau**2,
+                              tau**3 - tau**2)
+        pos[6:] = (h00 * self.positions[6:] + h10 * d * self.velocities[6:] + h01 * other.positions[6:]
+                   + h11 * d * other.velocities[6:])
+        vel = self.velocities + tau * (other.velocities - self.velocities)
+        return dataclasses.replace(other, positions=pos, velocities=vel)
 
 
 def _readout_for(geometry: RobotGeometry):

@@ -5,6 +5,11 @@ GRAPH is a built-in name (vdp, network, network-searching, damped-oscillator, ..
 path/to/module.py:function returning a Graph. Free graph inputs must be held constant (--input) unless
 they declare a default. Writes DIR/report.json and DIR/orbit.png.
 
+`cpgsim verify gait SCENARIO` verifies instead the walking gait of a robot scenario (flat, ...) as a limit
+cycle of the closed loop: Poincare section, stride map from exact saved states, Floquet multipliers by
+finite differences, a perturbation experiment (docs/verification.md, "The walking gait"); it writes
+DIR/gait.json and DIR/gait.png (default DIR verify_gait_<scenario>); --set then takes scenario keys.
+
 Exit status: 0 stable limit cycle; 1 no stable cycle (diverges, converges to an equilibrium, period not
 found, no common period, unstable orbit) with the reason; 2 bad input.
 
@@ -13,6 +18,8 @@ Examples:
   cpgsim verify vdp --set z.eps=0.5 --json
   cpgsim verify network --x0 z1.x=1          # legs 2, 4, 6 leader start [1, 0]
   cpgsim verify --sweep -o out/sweep          # eps x b table of docs/verification.md
+  cpgsim verify gait flat -o out/gait         # the Yu tripod's walking gait (about 3 minutes)
+  cpgsim verify gait flat --study controller.fsm.T_g=4,5,6 -o out/gait-study
 """
 
 from __future__ import annotations
@@ -30,7 +37,8 @@ HELP = "verify a stable limit cycle (period, Floquet multipliers, phase lags, sy
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("graph", nargs="?", help="built-in graph name or path/to/module.py:function")
+    p.add_argument("graph", nargs="?", help="built-in graph name or path/to/module.py:function, or 'gait'")
+    p.add_argument("scenario", nargs="?", help="with 'gait': the robot scenario (built-in name or FILE.toml)")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     p.add_argument("-o", "--output", default=None, metavar="DIR",
                    help="report directory (default verify_<graph>, or verify_sweep with --sweep)")
@@ -52,6 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
     p.add_argument("--sweep", action="store_true",
                    help="run the eps x b sweep of a single neuron against Yu Y4 (docs/verification.md)")
+    from cpgsim.harness.cli import gait_command as _gait
+
+    _gait.add_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,6 +70,12 @@ def run(args: argparse.Namespace) -> int:
     from cpgsim.harness.verify.result import VerifyOptions
     from cpgsim.harness.verify.shooting import verify
 
+    if args.graph == "gait" and not args.sweep:
+        from cpgsim.harness.cli import gait_command as _gait
+
+        return _gait.run(args)
+    if args.scenario:
+        raise CliError(f"unexpected argument {args.scenario!r} (a SCENARIO goes with 'verify gait')")
     if args.sweep:
         if args.graph:
             raise CliError("--sweep takes no GRAPH (it sweeps a single Van der Pol neuron)")

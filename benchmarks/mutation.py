@@ -5,6 +5,8 @@ mutant is *killed* when they fail).
     python benchmarks/mutation.py                     # every module below
     python benchmarks/mutation.py --module units      # one of them
     python benchmarks/mutation.py --list
+    python benchmarks/mutation.py --module fsm --keep runs/mutation      # keep the session (sqlite)
+    python benchmarks/mutation.py --module fsm --recheck runs/mutation/fsm.sqlite  # its survivors vs the tests now
 
 It never mutates this checkout: the current commit is checked out into a temporary git worktree, whose
 root is made importable as the package ``cpgsim`` through a symlink put first on ``PYTHONPATH`` (the
@@ -87,13 +89,81 @@ def run_module(name: str, work: Path, timeout: float, survivors: bool) -> dict[s
     return row
 
 
+def _worktree() -> tuple[Path, Path]:
+    """(base folder, worktree of HEAD importable as ``cpgsim``): see the module docstring."""
+    base = Path(tempfile.mkdtemp(prefix="cpgsim-mutation-"))
+    work = base / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(work), "HEAD"], check=True,
+                   capture_output=True)
+    (base / "import-root").mkdir()
+    (base / "import-root" / "cpgsim").symlink_to(work, target_is_directory=True)
+    return base, work
+
+
+def _drop_worktree(base: Path, work: Path) -> None:
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(work)], capture_output=True)
+    shutil.rmtree(base, ignore_errors=True)
+
+
+def recheck(session: Path, name: str, timeout: float) -> dict[str, object]:
+    """Apply each mutant that *survived* in ``session`` (a kept cosmic-ray session of module ``name``) to a
+    worktree of the current commit and run the module's current tests against it: the survivors the tests
+    written since that session now kill."""
+    module_path, tests = MODULES[name]
+    con = sqlite3.connect(session)
+    try:
+        rows = con.execute("SELECT m.module_path, m.operator_name, m.occurrence FROM work_results r JOIN "
+                           "mutation_specs m ON r.job_id = m.job_id WHERE r.test_outcome = 'SURVIVED'").fetchall()
+        total = con.execute("SELECT COUNT(*) FROM work_results").fetchone()[0]
+        killed0 = con.execute("SELECT COUNT(*) FROM work_results WHERE test_outcome IN ('KILLED', 'TIMEOUT')"
+                              ).fetchone()[0]
+    finally:
+        con.close()
+    base, work = _worktree()
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", CPGSIM_CACHE=str(base / "cache"),
+               PYTHONPATH=os.pathsep.join([str(base / "import-root"), os.environ.get("PYTHONPATH", "")]))
+    now_killed, still = 0, []
+    try:
+        for rel, op, occ in rows:  # module paths relative to the repository root, as the session holds them
+            subprocess.run(["cosmic-ray", "apply", rel, op, str(occ)], cwd=work, env=env, check=True,
+                           capture_output=True)
+            try:
+                r = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests],
+                                   cwd=work, env=env, capture_output=True, timeout=timeout)
+                dead = r.returncode != 0
+            except subprocess.TimeoutExpired:
+                dead = True
+            now_killed += dead
+            if not dead:
+                still.append((op, occ))
+            subprocess.run(["git", "checkout", "--", rel], cwd=work, check=True, capture_output=True)
+    finally:
+        _drop_worktree(base, work)
+    killed = killed0 + now_killed
+    return {"module": module_path, "mutants": total, "killed": killed, "survived": total - killed,
+            "score": killed / max(1, total), "recheck_killed": now_killed, "still_surviving": still}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--module", action="append", choices=sorted(MODULES), help="only these modules")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per mutant's test run")
     ap.add_argument("--survivors", action="store_true", help="print each surviving mutant")
     ap.add_argument("--list", action="store_true")
+    ap.add_argument("--keep", type=Path, default=None, help="copy each module's session (sqlite) into this folder")
+    ap.add_argument("--recheck", type=Path, default=None, metavar="SESSION",
+                    help="with one --module: run the current tests against the survivors of a kept session")
     args = ap.parse_args()
+    if args.recheck is not None:
+        if not args.module or len(args.module) != 1:
+            print("--recheck needs exactly one --module", file=sys.stderr)
+            return 2
+        row = recheck(args.recheck, args.module[0], args.timeout)
+        print(f"{row['module']}: {row['mutants']} mutants, {row['killed']} killed ({row['recheck_killed']} of them "
+              f"by the current tests), {row['survived']} survived: {row['score']:.1%}")
+        for op, occ in row["still_surviving"]:
+            print(f"   survivor: {op} #{occ}")
+        return 0
     if args.list:
         for k, (path, tests) in MODULES.items():
             print(f"{k:16s} {path:40s} {' '.join(tests)}")
@@ -101,17 +171,15 @@ def main() -> int:
     if shutil.which("cosmic-ray") is None:
         print("mutation.py needs cosmic-ray: pip install cosmic-ray", file=sys.stderr)
         return 2
-    base = Path(tempfile.mkdtemp(prefix="cpgsim-mutation-"))
-    work = base / "tree"
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(work), "HEAD"], check=True,
-                   capture_output=True)
+    base, work = _worktree()
     try:
-        (base / "import-root").mkdir()
-        (base / "import-root" / "cpgsim").symlink_to(work, target_is_directory=True)
         rows = [run_module(name, work, args.timeout, args.survivors) for name in (args.module or MODULES)]
+        if args.keep is not None:
+            args.keep.mkdir(parents=True, exist_ok=True)
+            for name in args.module or MODULES:
+                shutil.copy2(work / f"{name}.sqlite", args.keep / f"{name}.sqlite")
     finally:
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(work)], capture_output=True)
-        shutil.rmtree(base, ignore_errors=True)
+        _drop_worktree(base, work)
     print(f"{'module':40s} {'mutants':>8s} {'killed':>7s} {'survived':>9s} {'score':>7s} {'wall':>7s}")
     for r in rows:
         print(f"{r['module']:40s} {r['mutants']:8d} {r['killed']:7d} {r['survived']:9d} {r['score']:7.1%} "

@@ -20,10 +20,12 @@ T_END = 3.0
 
 @pytest.fixture(scope="module")
 def client():
+    import dask
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=40)
+    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):  # as the sweep's own cluster
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=40)
     c = Client(cluster)
     cloudpickle.register_pickle_by_value(sys.modules[__name__])  # so workers can run _flaky_trial
     yield c

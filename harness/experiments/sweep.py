@@ -284,8 +284,13 @@ def _connect(scheduler: str | None, workers: int, client: Any, info: dict[str, A
         own = [client]
         info["executor"] = f"dask scheduler {scheduler}"
     else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=40)
+        import dask
+
+        # one trial per worker at a time, none queued on it: a trial that kills its worker process then counts
+        # against itself only (a queued one would be retried as "suspicious" and could end as KilledWorker)
+        with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=40)
         client = Client(cluster)
         own = [client, cluster]
         info["executor"] = f"dask LocalCluster, {int(workers)} worker processes x 1 thread"

@@ -13,7 +13,20 @@ import pytest
 # two copies of every class, and code written against the old names would pass here and fail for users.
 # The project is imported only as the installed package `cpgsim`.
 _ROOT = Path(__file__).resolve().parents[1]
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _ROOT]
+
+
+def _strip_root() -> None:
+    sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _ROOT]
+
+
+_strip_root()
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """pytest >= 9.2 sets up the repository root as a package node (it has an ``__init__.py``: the root is
+    the package ``cpgsim``) and puts the root back on sys.path while doing so: take it off again."""
+    _strip_root()
 
 
 @pytest.fixture

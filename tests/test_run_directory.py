@@ -173,3 +173,16 @@ def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
         assert not res.complete and len(res.time) > 10
     assert main(["simulate", "damped-oscillator", "--t-end", "0.2", "--dt", "0.01", "-o", str(out), "--force"]) == 0
     assert len(Results.load(out).time) == 21 and not (tmp_path / "r.partial.csv").exists()
+
+
+def test_the_demo_follows_the_run_directory_rules(tmp_path, capsys):
+    """`cpgsim demo` used to write straight into its folder (no manifest, a user's folder overwritten file by
+    file); it is `cpgsim run` now: a folder cpgsim did not write is refused, untouched."""
+    from cpgsim.harness.cli.main import main
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    assert main(["demo", "-o", str(folder)]) == 2
+    assert "holds no cpgsim run" in capsys.readouterr().err
+    assert [p.name for p in folder.iterdir()] == ["notes.txt"] and (folder / "notes.txt").read_text() == "mine"

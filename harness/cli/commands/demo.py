@@ -9,11 +9,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cpgsim.harness.cli.commands.run import print_summary
-from cpgsim.harness.cli.common import CliError
-from cpgsim.harness.experiments.runner import run_scenario
-from cpgsim.harness.simulate import SimulationError
-
 NAME = "demo"
 HELP = "run the main demo (Yu hexapod over a step) and write pictures"
 
@@ -24,12 +19,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``cpgsim run SCENARIO -o OUTPUT`` (its run directory rules: built beside the previous run and swapped
+    in when complete, a folder cpgsim did not write is never emptied), then where to look."""
+    from cpgsim.harness.cli.commands import run as run_command
+
+    as_run = argparse.Namespace(scenario=args.scenario, output=args.output, t_end=None, seed=None,
+                                no_progress=False, list=False, show=False, sets=[], csv=False)
+    code = run_command.run(as_run)
     out = Path(args.output)
-    try:
-        summary = run_scenario(args.scenario, out)
-    except SimulationError as exc:
-        raise CliError(f"{exc} (partial results in {out}/)", code=1) from exc
-    print_summary(summary, out)
     print(f"open {out}/report.html in a browser to replay the walk in 3D with its plots (or {out}/gait.png, "
           f"{out}/toe_forces.png, {out}/snapshots.png)")
-    return 0
+    return code

@@ -223,10 +223,7 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
             self._link_contact[:] = flags[1:] > 0.5
             return
         model, data = self.model, self.data
-        if self.pushes:
-            self._steps_with_pushes(n)
-            return
-        if n == 1:
+        if n == 1 and not self.pushes:
             mujoco.mj_step(model, data)
             self._read_contacts()
             return
@@ -234,39 +231,30 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         body = False
         link = np.zeros(6, dtype=bool)
         for _ in range(n):
+            if self.pushes:
+                self._set_push_wrench()
             mujoco.mj_step(model, data)
             self._read_contacts()
             total += self._force_world
             body |= self._body_contact
             link |= self._link_contact
+        if self.pushes:
+            data.xfrc_applied[self._body_id] = 0.0
         self._force_world[:] = total / n
         self._body_contact = body
         self._link_contact[:] = link
 
-    def _steps_with_pushes(self, n: int) -> None:
-        """``n`` MuJoCo steps with the active pushes set as the body's ``xfrc_applied`` (force at the body's
-        centre of mass plus the torque of its offset from there) before each; readings as :meth:`_substeps`."""
-        model, data, b = self.model, self.data, self._body_id
-        total = np.zeros(18)
-        body = False
-        link = np.zeros(6, dtype=bool)
-        for _ in range(n):
-            wrench = np.zeros(6)
-            for push in self.pushes_at(float(data.time)):
-                force = np.asarray(push.force_N)
-                point = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(push.point_m)
-                wrench[:3] += force
-                wrench[3:] += np.cross(point - data.xipos[b], force)
-            data.xfrc_applied[b] = wrench
-            mujoco.mj_step(model, data)
-            self._read_contacts()
-            total += self._force_world
-            body |= self._body_contact
-            link |= self._link_contact
-        data.xfrc_applied[b] = 0.0
-        self._force_world[:] = total / n
-        self._body_contact = body
-        self._link_contact[:] = link
+    def _set_push_wrench(self) -> None:
+        """The pushes active at the next MuJoCo step as the body's ``xfrc_applied``: the force at the body's
+        centre of mass plus the torque of its offset from there."""
+        data, b = self.data, self._body_id
+        wrench = np.zeros(6)
+        for push in self.pushes_at(float(data.time)):
+            force = np.asarray(push.force_N)
+            point = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(push.point_m)
+            wrench[:3] += force
+            wrench[3:] += np.cross(point - data.xipos[b], force)
+        data.xfrc_applied[b] = wrench
 
     # -- the closed loop in C (cpgsim.harness.fused) ----------------------------------------------------
     def closed_loop(self, commit_fn: int, ctx: int, nx: int, nz: int, u: np.ndarray, y: np.ndarray,

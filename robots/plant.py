@@ -465,18 +465,19 @@ class DartHexapod(PlantCommon, CoSimBlock):
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
         self._update_servo_forces(dt)
         world, skel, forces = self.world, self._skel, self._forces
-        if self.pushes:
-            self._steps_with_pushes(t, n)
-        elif n == 1:
+        if n == 1 and not self.pushes:
             skel.setForces(forces)
             world.step()
             self._read_contacts()
         else:
+            body_node = self.model.body
             total = np.zeros(18)
             body = False
             link = np.zeros(6, dtype=bool)
-            for _ in range(n):
-                skel.setForces(forces)  # world.step() clears them
+            for i in range(n):
+                skel.setForces(forces)  # world.step() clears them, and the external forces too
+                for push in self.pushes_at(t + i * self.time_step):
+                    body_node.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
                 world.step()
                 self._read_contacts()
                 total += self._force_world
@@ -488,26 +489,6 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self._t = t + dt
         self._n_steps += n
         self._update_outputs()
-
-    def _steps_with_pushes(self, t: float, n: int) -> None:
-        """``n`` world steps from ``t`` with the active pushes applied to the body at each (``world.step``
-        clears external forces as it clears the joint forces); contact readings as in :meth:`do_step`."""
-        body = self.model.body
-        total = np.zeros(18)
-        touched = False
-        link = np.zeros(6, dtype=bool)
-        for i in range(n):
-            self._skel.setForces(self._forces)
-            for push in self.pushes_at(t + i * self.time_step):
-                body.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
-            self.world.step()
-            self._read_contacts()
-            total += self._force_world
-            touched |= self._body_contact
-            link |= self._link_contact
-        self._force_world[:] = total / n
-        self._body_contact = touched
-        self._link_contact = link
 
     def _update_servo_forces(self, dt: float) -> None:
         """Joint forces for the next world steps: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).

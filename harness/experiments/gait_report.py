@@ -176,6 +176,13 @@ def plot_gait(run: GaitRun, path: Path) -> Path:
     fig.suptitle(f"{run.setup.scenario.name if run.setup.scenario else 'gait'}: period {r.period:.4f} s, "
                  f"max |lambda| {np.max(np.abs(est.multipliers)):.3f}, fd_agreement {r.fd_agreement:.2g}")
     fig.tight_layout()
+    return save_png(fig, path)
+
+
+def save_png(fig: Any, path: str | Path) -> Path:
+    """Write ``fig`` as a PNG at ``path`` atomically (temporary file + rename), then close it."""
+    import matplotlib.pyplot as plt
+
     path = Path(path)
     try:
         atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), text=False)

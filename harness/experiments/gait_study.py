@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from cpgsim.harness.experiments.gait_verify import verify_gait
-from cpgsim.harness.results import atomic_write
 from cpgsim.harness.verify.gait import GaitOptions
 from cpgsim.harness.verify.stride import SectionError
 
@@ -74,9 +73,6 @@ def plot_study(rows: Sequence[Mapping[str, Any]], key: str, path: Path) -> Path:
         if "error" in r:
             ax[0].axvline(float(r["value"]), color="r", lw=0.8, ls=":")
     fig.tight_layout()
-    path = Path(path)
-    try:
-        atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), text=False)
-    finally:
-        plt.close(fig)
-    return path
+    from cpgsim.harness.experiments.gait_report import save_png
+
+    return save_png(fig, path)

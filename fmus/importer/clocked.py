@@ -331,24 +331,11 @@ class ClockedRuntime(FmuRuntime):
         self._countdowns(from_float(self._time))
 
     def _cs_step(self, t: float, h: float) -> None:
-        """``fmi3DoStep`` (called directly, as the base runtime does); an event the FMU reports at the step's
-        end (``eventHandlingNeeded``) is handled there at once."""
-        from ctypes import byref
-
-        from fmpy import fmi3
-
-        event, terminate, early, last = fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Boolean(), fmi3.fmi3Float64()
-        status = self.fmu.dll.fmi3DoStep(self.fmu.component, t, h, fmi3.fmi3Boolean(True), byref(event),
-                                         byref(terminate), byref(early), byref(last))
-        if status > 2 or (status == 2 and not terminate.value):
-            from fmpy.fmi1 import FMICallException
-
-            raise FMICallException("fmi3DoStep", status)
-        if terminate.value:
-            t_last = float(last.value) if status == 2 or early.value else t + h
-            self._stop(min(max(t_last, t), t + h), "fmi3DoStep returned terminateSimulation")
+        """``fmi3DoStep`` (the base runtime's direct call); an event the FMU reports at the step's end
+        (``eventHandlingNeeded``) is handled there at once."""
+        event = self._fmi3_do_step(t, h)
         self._time = t + h
-        if event.value:
+        if event:
             self._cs_event(f"event reported by fmi3DoStep at t={t + h:.12g}")
 
     # -- model exchange: the ticks are time events ------------------------------------------------------

@@ -323,7 +323,11 @@ class FmuRuntime:
             self._stop(min(max(last, t), t + dt), "fmi2DoStep returned fmi2Discard with fmi2Terminated")
 
     def _do_step3(self, t: float, dt: float) -> None:
-        """``fmi3DoStep`` called directly (fmpy raises on fmi3Discard and loses ``terminateSimulation``)."""
+        self._fmi3_do_step(t, dt)
+
+    def _fmi3_do_step(self, t: float, dt: float) -> bool:
+        """``fmi3DoStep`` called directly (fmpy raises on fmi3Discard and loses ``terminateSimulation``);
+        returns the FMU's ``eventHandlingNeeded``."""
         from ctypes import byref as ref
 
         from fmpy import fmi3
@@ -338,6 +342,7 @@ class FmuRuntime:
         if terminate.value:
             t_last = float(last.value) if status == 2 or early.value else t + dt
             self._stop(min(max(t_last, t), t + dt), "fmi3DoStep returned terminateSimulation")
+        return bool(event.value)
 
     def _stop(self, t_last: float, why: str) -> None:
         self._terminated = True

@@ -67,6 +67,14 @@ def alive(pid: int) -> bool:
     return state not in ("Z", "X")
 
 
+def _gone(pids: list[int], seconds: float) -> list[int]:
+    """The ``pids`` still running after waiting up to ``seconds`` for them to end."""
+    deadline = time.monotonic() + seconds
+    while any(alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return [p for p in pids if alive(p)]
+
+
 def test_a_process_the_fmu_forked_ends_with_the_run(tmp_path, monkeypatch):
     pidfile = tmp_path / "pid"
     monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
@@ -74,18 +82,7 @@ def test_a_process_the_fmu_forked_ends_with_the_run(tmp_path, monkeypatch):
     r = run_cli(["simulate", "fork.fmu", "--isolate", "--t-end", "0.1", "--dt", "0.01", "-o", "o.csv"], tmp_path)
     assert r.returncode == 0, r.stderr
     pid = int(pidfile.read_text())
-    deadline = time.monotonic() + 10
-    while alive(pid) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not alive(pid), f"the FMU's forked process {pid} outlived the run"
-
-
-def _gone(pids: list[int], seconds: float) -> list[int]:
-    """The ``pids`` still running after waiting up to ``seconds`` for them to end."""
-    deadline = time.monotonic() + seconds
-    while any(alive(p) for p in pids) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    return [p for p in pids if alive(p)]
+    assert _gone([pid], 10) == [], f"the FMU's forked process {pid} outlived the run"
 
 
 def _wait_for(path: Path, seconds: float) -> str:

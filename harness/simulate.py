@@ -255,7 +255,7 @@ class Simulator:
         for path, blk in self._cosim_blocks.items():
             for port, dtype in (getattr(blk, "exact_outputs", {}) or {}).items():
                 key = f"{path}.{port}"
-                out.update({c: dtype for c in columns if c == key or (c.startswith(key + "[") and c.endswith("]"))})
+                out.update({columns[j]: dtype for j, _ in port_columns(columns, key)})
         return out
 
     def _exact_free_inputs(self, inputs: Mapping[str, InputValue]) -> dict[str, np.ndarray]:
@@ -627,9 +627,7 @@ class _Recorder:
         """``(column index, "block.port", element)`` of every recorded 64-bit integer column."""
         out = []
         for key in self.exact:
-            for j, col in enumerate(self.columns):
-                if col == key or (col.startswith(key + "[") and col.endswith("]")):
-                    out.append((j, key, 0 if col == key else int(col[len(key) + 1:-1])))
+            out += [(j, key, element) for j, element in port_columns(self.columns, key)]
         return out
 
     def _exact_cells(self, start: int, stop: int) -> dict[int, list[int]]:
@@ -689,6 +687,18 @@ def horizon_steps(t0: float, t_end: float, dt: float) -> int:
         raise ModelError(f"t_end={t_end:g} s is not a whole number of macro steps dt={dt:g} s from t0={t0:g} s "
                          f"({steps:.6g} steps): choose t_end = t0 + k*dt")
     return n
+
+
+def port_columns(columns: Sequence[str], port: str) -> list[tuple[int, int]]:
+    """``(column index, element)`` of the recorded columns of ``port`` (``"block.port"``: the column itself,
+    or ``block.port[i]`` for a vector port's element ``i``)."""
+    out = []
+    for j, col in enumerate(columns):
+        if col == port:
+            out.append((j, 0))
+        elif col.startswith(port + "[") and col.endswith("]"):
+            out.append((j, int(col[len(port) + 1:-1])))
+    return out
 
 
 def matching_columns(columns: Sequence[str], aliases: Mapping[str, str], patterns: Sequence[str]) -> list[int]:

@@ -102,7 +102,7 @@ class Kind:
     def function(self, tag: str, outs: Sequence[ca.SX]) -> ca.Function:
         name = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", f"{self.name}_{tag}")).strip("_")
         return ca.Function(name, self.args, list(outs), ["t", "x", "z", "u", "p"],
-                           [f"o{i}" for i in range(len(outs))])
+                           [f"o{i}" for i in range(len(outs))], {"cse": True})
 
 
 @dataclass
@@ -152,18 +152,19 @@ class Schedule:
     def has_discrete(self) -> bool:
         return bool(self.discrete_groups)
 
-    def groups_read_by_derivatives(self) -> set[int]:
-        """``id`` of the signal groups whose outputs derivatives read, directly or through other signals."""
+    def derivative_reads(self) -> np.ndarray:
+        """Pool mask of what the derivative groups read (their inputs)."""
         needed = np.zeros(self.pool_size, dtype=bool)
         for g in self.derivative_groups:
             needed[g.u_idx.ravel()] = True
-        read: set[int] = set()
-        for level in reversed(self.signal_levels):  # a signal reads only lower levels
-            for g in level:
-                if any(needed[_group_rows(g, k)].any() for k in range(len(g.out_off))):
-                    read.add(id(g))
-                    needed[g.u_idx.ravel()] = True
-        return read
+        return needed
+
+    def discrete_reads(self) -> np.ndarray:
+        """Pool mask of what the sampled update (resets and discrete updates) reads."""
+        needed = np.zeros(self.pool_size, dtype=bool)
+        for g in self.discrete_groups:
+            needed[g.u_idx.ravel()] = True
+        return needed
 
 
 # -- leaf signatures ---------------------------------------------------------------------------------
@@ -491,6 +492,82 @@ def _group_rows(g: Group, k: int) -> np.ndarray:
     return (g.out_off[k][:, None] + np.arange(size)[None, :]).ravel()
 
 
+def _group_outputs(g: Group) -> list[ca.SX]:
+    """The expression of every output of ``g`` in its kind's generic symbols."""
+    return g.fn.call(g.kind.args)
+
+
+def _stage_variant(s: Schedule) -> np.ndarray:
+    """Pool mask of the signals that can change between the RK4 stages of one step.
+
+    A signal row is variant when its expression depends on ``t`` or ``x``, or reads a variant input
+    (for any instance of its group); the rest depend only on parameters, discrete states and external
+    inputs, which are fixed for the whole step once the sampled update has run.
+    """
+    variant = np.zeros(s.pool_size, dtype=bool)
+    for level in s.signal_levels:
+        for g in level:
+            t, x, _z, u, _p = g.kind.args
+            cols = np.flatnonzero(variant[g.u_idx].any(axis=0)) if g.u_idx.size else np.zeros(0, dtype=int)
+            moving = ca.vertcat(t, x, u[cols.tolist()]) if cols.size else ca.vertcat(t, x)
+            for k, expr in enumerate(_group_outputs(g)):
+                rows = sorted(set(ca.jacobian_sparsity(expr, moving).get_triplet()[0]))
+                if rows:
+                    variant[_group_rows(g, k).reshape(g.n, -1)[:, rows]] = True
+    return variant
+
+
+def _pruned_group(g: Group, keep: list[np.ndarray], tag: str) -> tuple[Group | None, list[int]]:
+    """``g`` computing only the rows ``keep[k]`` (a mask per output) of each output; and the input
+    columns those rows read. Kept rows are cut into contiguous runs, one output each."""
+    exprs, offs, targets = [], [], []
+    for k, (expr, mask) in enumerate(zip(_group_outputs(g), keep, strict=True)):
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            continue
+        for run in np.split(idx, np.flatnonzero(np.diff(idx) != 1) + 1):
+            a, b = int(run[0]), int(run[-1]) + 1
+            exprs.append(expr if (a, b) == (0, expr.numel()) else expr[a:b])
+            offs.append(g.out_off[k] + a)
+            targets.append(g.out_target[k])
+    if not exprs:
+        return None, []
+    u = g.kind.args[3]
+    cols = sorted(set(ca.jacobian_sparsity(ca.vertcat(*exprs), u).get_triplet()[1])) if u.numel() else []
+    fn = g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_{tag}", exprs)
+    return Group(g.kind, fn, g.x_off, g.z_off, g.p_off, g.u_idx, offs, targets), cols
+
+
+def _pruned_levels(s: Schedule, needed: np.ndarray, present: np.ndarray | None,
+                   tag: str) -> tuple[list[Group], np.ndarray]:
+    """The signal groups, in evaluation order, cut down to the rows pool mask ``needed`` asks for,
+    directly or through the inputs of those rows.
+
+    Rows in pool mask ``present`` are not computed (their values are already in the pool); the second
+    result is the mask of those that were needed (they must be valid in the pool the pruned groups use).
+    """
+    needed = needed.copy()
+    reused = np.zeros(s.pool_size, dtype=bool)
+    out: list[Group] = []
+    for level in reversed(s.signal_levels):
+        for g in reversed(level):
+            keep = []
+            for k in range(len(g.out_off)):
+                rows = _group_rows(g, k).reshape(g.n, -1)
+                want = needed[rows]
+                if present is not None:
+                    reused[rows[want & present[rows]]] = True
+                    want = want & ~present[rows]
+                keep.append(want.any(axis=0))
+            pruned, cols = _pruned_group(g, keep, tag)
+            if pruned is None:
+                continue
+            needed[g.u_idx[:, cols].ravel()] = True
+            out.append(pruned)
+    out.reverse()
+    return out, reused
+
+
 def _contiguous_keys(kind: Kind, keys: tuple[str, ...]) -> bool:
     pos = kind.out_rel[keys[0]]
     for k in keys:
@@ -626,8 +703,11 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     from cpgsim.harness.native import casadi_c_source
 
     fused = _fused_first_stage(s)
+    inner, reused = _pruned_levels(s, s.derivative_reads(), ~_stage_variant(s), "stage")
+    pre = _pruned_levels(s, s.discrete_reads(), None, "pre")[0] if s.has_discrete else []
+    reused_rows = np.flatnonzero(reused[:s.n_sig])
     groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
-              + list(fused.values()))
+              + list(fused.values()) + inner + pre)
     source = casadi_c_source([g.fn for g in groups], "cpgsim_kinds")
     parts = [source, "\n/* ---- grouped step (harness/grouped.py) ---- */\n"]
     names: dict[int, str] = {}
@@ -638,12 +718,17 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     def calls(gs) -> str:
         return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
 
-    read = s.groups_read_by_derivatives()
     fused_kinds = {id(g.kind) for g in fused.values()}
-    level_calls = calls(g for lv in s.signal_levels for g in lv)
+    pre_calls = calls(pre)
     first_calls = calls(fused.get(id(g), g) for lv in s.signal_levels for g in lv)
     first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
-    inner_calls = calls(g for lv in s.signal_levels for g in lv if id(g) in read)
+    inner_calls = calls(inner)
+    if reused_rows.size:
+        parts.append(_c_array("cpgsim_reused", reused_rows))
+        keep_reused = (f"if (S != Sw) for (i = 0; i < {reused_rows.size}; ++i) "
+                       "Sw[cpgsim_reused[i]] = S[cpgsim_reused[i]];")
+    else:
+        keep_reused = ""
     deriv_calls = calls(s.derivative_groups)
     disc_calls = calls(s.discrete_groups)
     h = dt / substeps
@@ -657,14 +742,15 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     parts.append(f"""
 /* S: the signals (model signal order); E: external inputs, then one zero (see the group tables) */
 
-/* every signal (for the recorded y and the sampled update) */
+/* the signals the sampled update reads, directly or through other signals (before the update) */
 static void cpgsim_signals(double t, const double *x, const double *z, const double *p, double *S, const double *E) {{
   double *x_out = 0, *z_out = 0;
   (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
-{level_calls}
+{pre_calls}
 }}
 
-/* only the signals that derivatives read, directly or through other signals (inner RK4 stages) */
+/* inner RK4 stages: only the signal rows that derivatives read, directly or through other signals, and
+   of those only the rows that depend on t or x (the others keep the first stage's values) */
 static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *S,
                                 const double *E) {{
   double *x_out = 0, *z_out = 0;
@@ -722,7 +808,7 @@ int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   for (s = 0; s < {substeps}; ++s) {{
     const double ti = t0 + s * {h!r};
     xn = (s == {substeps - 1} && res[0]) ? res[0] : (s % 2 ? xa : xb);
-    if (s == 0) cpgsim_first_stage(ti, xp, zp, p, S, E, k1);
+    if (s == 0) {{ cpgsim_first_stage(ti, xp, zp, p, S, E, k1); {keep_reused} }}
     else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1); }}
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
     cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);

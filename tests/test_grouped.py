@@ -14,7 +14,8 @@ import re
 import numpy as np
 import pytest
 
-from cpgsim.components.basic import Constant, Gain, Integrator, Sum
+from cpgsim.components.basic import Constant, Gain, Integrator, SineSource, Sum
+from cpgsim.components.core import Block, Equations, Symbols
 from cpgsim.components.graph import AlgebraicLoopError, Graph
 from cpgsim.components.library import damped_oscillator, network_array
 from cpgsim.harness.compile import compile_graph
@@ -166,3 +167,50 @@ def test_long_array_configuration_is_not_merged():
     assert sorted(len(k.members) for k in model.schedule.kinds if k.label == "_Table") == [1, 1, 1, 1]
     y = np.asarray(model.signals(0.0, model.x0, model.z0, np.zeros(0), model.p0)).ravel()
     assert [y[model.signals_layout.index(f"t{i}.y").start] for i in range(4)] == [0.0, 1.0, 2.0, 3.0]
+
+
+class _Counter(Block):
+    """A sampled counter: ``z <- z + step`` at every macro step, ``y = z`` (fixed within a step)."""
+
+    def __init__(self, name: str, step: float = 1.0, **kw) -> None:
+        self._step = step
+        super().__init__(name, **kw)
+
+    def declare(self) -> None:
+        self.add_discrete_state("count", 0.0)
+        self.add_output("y", 1, "1/s")
+
+    def define(self, v: Symbols) -> Equations:
+        return Equations(updates={"count": v.z["count"] + self._step}, outputs={"y": v.z["count"]})
+
+
+def counter_chain(n: int = 6) -> Graph:
+    """Per instance: counter -> integrator -> gain -> integrator, plus a sine read by a sum.
+
+    The counter's output is read by a derivative but is fixed within a step (the inner RK4 stages reuse
+    the value after the sampled update); the gain's output depends on a state (recomputed each stage).
+    """
+    g = Graph("chain")
+    for i in range(n):
+        g.add(_Counter(f"c{i}", step=0.5 + 0.1 * i))
+        g.add(Integrator(f"i{i}"))
+        g.add(Gain(f"k{i}", k=-0.3, out_unit="1/s"))  # 1 -> 1/s
+        g.add(Integrator(f"j{i}"))
+        g.add(SineSource(f"s{i}", unit="1/s"))
+        g.add(Sum(f"sum{i}", signs=(1, 1), unit="1/s"))
+        g.connect(f"c{i}.y", f"sum{i}.u1")
+        g.connect(f"s{i}.y", f"sum{i}.u2")
+        g.connect(f"sum{i}.y", f"i{i}.u")
+        g.connect(f"i{i}.y", f"k{i}.u")
+        g.connect(f"k{i}.y", f"j{i}.u")
+    return g
+
+
+def test_signals_fixed_within_a_step_use_the_updated_value():
+    """Inner RK4 stages compute only the signal rows derivatives read that move with t or x; rows fixed
+    within the step (the counter after its update) are the first stage's values: same numbers as the flat
+    compile, which evaluates every signal at every stage."""
+    a, b = run(counter_chain(), "flat", t_end=0.5), run(counter_chain(), "kinds", t_end=0.5)
+    assert a.columns == b.columns
+    assert np.ptp(a["i0.y"]) > 1.0  # the counter drives the integrator
+    assert np.array_equal(a.data, b.data)

@@ -594,7 +594,7 @@ class _Recorder:
         w = self.writer
         if w is not None and self.n > self.streamed and (self.n - self.streamed >= self.flush_rows or w.due()):
             self._hand_over()
-            w.flush()
+            w.flush(wait=False)
 
     def _hand_over(self) -> None:
         self.writer.append(self.times[self.streamed:self.n], self.data[self.streamed:self.n],

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from cpgsim.components.private_store import pid_alive
+from cpgsim.harness.results.background import BackgroundWriter
 from cpgsim.harness.results.errors import ResultsError
 
 
@@ -363,6 +364,7 @@ class ResultsWriter:
         self.flush_seconds = float(flush_seconds)
         self._file = None
         self._arrow: Any = None  # an arrow.ArrowStream for a .arrow target
+        self._background: BackgroundWriter | None = None  # its writer thread
         self._pending: list[tuple[np.ndarray, Mapping[int, Sequence[int]] | None]] = []
         self._rows = 0
         self._last = _time.monotonic()
@@ -391,6 +393,7 @@ class ResultsWriter:
 
             self._arrow = ArrowStream(self.stream_path, self.columns, self.units,
                                       self.meta.get("integer_columns", {}), csv_meta(self.meta))
+            self._background = BackgroundWriter(self._write_batch, self.stream_path.name)
         else:
             fd = os.open(self.stream_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
             self._file = os.fdopen(fd, "w")
@@ -414,18 +417,25 @@ class ResultsWriter:
         """``flush_seconds`` of wall time have passed since the last flush."""
         return _time.monotonic() - self._last >= self.flush_seconds
 
-    def flush(self) -> None:
-        """Write the pending rows as whole lines and push them to the disk."""
+    def flush(self, wait: bool = True) -> None:
+        """Write the pending rows (whole lines or record batches) and push them to the disk.
+
+        ``wait=False`` (Arrow): hand them to the writer thread and return (a running simulation's
+        hand-over); they are on the disk when a later ``flush()`` or the end of the stream returns.
+        """
         self._last = _time.monotonic()
         if (self._file is None and self._arrow is None) or not self._pending:
+            if wait and self._background is not None:
+                self._background.drain()
             return
         pending, self._pending = self._pending, []
+        if self._arrow is not None:  # one record batch per pending block, each fsynced, on the writer thread
+            for table, exact in pending:
+                self._background.put(table, exact)
+            if wait:
+                self._background.drain()
+            return
         try:
-            if self._arrow is not None:  # one record batch per pending block, each fsynced
-                for table, exact in pending:
-                    self._arrow.write(table, exact)
-                    self._rows += len(table)
-                return
             text = "".join(csv_rows(table, exact) for table, exact in pending)
             self._file.write(text)
             self._rows += sum(len(table) for table, _ in pending)  # counted before the flush: a signal
@@ -465,11 +475,23 @@ class ResultsWriter:
         finally:
             self._close_stream(ended=False)
 
+    def _write_batch(self, table: np.ndarray, exact: Mapping[int, Sequence[int]] | None) -> None:
+        """One block into the Arrow stream (on the writer thread)."""
+        try:
+            self._arrow.write(table, exact)
+        except OSError as exc:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(self.stream_path)) from exc
+        self._rows += len(table)
+
     def _close_stream(self, ended: bool) -> None:
         if self._file is not None:
             self._file.close()
             self._file = None
         if self._arrow is not None:
-            arrow, self._arrow = self._arrow, None
-            arrow.close() if ended else arrow.abandon()
+            background, self._background = self._background, None
+            try:
+                background.close()  # every block handed over is written before the stream ends
+            finally:
+                arrow, self._arrow = self._arrow, None
+                arrow.close() if ended else arrow.abandon()
 

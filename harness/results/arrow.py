@@ -58,27 +58,31 @@ class ArrowStream:
         self.path = Path(path)
         self.schema = schema(columns, units, integer_columns, meta)
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
-        self._file = os.fdopen(fd, "wb")
-        self._sink = pa.PythonFile(self._file, mode="w")
-        options = pa.ipc.IpcWriteOptions(compression="zstd")
+        self._file = os.fdopen(fd, "wb", buffering=0)
+        # Arrow's own file object writes straight to the descriptor (a Python file object in between cost
+        # a third of the write); buffers are compressed on the calling thread (use_threads=False: a
+        # background writer must take one core at most, whatever the machine's load)
+        self._sink = pa.output_stream(self._file, buffer_size=1 << 20)
+        options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
         self._writer = pa.ipc.new_stream(self._sink, self.schema, options=options)
         self._sync()
 
     def _sync(self) -> None:
-        self._file.flush()
+        self._sink.flush()
         os.fsync(self._file.fileno())
 
     def write(self, table: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> None:
         """Append ``table`` (rows x (1 + columns): time first) as one batch; ``exact`` maps a table column
         index to its exact integers (the 64-bit integer columns)."""
         pa = _pa()
+        columns = np.ascontiguousarray(np.asarray(table, dtype=np.float64).T)  # one copy: columns contiguous
         arrays = []
         for j, field in enumerate(self.schema):
             if pa.types.is_integer(field.type):
-                values = exact[j] if exact and j in exact else table[:, j]
+                values = exact[j] if exact and j in exact else columns[j]
                 arrays.append(pa.array([int(v) for v in values], type=field.type))
             else:
-                arrays.append(pa.array(np.ascontiguousarray(table[:, j], dtype=np.float64)))
+                arrays.append(pa.array(columns[j]))  # no copy
         self._writer.write_batch(pa.RecordBatch.from_arrays(arrays, schema=self.schema))
         self._sync()
 
@@ -88,11 +92,15 @@ class ArrowStream:
             self._writer.close()
             self._sync()
         finally:
+            self._sink.close()
             self._file.close()
 
     def abandon(self) -> None:
         """Close the file without the end marker (the batches written stay readable)."""
-        self._file.close()
+        try:
+            self._sink.flush()
+        finally:
+            self._file.close()
 
 
 def write_table(path: Path, time: np.ndarray, columns: Sequence[str], units: Sequence[str], data: np.ndarray,

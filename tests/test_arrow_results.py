@@ -86,3 +86,54 @@ def test_cli_results_converts_to_csv_that_a_csv_reader_gets_exactly(tmp_path, ca
     assert [int(r["b.n"]) for r in rows] == [BIG - k for k in range(7)]
     assert main(["results", str(tmp_path / "r.arrow"), "--csv"]) == 2  # exists: refused without --force
     assert "exists (use --force" in capsys.readouterr().err
+
+
+def test_blocks_handed_to_the_writer_thread_keep_their_order(tmp_path):
+    """``flush(wait=False)`` (the simulation's hand-over) returns before the batch is on the disk; every
+    block is written, in order, by the time the stream is closed."""
+    path = tmp_path / "o.arrow"
+    w = ResultsWriter(path).open(["a.x"], ["m"], {})
+    for k in range(40):
+        t = np.arange(25 * k, 25 * k + 25) * 1e-3
+        w.append(t, (t * 3.0)[:, None])
+        w.flush(wait=False)
+    t_all = np.arange(1000) * 1e-3
+    w.close(Results(t_all, ["a.x"], ["m"], (t_all * 3.0)[:, None], True, "", {}))
+    back = Results.load(path)
+    assert back.complete and w.rows_written == 1000
+    np.testing.assert_array_equal(back.time, t_all)
+    np.testing.assert_array_equal(back["a.x"], t_all * 3.0)
+
+
+def test_a_write_error_on_the_writer_thread_reaches_the_run_and_names_the_file(tmp_path, monkeypatch):
+    """A full disk while the thread writes: the next hand-over raises it with the file's name, no later
+    block is written, and the batches written before it stay readable (marked incomplete)."""
+    import errno
+
+    from cpgsim.harness.results import arrow
+
+    path = tmp_path / "full.arrow"
+    w = ResultsWriter(path).open(["a.x"], ["m"], {})
+    real_write, calls = arrow.ArrowStream.write, []
+
+    def write(self, table, exact=None):
+        calls.append(len(table))
+        if len(calls) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_write(self, table, exact)
+
+    monkeypatch.setattr(arrow.ArrowStream, "write", write)
+    for k in range(2):
+        w.append(np.arange(10 * k, 10 * k + 10) * 1e-3, np.zeros((10, 1)))
+        w.flush()
+    w.append(np.arange(20, 30) * 1e-3, np.zeros((10, 1)))
+    w.flush(wait=False)  # the thread fails on this block
+    with pytest.raises(OSError) as info:
+        for k in range(3, 10):
+            w.append(np.arange(10 * k, 10 * k + 10) * 1e-3, np.zeros((10, 1)))
+            w.flush()
+    assert info.value.errno == errno.ENOSPC and str(path) in str(info.value)
+    assert len(calls) == 3  # nothing written after the error
+    w.abandon()
+    part = Results.load(path)
+    assert not part.complete and len(part.time) == 20

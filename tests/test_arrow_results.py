@@ -114,15 +114,15 @@ def test_a_write_error_on_the_writer_thread_reaches_the_run_and_names_the_file(t
 
     path = tmp_path / "full.arrow"
     w = ResultsWriter(path).open(["a.x"], ["m"], {})
-    real_write, calls = arrow.ArrowStream.write, []
+    real_write, calls = arrow.ArrowStream.write_batch, []
 
-    def write(self, table, exact=None):
-        calls.append(len(table))
+    def write_batch(self, batch):
+        calls.append(batch.num_rows)
         if len(calls) == 3:
             raise OSError(errno.ENOSPC, "No space left on device")
-        real_write(self, table, exact)
+        real_write(self, batch)
 
-    monkeypatch.setattr(arrow.ArrowStream, "write", write)
+    monkeypatch.setattr(arrow.ArrowStream, "write_batch", write_batch)
     for k in range(2):
         w.append(np.arange(10 * k, 10 * k + 10) * 1e-3, np.zeros((10, 1)))
         w.flush()

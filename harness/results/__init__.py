@@ -355,6 +355,10 @@ class ResultsWriter:
     row leaves no file.
     """
 
+    background = True
+    """Arrow streams: write record batches on a writer thread (``False``: on the caller's thread, as the
+    benchmark compares)."""
+
     def __init__(self, path: str | Path, flush_seconds: float = 2.0) -> None:
         self.path = Path(path).absolute()  # a library that changes the working directory cannot misdirect it
         if self.path.suffix not in (".arrow", ".csv", ".npz"):
@@ -393,7 +397,8 @@ class ResultsWriter:
 
             self._arrow = ArrowStream(self.stream_path, self.columns, self.units,
                                       self.meta.get("integer_columns", {}), csv_meta(self.meta))
-            self._background = BackgroundWriter(self._write_batch, self.stream_path.name)
+            if self.background:
+                self._background = BackgroundWriter(self._write_batch, self.stream_path.name)
         else:
             fd = os.open(self.stream_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
             self._file = os.fdopen(fd, "w")
@@ -430,9 +435,12 @@ class ResultsWriter:
             return
         pending, self._pending = self._pending, []
         if self._arrow is not None:  # one record batch per pending block, each fsynced, on the writer thread
-            for table, exact in pending:
-                self._background.put(table, exact)
-            if wait:
+            for table, exact in pending:  # the batch is built here: the thread then runs without the GIL
+                if self._background is None:
+                    self._write_batch(self._arrow.batch(table, exact), len(table))
+                else:
+                    self._background.put(self._arrow.batch(table, exact), len(table))
+            if wait and self._background is not None:
                 self._background.drain()
             return
         try:
@@ -475,13 +483,13 @@ class ResultsWriter:
         finally:
             self._close_stream(ended=False)
 
-    def _write_batch(self, table: np.ndarray, exact: Mapping[int, Sequence[int]] | None) -> None:
-        """One block into the Arrow stream (on the writer thread)."""
+    def _write_batch(self, batch: Any, rows: int) -> None:
+        """One record batch into the Arrow stream (on the writer thread)."""
         try:
-            self._arrow.write(table, exact)
+            self._arrow.write_batch(batch)
         except OSError as exc:  # a full disk: say which file
             raise OSError(exc.errno, exc.strerror, str(self.stream_path)) from exc
-        self._rows += len(table)
+        self._rows += rows
 
     def _close_stream(self, ended: bool) -> None:
         if self._file is not None:
@@ -490,7 +498,8 @@ class ResultsWriter:
         if self._arrow is not None:
             background, self._background = self._background, None
             try:
-                background.close()  # every block handed over is written before the stream ends
+                if background is not None:
+                    background.close()  # every block handed over is written before the stream ends
             finally:
                 arrow, self._arrow = self._arrow, None
                 arrow.close() if ended else arrow.abandon()

@@ -74,6 +74,16 @@ class ArrowStream:
     def write(self, table: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> None:
         """Append ``table`` (rows x (1 + columns): time first) as one batch; ``exact`` maps a table column
         index to its exact integers (the 64-bit integer columns)."""
+        self.write_batch(self.batch(table, exact))
+
+    def write_batch(self, batch: Any) -> None:
+        """Append a record batch made by :meth:`batch` and push it to the disk (pyarrow compresses and
+        writes without the GIL, ``fsync`` too: a writer thread doing this holds the GIL only briefly)."""
+        self._writer.write_batch(batch)
+        self._sync()
+
+    def batch(self, table: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> Any:
+        """``table`` as a record batch of this stream's schema (Python work: done on the caller's thread)."""
         pa = _pa()
         columns = np.ascontiguousarray(np.asarray(table, dtype=np.float64).T)  # one copy: columns contiguous
         arrays = []
@@ -83,8 +93,7 @@ class ArrowStream:
                 arrays.append(pa.array([int(v) for v in values], type=field.type))
             else:
                 arrays.append(pa.array(columns[j]))  # no copy
-        self._writer.write_batch(pa.RecordBatch.from_arrays(arrays, schema=self.schema))
-        self._sync()
+        return pa.RecordBatch.from_arrays(arrays, schema=self.schema)
 
     def close(self) -> None:
         """Write the end-of-stream marker and close the file."""

@@ -18,9 +18,14 @@ truth); only the loop structure is generated here, in two forms from one :class:
 - C source for the native backend (:func:`c_step_source`): one loop per group calling the kind's
   CasADi-generated C function on pointers into the flat state, parameter and signal vectors (states,
   parameters and outputs of a block are contiguous in the model's layouts, so only inputs are
-  gathered), then RK4 over the whole state vector; only the signals that derivatives read are
-  recomputed in the inner RK4 stages, and kinds without inputs compute signals and derivatives in
-  one pass in the first. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every
+  gathered), then RK4 over the whole state vector. The first stage computes every signal (the
+  recorded ``y``); the inner stages only the signal *rows* that derivatives read, directly or through
+  other signals, and of those only the ones that depend on ``t`` or ``x`` (the rest are fixed for the
+  step once the sampled update has run, and keep the first stage's values); the pass before the sampled
+  update only the rows the update reads. Each pruned pass is its own CasADi function of the kind (same
+  expressions, so the same numbers), and each kind's functions are generated with common
+  subexpression elimination (a leg's kinematics appear in several of its blocks). Kinds without inputs
+  compute signals and derivatives in one pass in the first stage. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every
   driver of :mod:`cpgsim.harness.native` runs it unchanged.
 
 Evaluation order: an output port's *level* is 0 when it reads no other block's output through direct

@@ -573,6 +573,34 @@ def _pruned_levels(s: Schedule, needed: np.ndarray, present: np.ndarray | None,
     return out, reused
 
 
+def _sampled_pass(pre: list[Group], discrete: list[Group]) -> list[Group]:
+    """The groups of the sampled update in call order: the signal groups ``pre`` (pruned to what the update
+    reads), then the discrete groups.
+
+    A kind's discrete group is merged into the last of its signal groups in ``pre`` (one function of both,
+    with common subexpressions shared: a leg's update recomputes the kinematics its signals hold) when it
+    reads no signal written at or after that group; otherwise it runs after all of them.
+    """
+    seq = list(pre)
+    rest: list[Group] = []
+    for d in discrete:
+        at = [i for i, g in enumerate(seq) if g.kind is d.kind and np.array_equal(g.x_off, d.x_off)
+              and all(t == "pool" for t in g.out_target)]
+        if not at:
+            rest.append(d)
+            continue
+        i = at[-1]
+        later = np.concatenate([_group_rows(g, k) for g in seq[i:] for k in range(len(g.out_off))])
+        if np.isin(d.u_idx, later).any():
+            rest.append(d)
+            continue
+        g = seq[i]
+        fn = g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_sampled", _group_outputs(g) + _group_outputs(d))
+        seq[i] = Group(g.kind, fn, g.x_off, g.z_off, g.p_off, d.u_idx, [*g.out_off, *d.out_off],
+                       [*g.out_target, *d.out_target])
+    return seq + rest
+
+
 def _contiguous_keys(kind: Kind, keys: tuple[str, ...]) -> bool:
     pos = kind.out_rel[keys[0]]
     for k in keys:
@@ -710,9 +738,10 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     fused = _fused_first_stage(s)
     inner, reused = _pruned_levels(s, s.derivative_reads(), ~_stage_variant(s), "stage")
     pre = _pruned_levels(s, s.discrete_reads(), None, "pre")[0] if s.has_discrete else []
+    sample = _sampled_pass(pre, s.discrete_groups)
     reused_rows = np.flatnonzero(reused[:s.n_sig])
-    groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + s.discrete_groups
-              + list(fused.values()) + inner + pre)
+    groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + list(fused.values())
+              + inner + sample)
     source = casadi_c_source([g.fn for g in groups], "cpgsim_kinds")
     parts = [source, "\n/* ---- grouped step (harness/grouped.py) ---- */\n"]
     names: dict[int, str] = {}
@@ -724,7 +753,7 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
         return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
 
     fused_kinds = {id(g.kind) for g in fused.values()}
-    pre_calls = calls(pre)
+    sample_calls = calls(sample)
     first_calls = calls(fused.get(id(g), g) for lv in s.signal_levels for g in lv)
     first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
     inner_calls = calls(inner)
@@ -735,23 +764,23 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     else:
         keep_reused = ""
     deriv_calls = calls(s.derivative_groups)
-    disc_calls = calls(s.discrete_groups)
     h = dt / substeps
     nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
     if s.has_discrete:
         start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
-                 "  cpgsim_signals(t0, x, z, p, Sw, E);\n  cpgsim_discrete(t0, x, z, p, Sw, E, xa, zb);\n"
+                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb);\n"
                  "  xp = xa; zp = zb;")
     else:
         start = "xp = x; zp = z;"
     parts.append(f"""
 /* S: the signals (model signal order); E: external inputs, then one zero (see the group tables) */
 
-/* the signals the sampled update reads, directly or through other signals (before the update) */
-static void cpgsim_signals(double t, const double *x, const double *z, const double *p, double *S, const double *E) {{
-  double *x_out = 0, *z_out = 0;
+/* the sampled update: the signals it reads, directly or through other signals (before the update), then
+   the resets and updates into x_out, z_out (a kind's update merged into its last signal pass there) */
+static void cpgsim_sample(double t, const double *x, const double *z, const double *p, double *S,
+                          const double *E, double *x_out, double *z_out) {{
   (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
-{pre_calls}
+{sample_calls}
 }}
 
 /* inner RK4 stages: only the signal rows that derivatives read, directly or through other signals, and
@@ -779,10 +808,6 @@ static void cpgsim_first_stage(double t, const double *x, const double *z, const
 {first_deriv_calls}
 }}
 
-static void cpgsim_discrete(double t, const double *x, const double *z, const double *p, double *S,
-                            const double *E, double *x_out, double *z_out) {{
-{disc_calls}
-}}
 
 #define CPGSIM_NX {max(nx, 1)}
 #define CPGSIM_NZ {max(nz, 1)}

@@ -22,11 +22,13 @@ truth); only the loop structure is generated here, in two forms from one :class:
   recorded ``y``); the inner stages only the signal *rows* that derivatives read, directly or through
   other signals, and of those only the ones that depend on ``t`` or ``x`` (the rest are fixed for the
   step once the sampled update has run, and keep the first stage's values); the pass before the sampled
-  update only the rows the update reads. Each pruned pass is its own CasADi function of the kind (same
-  expressions, so the same numbers), and each kind's functions are generated with common
-  subexpression elimination (a leg's kinematics appear in several of its blocks). Kinds without inputs
-  compute signals and derivatives in one pass in the first stage. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every
-  driver of :mod:`cpgsim.harness.native` runs it unchanged.
+  update only the rows the update reads, and a kind's update is merged into the last of those passes
+  of its kind where the order allows (:func:`_sampled_pass`). Each pruned or merged pass is its own
+  CasADi function of the kind (same expressions, so the same numbers), and each kind's functions are
+  generated with common subexpression elimination (a leg's kinematics appear in several of its blocks
+  and again in its update). Kinds without inputs compute signals and derivatives in one pass in the
+  first stage. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every driver of
+  :mod:`cpgsim.harness.native` runs it unchanged.
 
 Evaluation order: an output port's *level* is 0 when it reads no other block's output through direct
 feedthrough, else one more than the highest level it reads; groups run level by level, which is the

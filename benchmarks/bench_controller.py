@@ -1,0 +1,80 @@
+"""The hexapod controller's compiled step alone: what one 1 ms macro step of Yu's six-leg controller costs.
+
+The controller's step is, with the physics engine's own step, what a robot run pays per control step
+(in the MuJoCo loop nothing else is left). Three builds of the same step, interleaved ``--repeat`` times
+in one process (load from other processes hits each alike), each run for ``--steps`` steps in one C call
+(the horizon driver of ``harness/native.py``; inputs held at zero, the model's start state): medians in
+microseconds per step and their ratio to the default.
+
+- ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
+  the signal rows derivatives read that move within the step, the sampled update merged into its signal
+  pass, common subexpressions shared (``harness/grouped.py``), gcc flags of
+  ``harness/native.optimization_flags`` (-O3 here);
+- ``grouped -O1``: the same C at -O1 (the flag this step got before 2026-12-02, as a 150 kB file);
+- ``flat``: every instance inlined into one CasADi expression, CasADi's own C (``grouping="flat"``).
+
+Run: ``python benchmarks/bench_controller.py [--steps 5000] [--repeat 7]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+os.environ.setdefault("CPGSIM_COMPILE_CACHE", "0")  # the grouped schedule is not kept by cached models
+
+from cpgsim.components.yu.leg import hexapod_controller  # noqa: E402
+from cpgsim.harness import native  # noqa: E402
+from cpgsim.harness.compile import compile_graph  # noqa: E402
+
+
+def horizon(model, source: str | None, flags: tuple[str, ...] | None) -> native.NativeHorizon:
+    if flags is None:
+        return native.NativeHorizon(model.step, source)
+    saved = native.optimization_flags
+    native.optimization_flags = lambda _source: flags  # this build only
+    try:
+        return native.NativeHorizon(model.step, source)
+    finally:
+        native.optimization_flags = saved
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=5000)
+    ap.add_argument("--repeat", type=int, default=7)
+    args = ap.parse_args()
+    kinds = compile_graph(hexapod_controller(), grouping="kinds")
+    flat = compile_graph(hexapod_controller(), grouping="flat")
+    source = kinds.c_step_source()
+    builds = {
+        f"grouped {' '.join(native.optimization_flags(source))} (default)": (kinds, horizon(kinds, source, None)),
+        "grouped -O1": (kinds, horizon(kinds, source, ("-O1",))),
+        f"flat {' '.join(native.optimization_flags(native.casadi_c_source([flat.step], 'x')))}":
+            (flat, horizon(flat, None, None)),
+    }
+    times: dict[str, list[float]] = {k: [] for k in builds}
+    ends = {}
+    for _ in range(args.repeat):
+        for label, (model, h) in builds.items():
+            U = np.zeros((model.inputs.size, args.steps))
+            t0 = time.perf_counter()
+            x, _z, _out, _bad = h.run(args.steps, 0.0, model.dt, model.x0, model.z0, U, model.p0,
+                                      picks=np.zeros(0, dtype=np.int64))
+            times[label].append((time.perf_counter() - t0) / args.steps * 1e6)
+            ends[label] = x
+    ref = next(iter(builds))
+    print(f"six-leg Yu controller, {kinds.states.size} states, {kinds.dstates.size} discrete states, "
+          f"{kinds.signals_layout.size} signals; {args.steps} steps per run, median of {args.repeat} interleaved")
+    for label, values in times.items():
+        med = statistics.median(values)
+        same = "same end state" if np.array_equal(ends[label], ends[ref]) else "END STATE DIFFERS"
+        print(f"  {label:28s} {med:7.2f} us/step  x{med / statistics.median(times[ref]):5.2f}  ({same})")
+
+
+if __name__ == "__main__":
+    main()

@@ -40,7 +40,8 @@ def test_batch_results_are_bit_identical_to_single_runs():
     assert not np.array_equal(alone[0].data, alone[2].data)
 
 
-def test_a_diverging_trial_stops_only_itself():
+def test_a_diverging_trial_stops_only_itself(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings to MUJOCO_LOG.TXT in the working folder
     good = _run("flat", MJ, 0, 0.5)
     with pytest.raises(SimulationError, match="diverged"):  # alone: the fused loop reports the plant's state
         _run("flat", DIVERGES, 0, 0.5)
@@ -66,7 +67,8 @@ def test_a_job_that_raises_is_returned_and_ctrl_c_is_raised_again():
         run_batch([lambda: 1, interrupted], threads=2)
 
 
-def test_sweep_batch_names_the_failed_trial(tmp_path):
+def test_sweep_batch_names_the_failed_trial(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
     from cpgsim.harness.experiments.sweep import run_sweep
 
     doc = run_sweep("flat", 1, 0, tmp_path / "s", sets=MJ, vary=("robot.kp", [95.9, 1e10]), t_end=0.4,
@@ -100,7 +102,8 @@ def test_batch_of_different_controllers_equals_single_runs():
         assert np.array_equal(a.data, b.data)
 
 
-def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path):
+def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
     from cpgsim.harness.experiments.bench import run_bench
 
     suite = tmp_path / "tiny.toml"

@@ -22,6 +22,8 @@ A suite file (the shipped one: ``harness/experiments/suites/terrain.toml``)::
 
 Each cell (controller, terrain) runs ``seeds`` trials (:func:`cpgsim.harness.experiments.sweep.run_trial`, the
 summary only); a trial's ``success`` is its scenario's criteria (:mod:`cpgsim.harness.experiments.outcomes`).
+When every cell is on MuJoCo (``sets={"robot.engine": "mujoco"}``, ``cpgsim bench --set``), the trials run as one
+batch in this process (:func:`cpgsim.harness.experiments.sweep.run_in_batch`, docs/engines.md) unless ``batch=False``.
 Output: ``bench.json`` (every trial's outcome, per cell: n, successes, Wilson 95 % interval, falls,
 stalls, crashes, median speed and tilt), ``bench.md`` (the table) and ``bench.png`` (success per cell).
 """

@@ -14,6 +14,10 @@ Output directory::
     sweep.png       success ratio per group with its interval, and the per-trial outcome
     <group>/trial_<i>_seed<seed>/   the run's results.csv/npz, summary.json (and pictures with plots=True)
 
+MuJoCo: when every trial is on MuJoCo and no executor is given, the trials run as one batch in this process
+(:func:`run_in_batch`, :mod:`cpgsim.robots.mujoco_batch`): their fused C loops advanced together on threads,
+the same numbers as alone.
+
 Determinism: a trial is a deterministic function of (scenario, seed, sets, t_end) -- CasADi and DART
 compute the same floating-point numbers for the same inputs -- so a sweep on a cluster gives the same
 per-trial records as the serial loop (``tests/test_sweep.py`` checks it).

@@ -7,7 +7,10 @@ integer ports, and the block offers ``closed_loop(...)`` (the MuJoCo plant,
 same order as the Python loop of :func:`cpgsim.harness.master.run_master` (block outputs -> ``u``, step
 with commit, record, block inputs from ``y``, block step), so the results are the same numbers. Between
 chunks the recorder streams, the progress bar moves and Ctrl-C is seen. The last row (``t_end``: no step)
-is left to the ordinary loop. Found by duck typing: this layer imports no robot.
+is left to the ordinary loop. Found by duck typing: this layer imports no robot. The runner's status 3 (the
+plant's own state diverged) is an error of the block, named as such. A runner made on a trial thread of
+:func:`cpgsim.robots.mujoco_batch.run_batch` advances its chunks together with the other trials' (one C call
+per round, on threads): this loop does not change.
 """
 
 from __future__ import annotations
@@ -62,6 +65,9 @@ def run_fused(runner: Any, plan: Any, rec: Any, times: np.ndarray, n: int, progr
             on_diverged()
         if status == 2:
             raise RuntimeError("compiled step function reported an evaluation error")
+        if status == 3:
+            raise FloatingPointError(f"the physics engine's state went non-finite or out of range after "
+                                     f"t = {float(times[k + rows - 1]):.6g} s (the plant diverged)")
         progress_bar.update(rows)
         rec.tick()
         k += rows

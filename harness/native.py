@@ -276,12 +276,7 @@ def casadi_c_source(functions: list[ca.Function], tag: str) -> str:
                                            "casadi_int": "long long int"})
         for fn in functions:
             cg.add(fn)
-        cwd = os.getcwd()
-        os.chdir(tmp)
-        try:
-            cg.generate()
-        finally:
-            os.chdir(cwd)
+        cg.generate(tmp + os.sep)  # by prefix, not chdir: the working folder is shared by threads (batches)
         return (Path(tmp) / f"{tag}.c").read_text()
 
 

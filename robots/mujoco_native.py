@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
 from pathlib import Path
 
 import mujoco
@@ -24,7 +25,14 @@ import numpy as np
 
 from cpgsim.harness.native import NativeUnavailable, compile_source, optimization_flags
 
+BATCH = threading.local()
+"""``BATCH.current``: the :class:`cpgsim.robots.mujoco_batch.Batch` whose trial runs on this thread (None:
+a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_loop`` call per chunk)."""
+
 SOURCE = r"""
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
 #include <string.h>
 #include <mujoco/mujoco.h>
 /* codes: 0..5 leg (toe force), 10+leg other leg link, 100 body, 1000 not the robot.
@@ -67,40 +75,124 @@ int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *
   return substeps(m, d, n, codes, force, flags);
 }
 
+/* One trial of the closed loop: everything the loop reads and writes (the Python side owns the arrays). */
+typedef int (*commit_fn)(void *, double, int, int);
+typedef int (*eval_fn)(void *);
+typedef struct {
+  const mjModel *m; mjData *d; int nsub; const int *codes; double *force; double *flags;
+  void *step_commit; void *sctx; int nx, nz; double *u; const double *y;
+  int nmap; const long long *u_idx, *o_idx;
+  void *feval; void *rctx; double *rpos, *rvel, *rcontact; const double *O; int nO;
+  const long long *qt_idx; int npick; const long long *yi; double *Yrec, *Orec;
+  int k0, k1; const double *times;
+  int rows, status;
+} cpgsim_mj_trial;
+
 /* The closed loop of a compiled controller step and this plant for macro steps k0 .. k1-1, as the
    co-simulation master does them (Jacobi, no feedthrough): u <- plant outputs O; controller step at
    times[k] with commit (x, z move on when finite); record row k (Yrec: y[yi], Orec: O); ctrl <- y[qt];
    n sub-steps of MuJoCo with the contact sums; O <- readout(qpos, qvel, force, body contact).
-   Returns the rows recorded; *status: 0 done, 1 the controller state went non-finite at the last
-   recorded row (the plant was not stepped), 2 the controller step failed (row not recorded). */
-typedef int (*commit_fn)(void *, double, int, int);
-typedef int (*eval_fn)(void *);
+   Sets t->rows (the rows recorded) and t->status: 0 done, 1 the controller state went non-finite at the
+   last recorded row (the plant was not stepped), 2 the controller step failed (row not recorded) or the
+   readout failed (row recorded), 3 MuJoCo's state went non-finite or out of range in the sub-steps after
+   the last recorded row (mj_step warns and resets its data then; the readout is not updated).
+   The one loop both entry points run: cpgsim_mj_loop (one trial) and cpgsim_mj_batch (many, threads). */
+static void trial_loop(cpgsim_mj_trial *t) {
+  const mjModel *m = t->m;
+  mjData *d = t->d;
+  commit_fn commit = (commit_fn)t->step_commit;
+  eval_fn readout = (eval_fn)t->feval;
+  const double *y = t->y, *O = t->O;
+  int k, i, rc, k0 = t->k0, nbad0;
+  t->status = 0;
+  for (k = k0; k < t->k1; ++k) {
+    double *yr = t->Yrec + (long)(k - k0) * t->npick, *orow = t->Orec + (long)(k - k0) * t->nO;
+    for (i = 0; i < t->nmap; ++i) t->u[t->u_idx[i]] = O[t->o_idx[i]];
+    rc = commit(t->sctx, t->times[k], t->nx, t->nz);
+    if (rc == 2) { t->status = 2; t->rows = k - k0; return; }
+    for (i = 0; i < t->npick; ++i) yr[i] = y[t->yi[i]];
+    for (i = 0; i < t->nO; ++i) orow[i] = O[i];
+    if (rc == 1) { t->status = 1; t->rows = k - k0 + 1; return; }
+    for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
+    nbad0 = d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number
+            + d->warning[mjWARN_BADQACC].number;
+    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags)
+        || d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number
+           + d->warning[mjWARN_BADQACC].number != nbad0) {
+      t->status = 3; t->rows = k - k0 + 1; return;
+    }
+    for (i = 0; i < m->nq; ++i) t->rpos[i] = d->qpos[i];
+    for (i = 0; i < m->nv; ++i) t->rvel[i] = d->qvel[i];
+    t->rcontact[0] = t->flags[0];
+    if (readout(t->rctx)) { t->status = 2; t->rows = k - k0 + 1; return; }
+  }
+  t->rows = t->k1 - k0;
+}
+
 int cpgsim_mj_loop(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
                    void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                    int nmap, const long long *u_idx, const long long *o_idx,
                    void *feval, void *rctx, double *rpos, double *rvel, double *rcontact, const double *O, int nO,
                    const long long *qt_idx, int npick, const long long *yi, double *Yrec, double *Orec,
                    int k0, int k1, const double *times, int *status) {
-  commit_fn commit = (commit_fn)step_commit;
-  eval_fn readout = (eval_fn)feval;
-  int k, i, rc;
-  *status = 0;
-  for (k = k0; k < k1; ++k) {
-    double *yr = Yrec + (long)(k - k0) * npick, *orow = Orec + (long)(k - k0) * nO;
-    for (i = 0; i < nmap; ++i) u[u_idx[i]] = O[o_idx[i]];
-    rc = commit(sctx, times[k], nx, nz);
-    if (rc == 2) { *status = 2; return k - k0; }
-    for (i = 0; i < npick; ++i) yr[i] = y[yi[i]];
-    for (i = 0; i < nO; ++i) orow[i] = O[i];
-    if (rc == 1) { *status = 1; return k - k0 + 1; }
-    for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[qt_idx[i]];
-    substeps(m, d, nsub, codes, force, flags);
-    for (i = 0; i < m->nq; ++i) rpos[i] = d->qpos[i];
-    for (i = 0; i < m->nv; ++i) rvel[i] = d->qvel[i];
-    rcontact[0] = flags[0];
-    if (readout(rctx)) { *status = 2; return k - k0 + 1; }
-  }
-  return k1 - k0;
+  cpgsim_mj_trial t = {m, d, nsub, codes, force, flags, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx,
+                       feval, rctx, rpos, rvel, rcontact, O, nO, qt_idx, npick, yi, Yrec, Orec, k0, k1, times, 0, 0};
+  trial_loop(&t);
+  *status = t.status;
+  return t.rows;
+}
+
+/* A trial for cpgsim_mj_batch: the arguments of cpgsim_mj_loop up to Orec, kept (malloc'd; free with
+   cpgsim_mj_trial_free). cpgsim_mj_trial_range sets the chunk; cpgsim_mj_trial_result reads rows/status. */
+void *cpgsim_mj_trial_new(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
+                          void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
+                          int nmap, const long long *u_idx, const long long *o_idx,
+                          void *feval, void *rctx, double *rpos, double *rvel, double *rcontact, const double *O,
+                          int nO, const long long *qt_idx, int npick, const long long *yi, double *Yrec,
+                          double *Orec) {
+  cpgsim_mj_trial *t = malloc(sizeof(cpgsim_mj_trial));
+  cpgsim_mj_trial v = {m, d, nsub, codes, force, flags, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx,
+                       feval, rctx, rpos, rvel, rcontact, O, nO, qt_idx, npick, yi, Yrec, Orec, 0, 0, 0, 0, 0};
+  if (t) *t = v;
+  return t;
+}
+void cpgsim_mj_trial_range(void *p, int k0, int k1, const double *times) {
+  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
+  t->k0 = k0; t->k1 = k1; t->times = times; t->rows = 0; t->status = 0;
+}
+int cpgsim_mj_trial_result(void *p, int *status) {
+  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
+  *status = t->status;
+  return t->rows;
+}
+void cpgsim_mj_trial_free(void *p) { free(p); }
+
+/* Many trials, each its own mjData and controller context (models may be shared: mj_step only reads
+   them), on min(nthreads, n) POSIX threads; each thread takes whole trials from an atomic counter and
+   runs trial_loop on them; the calling thread is one of them (a thread that cannot be started is one
+   fewer, never a trial left out). Returns the number of threads that ran. */
+typedef struct { cpgsim_mj_trial **trials; int n; atomic_int next; } cpgsim_mj_pool;
+
+static void *batch_worker(void *arg) {
+  cpgsim_mj_pool *pool = (cpgsim_mj_pool *)arg;
+  int i;
+  while ((i = atomic_fetch_add(&pool->next, 1)) < pool->n) trial_loop(pool->trials[i]);
+  return 0;
+}
+
+int cpgsim_mj_batch(void **trials, int n, int nthreads) {
+  cpgsim_mj_pool pool;
+  pthread_t th[256];
+  int i, started = 0;
+  pool.trials = (cpgsim_mj_trial **)trials; pool.n = n;
+  atomic_init(&pool.next, 0);
+  if (nthreads > n) nthreads = n;
+  if (nthreads > 256) nthreads = 256;
+  for (i = 1; i < nthreads; ++i)  /* this thread is worker 0 */
+    if (pthread_create(&th[started], 0, batch_worker, &pool) == 0) ++started;
+  batch_worker(&pool);
+  for (i = 0; i < started; ++i) pthread_join(th[i], 0);
+  return started + 1;
 }
 """
 
@@ -132,6 +224,16 @@ def library() -> ctypes.CDLL:
                                    ctypes.c_int, lp, lp, vp, vp, dp, dp, dp, dp, ctypes.c_int, lp, ctypes.c_int, lp,
                                    dp, dp, ctypes.c_int, ctypes.c_int, dp, ip]
     dll.cpgsim_mj_loop.restype = ctypes.c_int
+    dll.cpgsim_mj_trial_new.argtypes = dll.cpgsim_mj_loop.argtypes[:27]
+    dll.cpgsim_mj_trial_new.restype = vp
+    dll.cpgsim_mj_trial_range.argtypes = [vp, ctypes.c_int, ctypes.c_int, dp]
+    dll.cpgsim_mj_trial_range.restype = None
+    dll.cpgsim_mj_trial_result.argtypes = [vp, ip]
+    dll.cpgsim_mj_trial_result.restype = ctypes.c_int
+    dll.cpgsim_mj_trial_free.argtypes = [vp]
+    dll.cpgsim_mj_trial_free.restype = None
+    dll.cpgsim_mj_batch.argtypes = [ctypes.POINTER(vp), ctypes.c_int, ctypes.c_int]
+    dll.cpgsim_mj_batch.restype = ctypes.c_int
     return dll
 
 
@@ -165,8 +267,12 @@ class FusedLoop:
 
     Built by :meth:`cpgsim.robots.mujoco_plant.MujocoHexapod.closed_loop`. ``run(k0, k1, times)`` does macro
     steps ``k0 .. k1-1`` and returns ``(rows, status, Y, O)``: the rows recorded, the status (0 done, 1 the
-    controller's state went non-finite at the last row, 2 an evaluation error), the recorded signals
-    ``y[yi]`` and the plant's output vectors per row (columns: ``slices``).
+    controller's state went non-finite at the last row, 2 an evaluation error, 3 MuJoCo's state went
+    non-finite or out of range after the last row), the recorded signals ``y[yi]`` and the plant's output
+    vectors per row (columns: ``slices``). Made on a trial thread of a
+    :class:`~cpgsim.robots.mujoco_batch.Batch`, it hands each chunk to the batch, which advances it with the
+    other trials' chunks in one ``cpgsim_mj_batch`` call: the same C loop on the same buffers, so the same
+    numbers.
     """
 
     def __init__(self, plant, native: NativeMujocoStep, commit_fn: int, ctx: int, nx: int, nz: int,
@@ -193,15 +299,30 @@ class FusedLoop:
                       plant._readout_out.ctypes.data_as(dp), plant._readout_out.size, q_i, len(yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
         self._times_keep = None
+        self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco_batch
+        self.trial = None
+        if self.batch is not None:
+            self.trial = native._lib.cpgsim_mj_trial_new(*self._head)
+            if not self.trial:
+                raise MemoryError("cpgsim_mj_trial_new: allocation failed")
+            self._free = native._lib.cpgsim_mj_trial_free
+
+    def __del__(self) -> None:
+        if getattr(self, "trial", None):
+            self._free(self.trial)
+            self.trial = None
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         k1 = min(k1, k0 + self.chunk)
         if self._times_keep is not times:
             self._times = np.ascontiguousarray(times, dtype=np.float64)
             self._times_keep = times
-        rows = self._fn(*self._head, k0, k1, self._times.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
-                        ctypes.byref(self._status))
-        status = self._status.value
+        times_p = self._times.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        if self.batch is not None:  # advanced with the other trials of the batch, in one C call
+            rows, status = self.batch.advance(self, k0, k1, times_p, last=k1 >= len(times) - 1)
+        else:
+            rows = self._fn(*self._head, k0, k1, times_p, ctypes.byref(self._status))
+            status = self._status.value
         stepped = rows - (1 if status == 1 else 0)
         self.plant._after_fused(stepped, float(times[k0 + stepped]) if stepped else None)
         return rows, status, self.Y[:rows], self.O[:rows]

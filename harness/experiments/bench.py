@@ -22,6 +22,8 @@ A suite file (the shipped one: ``harness/experiments/suites/terrain.toml``)::
 
 Each cell (controller, terrain) runs ``seeds`` trials (:func:`cpgsim.harness.experiments.sweep.run_trial`, the
 summary only); a trial's ``success`` is its scenario's criteria (:mod:`cpgsim.harness.experiments.outcomes`).
+When every cell is on MuJoCo (``sets={"robot.engine": "mujoco"}``, ``cpgsim bench --set``), the trials run as one
+batch in this process (:func:`cpgsim.harness.experiments.sweep.run_in_batch`, docs/engines.md) unless ``batch=False``.
 Output: ``bench.json`` (every trial's outcome, per cell: n, successes, Wilson 95 % interval, falls,
 stalls, crashes, median speed and tilt), ``bench.md`` (the table) and ``bench.png`` (success per cell).
 """
@@ -44,9 +46,12 @@ from cpgsim.harness.experiments.sweep import (
     _bar,
     _connect,
     _json_default,
+    batchable,
     outcome_signature,
+    run_in_batch,
     run_on_dask,
     run_trial,
+    use_batch,
     wilson_interval,
 )
 from cpgsim.harness.results import atomic_write
@@ -96,10 +101,12 @@ def load_suite(spec: str | Path) -> dict[str, Any]:
     return suite
 
 
-def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str) -> tuple[str, dict[str, Any]]:
-    """(base scenario, ``--set`` overrides) of one cell."""
+def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str,
+              extra: Mapping[str, Any] | None = None) -> tuple[str, dict[str, Any]]:
+    """(base scenario, ``--set`` overrides) of one cell; ``extra`` (``cpgsim bench --set``) applies to every
+    cell first (a cell's own keys win)."""
     c, t = suite["controllers"][controller], suite["terrains"][terrain]
-    sets: dict[str, Any] = dict(c.get("set", {}))
+    sets: dict[str, Any] = {**dict(extra or {}), **dict(c.get("set", {}))}
     for name, feature in t.get("features", {}).items():
         for key, value in feature.items():
             sets[f"terrain.{name}.{key}"] = value
@@ -115,23 +122,31 @@ def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str) -> tuple[
     return c["scenario"], sets
 
 
-def check_cells(suite: Mapping[str, Any]) -> None:
-    """Build every cell's closed loop once: a bad key fails here, before any trial, naming the cell."""
+def check_cells(suite: Mapping[str, Any], sets: Mapping[str, Any] | None = None) -> bool:
+    """Build every cell's closed loop once: a bad key fails here, before any trial, naming the cell.
+    Returns whether every cell can run in a MuJoCo batch (:func:`cpgsim.harness.experiments.sweep.batchable`)."""
     from cpgsim.harness.experiments.runner import build_scenario
 
+    ok = True
     for c in suite["controllers"]:
         for t in suite["terrains"]:
-            base, sets = cell_sets(suite, c, t)
+            base, cell = cell_sets(suite, c, t, sets)
             try:
-                build_scenario(base, sets, seed=int(suite["base_seed"]))
+                ok = batchable(build_scenario(base, cell, seed=int(suite["base_seed"]))) and ok
             except ModelError as exc:
                 raise ScenarioError(f"suite cell {c} x {t}: {exc}") from None
+    return ok
 
 
 def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = None, workers: int = 2,
               serial: bool = False, progress: bool = True, controllers: list[str] | None = None,
-              terrains: list[str] | None = None, seeds: int | None = None) -> dict[str, Any]:
-    """Run the suite (optionally a subset of its controllers / terrains / seeds) and write the table."""
+              terrains: list[str] | None = None, seeds: int | None = None, sets: Mapping[str, Any] | None = None,
+              batch: bool | None = None) -> dict[str, Any]:
+    """Run the suite (optionally a subset of its controllers / terrains / seeds) and write the table.
+
+    ``sets``: overrides for every cell (``robot.engine = "mujoco"``). ``batch``: run MuJoCo trials as one
+    batch in this process with ``workers`` C threads (:func:`cpgsim.harness.experiments.sweep.use_batch`;
+    by default whenever every cell is on MuJoCo and neither ``serial`` nor ``scheduler`` is given)."""
     suite = load_suite(suite_spec)
     for what, chosen in (("controllers", controllers), ("terrains", terrains)):
         if chosen:
@@ -141,20 +156,20 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
             suite[what] = {k: v for k, v in suite[what].items() if k in chosen}
     if seeds is not None:
         suite["seeds"] = int(seeds)
-    check_cells(suite)
+    batched = use_batch(batch, check_cells(suite, sets), serial, scheduler, None)
     out = Path(out)
     seed_list = [int(suite["base_seed"]) + i for i in range(int(suite["seeds"]))]
     tasks = []
     for c in suite["controllers"]:
         for t in suite["terrains"]:
-            base, sets = cell_sets(suite, c, t)
+            base, cell = cell_sets(suite, c, t, sets)
             for s in seed_list:
-                tasks.append(((c, t, s), (base, s, sets, str((out / "trials" / c / t / f"seed{s}").resolve()))))
+                tasks.append(((c, t, s), (base, s, cell, str((out / "trials" / c / t / f"seed{s}").resolve()))))
     t0 = time.perf_counter()
     info: dict[str, Any] = {"executor": "serial"}
     own: list[Any] = []
     client = None
-    if not serial:  # before the output folder exists: an unreachable scheduler leaves nothing behind
+    if not serial and not batched:  # before the output folder exists: an unreachable scheduler leaves nothing
         client, own = _connect(scheduler, workers, None, info)
     out.mkdir(parents=True, exist_ok=True)
     bar = _bar(len(tasks), progress, f"bench {suite['name']}")
@@ -164,6 +179,9 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
             for key, args in tasks:
                 records[key] = run_trial(*args, save_results=False)
                 bar.update(1)
+        elif batched:  # MuJoCo: the trials' fused loops advanced together on threads (robots/mujoco_batch.py)
+            records = run_in_batch({key: (run_trial, args, {"save_results": False}) for key, args in tasks},
+                                   int(workers), bar, info)
         else:  # the same Dask path as sweeps: the trials' files come back to this machine
             records = run_on_dask(client, {key: (run_trial, args, {"save_results": False}) for key, args in tasks},
                                   bar)

@@ -106,7 +106,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         summary["pictures"] = [str(p.name) for p in make_plots(setup, res, summary, out)]
     checks: dict[str, bool] = {}
     if setup.extra is not None and not interrupted:
-        more = setup.extra(res, out)
+        more = setup.extra(res, out if plots else None)  # None: no pictures (a benchmark's trial)
         checks = more.pop("checks", {})
         summary.update(more)
     summary.update(judge(setup, res, checks, keep=summary))

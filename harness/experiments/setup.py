@@ -35,7 +35,7 @@ class RunSetup:
     reflexes: Callable[[Results], list[dict]] | None = None  # [{leg, leg_number, kind, t, force_N}]
     record: list[str] | None = None
     info: dict[str, Any] = field(default_factory=dict)
-    extra: Callable[[Results, Path], dict[str, Any]] | None = None  # more summary keys / plots; "checks"
+    extra: Callable[[Results, Path | None], dict[str, Any]] | None = None  # more keys / plots (None: none); "checks"
     waiting: Callable[[Results], np.ndarray] | None = None  # time steps spent waiting on a reflex
     scenario: Scenario | None = None
     held: Callable[[Results], np.ndarray] | None = None  # time x 6: the gait FSM holds the leg (CPG rate 0)

@@ -14,6 +14,10 @@ Output directory::
     sweep.png       success ratio per group with its interval, and the per-trial outcome
     <group>/trial_<i>_seed<seed>/   the run's results.csv/npz, summary.json (and pictures with plots=True)
 
+MuJoCo: when every trial is on MuJoCo and no executor is given, the trials run as one batch in this process
+(:func:`run_in_batch`, :mod:`cpgsim.robots.mujoco_batch`): their fused C loops advanced together on threads,
+the same numbers as alone.
+
 Determinism: a trial is a deterministic function of (scenario, seed, sets, t_end) -- CasADi and DART
 compute the same floating-point numbers for the same inputs -- so a sweep on a cluster gives the same
 per-trial records as the serial loop (``tests/test_sweep.py`` checks it).
@@ -197,13 +201,63 @@ def _groups(sets: dict[str, Any], vary: tuple[str, list[Any]] | None) -> list[Gr
     return [Group(f"{key}={_label(v)}", {**sets, key: v}) for v in values]
 
 
-def check_groups(scenario: str, groups: Sequence[Group], seed: int) -> None:
+def check_groups(scenario: str, groups: Sequence[Group], seed: int) -> bool:
     """Build every group's closed loop once before any trial runs: an unknown key, a wrong type or a value
-    out of range is an error naming the key here, not a failure of every trial."""
+    out of range is an error naming the key here, not a failure of every trial. Returns whether every
+    group can run in a MuJoCo batch (:func:`batchable`)."""
     from cpgsim.harness.experiments.runner import build_scenario
 
+    ok = True
     for g in groups:
-        build_scenario(scenario, g.sets, seed=seed)
+        ok = batchable(build_scenario(scenario, g.sets, seed=seed)) and ok
+    return ok
+
+
+def batchable(setup: Any) -> bool:
+    """A trial that a MuJoCo batch (:mod:`cpgsim.robots.mujoco_batch`) runs in C: a MuJoCo plant without
+    pushes (pushes step in Python)."""
+    doc = setup.scenario.doc if setup.scenario is not None else {}
+    return doc.get("robot", {}).get("engine") == "mujoco" and not doc.get("disturbance")
+
+
+def use_batch(batch: bool | None, all_mujoco: bool, serial: bool, scheduler: str | None, client: Any) -> bool:
+    """Run the trials in a MuJoCo batch in this process? ``batch=None`` (auto): when every trial is a
+    MuJoCo trial and no executor was asked for (not ``serial``, no scheduler, no client); True: whenever
+    every trial is a MuJoCo trial (an error otherwise); False: never."""
+    if batch is None:
+        return all_mujoco and not serial and not scheduler and client is None
+    if batch and not all_mujoco:
+        raise ModelError("--batch needs every trial on MuJoCo (robot.engine = \"mujoco\") without pushes")
+    return bool(batch)
+
+
+def run_in_batch(jobs: dict[Any, tuple[Callable[..., dict[str, Any]], tuple, dict[str, Any]]], threads: int,
+                 bar: Any, info: dict[str, Any]) -> dict[Any, dict[str, Any]]:
+    """Run ``{key: (trial_fn, (scenario, seed, sets, out_dir, ...), kwargs)}`` in this process as one MuJoCo
+    batch (:func:`cpgsim.robots.mujoco_batch.run_batch`, ``threads`` C threads): each trial on a Python
+    thread of its own, every chunk of their fused loops advanced together. A trial function that raises is
+    recorded as failed, as on Dask. Returns ``{key: record}``; ``info`` gets the executor and the counters."""
+    from cpgsim.robots.mujoco_batch import run_batch
+
+    keys = list(jobs)
+    records: dict[Any, dict[str, Any]] = {}
+
+    def done(i: int, rec: Any, exc: BaseException | None) -> None:
+        _, args, _ = jobs[keys[i]]
+        if exc is not None:
+            rec = {"seed": args[1], "dir": args[3], "status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                   "outcome": {}}
+        records[keys[i]] = rec
+        _tick(bar, rec)
+
+    run_batch([lambda fn=fn, args=args, kw=kw: fn(*args, **kw) for fn, args, kw in jobs.values()],
+              threads=threads, on_done=done)
+    last = getattr(run_batch, "last", None)
+    info["executor"] = f"MuJoCo batch in this process, {last.threads if last else threads} C threads"
+    if last is not None:
+        info["batch"] = {"threads": last.threads, "calls": last.calls, "chunks": last.chunks,
+                         "c_time_s": last.c_time_s}
+    return records
 
 
 def _trial_dir(out: Path, group: Group, n_groups: int, i: int, seed: int) -> Path:
@@ -214,7 +268,8 @@ def _trial_dir(out: Path, group: Group, n_groups: int, i: int, seed: int) -> Pat
 def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict[str, float] | None = None,
               vary: tuple[str, list[float]] | None = None, scheduler: str | None = None, workers: int = 2,
               serial: bool = False, t_end: float | None = None, plots: bool = False, progress: bool = True,
-              trial_fn: Callable[..., dict[str, Any]] = run_trial, client: Any = None) -> dict[str, Any]:
+              trial_fn: Callable[..., dict[str, Any]] = run_trial, client: Any = None,
+              batch: bool | None = None) -> dict[str, Any]:
     """Run ``trials`` trials (per group) and write ``sweep.json`` and ``sweep.png`` into ``out``.
 
     ``scheduler``: address of a running dask scheduler (``tcp://host:8786``); default: a LocalCluster
@@ -222,18 +277,22 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
     (the reference for determinism and the benchmark). ``client``: an existing ``distributed.Client``
     to use (not closed). On Dask every trial runs in a scratch folder of its worker and sends its files
     back with its record (:func:`shipped_trial`); the client writes them, so workers need no shared disk.
+    ``batch``: MuJoCo trials in one batch in this process, ``workers`` C threads (:func:`use_batch`; by
+    default whenever every trial is on MuJoCo and no executor is given; ``plots=True`` never: pictures are
+    drawn by matplotlib, which is not thread-safe).
     """
     if int(trials) < 1:
         raise ModelError(f"--trials must be >= 1, got {trials}")
     groups = _groups(dict(sets or {}), vary)
-    check_groups(scenario, groups, int(seed))
+    all_mujoco = check_groups(scenario, groups, int(seed))
+    batched = use_batch(batch, all_mujoco and not plots, serial, scheduler, client)
     out = Path(out)
     tasks = [(g, i, int(seed) + i) for g in groups for i in range(int(trials))]
     t0 = time.perf_counter()
     records: dict[tuple[str, int], dict[str, Any]] = {}
     info: dict[str, Any] = {"executor": "serial"}
     own: list[Any] = []
-    if not serial:  # before the output folder exists: an unreachable scheduler leaves nothing behind
+    if not serial and not batched:  # before the output folder exists: an unreachable scheduler leaves nothing
         client, own = _connect(scheduler, workers, client, info)
     out.mkdir(parents=True, exist_ok=True)
     bar = _bar(len(tasks), progress, scenario)
@@ -247,6 +306,10 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
                     records[(g.label, i)] = {"seed": s, "dir": d, "status": "failed",
                                              "error": f"{type(exc).__name__}: {exc}", "outcome": {}}
                 _tick(bar, records[(g.label, i)])
+        elif batched:
+            jobs = {(g.label, i): (trial_fn, (scenario, s, g.sets, str(_trial_dir(out, g, len(groups), i, s)), t_end,
+                                              plots), {}) for g, i, s in tasks}
+            records = run_in_batch(jobs, int(workers), bar, info)
         else:
             records = _run_dask(client, scenario, tasks, groups, out, t_end, plots, trial_fn, bar)
     finally:

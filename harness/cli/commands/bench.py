@@ -5,7 +5,9 @@ SUITE is a built-in suite name (terrain: Yu with and without reflexes, Fukuhara 
 over flat ground, steps 20-70 mm on either side, ditches 10-80 mm, gaps, random blocks at two roughness
 levels and a mixed course) or a suite file FILE.toml. Writes OUTPUT/bench.json (every trial's outcome;
 per cell: success ratio with its Wilson 95% interval, falls, stalls, crashes, median speed), bench.md
-(the table) and bench.png. Example: cpgsim bench terrain -o runs/bench --controller yu --seeds 2
+(the table) and bench.png. --set KEY=VALUE applies to every cell (--set robot.engine=mujoco); with every
+cell on MuJoCo the trials run as one batch in this process (--workers C threads; --no-batch: on Dask).
+Example: cpgsim bench terrain -o runs/bench --controller yu --seeds 2
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cpgsim.harness.cli.common import CliError
+from cpgsim.harness.cli.common import CliError, add_scenario_set_argument, parse_scenario_sets
 
 NAME = "bench"
 HELP = "run controllers x terrains x seeds and tabulate success, falls, stalls, speed"
@@ -29,6 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="local cluster worker processes (default 2)")
     p.add_argument("--serial", action="store_true", help="run the trials in this process, no dask")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--batch", action=argparse.BooleanOptionalAction, default=None,
+                   help="MuJoCo trials as one batch in this process, --workers C threads (default: when every "
+                        "cell is on MuJoCo and neither --serial nor --scheduler is given; docs/engines.md)")
+    add_scenario_set_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.output or Path("runs") / f"bench-{Path(args.suite).stem}")
     doc = run_bench(args.suite, out, scheduler=args.scheduler, workers=args.workers, serial=args.serial,
                     progress=not args.no_progress, controllers=args.controller, terrains=args.terrain,
-                    seeds=args.seeds)
+                    seeds=args.seeds, sets=parse_scenario_sets(args.sets), batch=args.batch)
     print((out / "bench.md").read_text(), end="")
     print(f"{doc['executor']}; wall time {doc['wall_time_s']:.0f} s; wrote {out}/bench.json, {out}/bench.md, "
           f"{doc['picture']}")

@@ -50,6 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", default=None, help="output directory (default runs/sweep-<scenario>)")
     p.add_argument("--plots", action="store_true", help="also make each trial's run pictures (slower)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--batch", action=argparse.BooleanOptionalAction, default=None,
+                   help="MuJoCo trials as one batch in this process, --workers C threads (default: when every "
+                        "trial is on MuJoCo, without --plots, --serial or --scheduler; docs/engines.md)")
     add_scenario_set_argument(p)
 
 
@@ -74,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     out = Path(args.output or Path("runs") / f"sweep-{Path(args.scenario).stem}")
     doc = run_sweep(args.scenario, trials, seed, out, sets=sets, vary=vary, scheduler=args.scheduler,
-                    workers=workers, serial=args.serial, t_end=t_end, plots=args.plots, progress=not args.no_progress)
+                    workers=workers, serial=args.serial, t_end=t_end, plots=args.plots, progress=not args.no_progress,
+                    batch=args.batch)
     for line in doc["report"]:
         print(line)
     print(f"  {doc.get('executor', '')}; wall time {doc['wall_time_s']:.1f} s")

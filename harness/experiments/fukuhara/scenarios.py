@@ -357,10 +357,12 @@ def build(scenario: Scenario) -> RunSetup:
             checks["cross"] = crossing.pop("success")
             s.update({k: v for k, v in crossing.items() if not k.startswith("fell")})
         verdict = "ok" if all(checks.values()) else "failed"
-        s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"{scenario.name} (setting {setting}, rule 2 "
-                                         f"{'on' if info['rule2'] else 'off'}"
-                                         f"{', amputated ' + '+'.join(amputated) if amputated else ''}): gait "
-                                         f"{s['gait']} (contacts: {s['gait_from_contacts']}), {verdict}").name]
+        s["more_pictures"] = []
+        if out is not None:  # None: no pictures (a benchmark's trial)
+            s["more_pictures"] = [plot_alpha(res, out / "alpha.png", f"{scenario.name} (setting {setting}, rule 2 "
+                                             f"{'on' if info['rule2'] else 'off'}"
+                                             f"{', amputated ' + '+'.join(amputated) if amputated else ''}): gait "
+                                             f"{s['gait']} (contacts: {s['gait_from_contacts']}), {verdict}").name]
         s["checks"] = checks
         return s
 

@@ -71,6 +71,12 @@ static int substeps(const mjModel *m, mjData *d, int n, const int *codes, double
   return bad;
 }
 
+/* MuJoCo's default warning handler prints the warning and appends it to MUJOCO_LOG.TXT in the process's
+   working folder: a file cpgsim's user did not ask for. cpgsim reads the per-data warning counters
+   instead (the bad-state ones end a trial as diverged), so it installs a handler that writes nothing. */
+static void cpgsim_mj_no_log(const char *msg) { (void)msg; }
+void cpgsim_mj_quiet(void) { mju_user_warning = cpgsim_mj_no_log; }
+
 int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
   return substeps(m, d, n, codes, force, flags);
 }
@@ -234,6 +240,8 @@ def library() -> ctypes.CDLL:
     dll.cpgsim_mj_trial_free.restype = None
     dll.cpgsim_mj_batch.argtypes = [ctypes.POINTER(vp), ctypes.c_int, ctypes.c_int]
     dll.cpgsim_mj_batch.restype = ctypes.c_int
+    dll.cpgsim_mj_quiet.argtypes, dll.cpgsim_mj_quiet.restype = [], None
+    dll.cpgsim_mj_quiet()  # no MUJOCO_LOG.TXT in the working folder (see the C source)
     return dll
 
 

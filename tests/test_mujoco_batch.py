@@ -41,7 +41,7 @@ def test_batch_results_are_bit_identical_to_single_runs():
 
 
 def test_a_diverging_trial_stops_only_itself(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings to MUJOCO_LOG.TXT in the working folder
+    monkeypatch.chdir(tmp_path)  # MuJoCo's default warning handler would write MUJOCO_LOG.TXT here
     good = _run("flat", MJ, 0, 0.5)
     with pytest.raises(SimulationError, match="diverged"):  # alone: the fused loop reports the plant's state
         _run("flat", DIVERGES, 0, 0.5)
@@ -50,6 +50,7 @@ def test_a_diverging_trial_stops_only_itself(tmp_path, monkeypatch):
     assert bad is None and isinstance(bad_exc, SimulationError)
     assert "diverged" in str(bad_exc) and "robot" in str(bad_exc)
     assert ok_exc is None and np.array_equal(ok.data, good.data)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # the divergence is reported, not logged to a file
 
 
 def test_a_job_that_raises_is_returned_and_ctrl_c_is_raised_again():

@@ -9,8 +9,8 @@ microseconds per step and their ratio to the default.
 - ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
   the signal rows derivatives read that move within the step, the sampled update merged into its signal
   pass, common subexpressions shared (``harness/grouped.py``), gcc flags of
-  ``harness/native.optimization_flags`` (-O3 here);
-- ``grouped -O1``: the same C at -O1 (the flag this step got before 2026-12-02, as a 150 kB file);
+  ``harness/native.optimization_flags`` (-O1 for this 200 kB file);
+- ``grouped -O3``: the same C at -O3 (what a smaller file gets; 2 s more of gcc on a cold start);
 - ``flat``: every instance inlined into one CasADi expression, CasADi's own C (``grouping="flat"``).
 
 Run: ``python benchmarks/bench_controller.py [--steps 5000] [--repeat 7]``.
@@ -53,7 +53,7 @@ def main() -> None:
     source = kinds.c_step_source()
     builds = {
         f"grouped {' '.join(native.optimization_flags(source))} (default)": (kinds, horizon(kinds, source, None)),
-        "grouped -O1": (kinds, horizon(kinds, source, ("-O1",))),
+        "grouped -O3": (kinds, horizon(kinds, source, ("-O3",))),
         f"flat {' '.join(native.optimization_flags(native.casadi_c_source([flat.step], 'x')))}":
             (flat, horizon(flat, None, None)),
     }

@@ -247,26 +247,14 @@ def compiler() -> str | None:
 _TABLE = re.compile(r"^static const long long \w+\[\] = \{[^}]*\};$", re.MULTILINE)
 
 
-_FUNCTION_START = re.compile(r"^(?:static )?(?:int|void|casadi_real|double) \w+\(", re.MULTILINE)
-
-
-def largest_function(source: str) -> int:
-    """Characters of the longest C function in ``source`` (from one top-level definition to the next)."""
-    starts = [m.start() for m in _FUNCTION_START.finditer(source)] + [len(source)]
-    return max((b - a for a, b in zip(starts, starts[1:], strict=False)), default=len(source))
-
-
 def optimization_flags(source: str) -> tuple[str, ...]:
-    """-O3, except -O1 when one function exceeds 150 kB of C or the whole file 1.5 MB.
+    """-O3 for ordinary steps; -O1 above 150 kB of C code (gcc's time grows fast, the run gains little).
 
-    gcc's time at -O3 grows much faster than linearly with the size of one function (the flat compile's
-    straight-line step of a large graph), while many functions of moderate size (a grouped step's kinds)
-    compile at -O3 in about the time of -O1: the six-leg controller's grouped step, 220 kB in functions of
-    at most 50 kB, took 4.1 s at -O3 and 3.5 s at -O1, and runs 1.2-1.4x faster at -O3.
     Constant tables (a grouped step's offsets, one line each) are data, not code: they do not count.
+    Measured on the six-leg controller's grouped step (204 kB, ``benchmarks/bench_controller.py``,
+    2026-12-02): -O3 runs 1.08x faster than -O1 but takes 4.8 s of gcc instead of 2.7 s on a cold start.
     """
-    code = _TABLE.sub("", source)
-    return ("-O1",) if largest_function(code) > 150_000 or len(code) > 1_500_000 else ("-O3",)
+    return ("-O1",) if len(_TABLE.sub("", source)) > 150_000 else ("-O3",)
 
 
 def casadi_c_source(functions: list[ca.Function], tag: str) -> str:

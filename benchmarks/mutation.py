@@ -41,7 +41,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "units": ("components/units.py", ["tests/test_units.py"]),
     "outcomes": ("harness/experiments/outcomes.py", ["tests/test_outcome_rules.py"]),
     "importer-values": ("fmus/importer/description.py", ["tests/test_fmu_import.py"]),
-    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenarios.py"]),
+    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenario_rules.py"]),
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py"]),
 }
 

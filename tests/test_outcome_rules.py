@@ -440,3 +440,20 @@ def test_height_drop_and_speed_by_hand():
     assert math.isnan(one["speed_m_s"]) and one["distance_m"] == 0.0 and one["waiting_share"] is None
     two = evaluate(_res([0.0, 0.5], dt=0.5), "robot", {})
     assert two["speed_m_s"] == 1.0
+
+
+def test_two_samples_have_one_interval_to_wait_in():
+    """Two samples: one interval (ending at the second); waiting in it is the whole run: share 1."""
+    assert evaluate(_res([0.0, 0.0]), "robot", {}, waiting=[False, True])["waiting_share"] == 1.0
+    assert evaluate(_res([0.0, 0.0]), "robot", {}, waiting=[True, False])["waiting_share"] == 0.0
+
+
+def test_support_needs_both_feet_and_forces_recorded():
+    """Feet without toe forces (or forces without feet) cannot say which feet carry load: no share."""
+    n = 5
+    fz = np.tile(np.where(TRIPOD, 10.0, 0.0), (n, 1))
+    full = _res(np.zeros(n), feet=_feet(n), fz=fz)
+    cols = full.columns
+    for drop in ("foot_position", "toe_force"):
+        keep = [c for c in cols if drop not in c]
+        assert end_state(full.select(keep), "robot")["end_support_share"] is None

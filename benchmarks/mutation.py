@@ -43,6 +43,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "importer-values": ("fmus/importer/description.py", ["tests/test_fmu_import.py"]),
     "scenario": ("harness/experiments/scenario.py", ["tests/test_scenario_rules.py"]),
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py"]),
+    "reflexes": ("components/yu/reflexes.py", ["tests/test_reflex_rules.py"]),
 }
 
 

@@ -457,3 +457,37 @@ def test_support_needs_both_feet_and_forces_recorded():
     for drop in ("foot_position", "toe_force"):
         keep = [c for c in cols if drop not in c]
         assert end_state(full.select(keep), "robot")["end_support_share"] is None
+
+
+def test_static_stability_agrees_with_scipy_on_random_feet():
+    """An independent oracle: scipy's Delaunay triangulation (Qhull) of the loaded feet; a centre is held
+    when it lies in some triangle (find_simplex >= 0), i.e. in the convex hull. Random feet in general
+    position (no three collinear, centres almost surely off the edges), 3 to 6 of them, 25 centres each."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(26)
+    for _ in range(40):
+        feet = rng.uniform([-1.0, -2.0], [3.0, 1.0], size=(int(rng.integers(3, 7)), 2))
+        centres = rng.uniform([-1.5, -2.5], [3.5, 1.5], size=(25, 2))
+        inside = Delaunay(feet).find_simplex(centres) >= 0
+        for c, held in zip(centres, inside, strict=True):
+            assert statically_stable(feet, c) is bool(held), (feet, c)
+
+
+def test_end_state_default_window_is_5_s():
+    """A run of 10 s (0.25 s samples) whose body peaks at 4.5 s (5.5 s before the end) and stands lower after:
+    the default 5 s window starts at 5 s and does not see the peak."""
+    y = np.where(np.arange(41) == 18, 1.0, 0.5)
+    assert end_state(_res(y), "robot")["end_backslide_m"] == 0.0
+    assert end_state(_res(y), "robot", window_s=5.5)["end_backslide_m"] == 0.5
+
+
+def test_default_stall_window_is_5_s_not_shorter():
+    """Walks 0.5 m/s, stands still from 2 to 6.5 s (4.5 s), walks again, 10 s in all: every 5 s window holds
+    at least 0.5 s of walking (0.25 m); a 4 s window fits in the pause: a stall from 2 s."""
+    t = np.arange(41) * 0.25
+    speed = np.where((t > 2) & (t <= 6.5), 0.0, 0.5)
+    y = np.r_[0.0, np.cumsum(speed[1:] * 0.25)]
+    assert not evaluate(_res(y), "robot", {})["stalled"]
+    out = evaluate(_res(y), "robot", {"stall_window_s": 4.0})
+    assert out["stalled"] and out["stalled_from_s"] == 2.0

@@ -491,3 +491,12 @@ def test_default_stall_window_is_5_s_not_shorter():
     assert not evaluate(_res(y), "robot", {})["stalled"]
     out = evaluate(_res(y), "robot", {"stall_window_s": 4.0})
     assert out["stalled"] and out["stalled_from_s"] == 2.0
+
+
+def test_crossing_passes_the_goal_between_samples_and_uses_the_45_deg_default():
+    """y jumps from 0.5 to 1.0 m: the goal 0.75 m is passed at t = 0.5 s though no sample equals it. The fall
+    limit defaults to 45 deg (docs/scenarios.md): 45.5 deg before the goal is a fall, 44.5 deg is not."""
+    y = [0.0, 0.5, 1.0, 1.0]
+    assert crossing(_res(y), "robot", 0.5, 0.25)["crossed_time_s"] == 0.5
+    assert not crossing(_res(y, roll_deg=[0, 45.5, 0, 0]), "robot", 0.5, 0.25)["success"]
+    assert crossing(_res(y, roll_deg=[0, 44.5, 0, 0]), "robot", 0.5, 0.25)["success"]

@@ -500,3 +500,41 @@ def test_crossing_passes_the_goal_between_samples_and_uses_the_45_deg_default():
     assert crossing(_res(y), "robot", 0.5, 0.25)["crossed_time_s"] == 0.5
     assert not crossing(_res(y, roll_deg=[0, 45.5, 0, 0]), "robot", 0.5, 0.25)["success"]
     assert crossing(_res(y, roll_deg=[0, 44.5, 0, 0]), "robot", 0.5, 0.25)["success"]
+
+
+def test_a_stall_after_a_long_first_wait_is_found():
+    """Samples at 0, 3, 3.5 .. 5.5 s; the robot waits in the first interval (0 -> 3 s is cut), then stands 2.5 s
+    of walking time: a 2 s window fits: stalled from 3 s."""
+    t = np.array([0.0, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5])
+    waiting = np.array([True, False, False, False, False, False, False])
+    assert stall(t, np.zeros(7), waiting, 2.0, 0.5) == (True, 3.0)
+
+
+def test_the_5_s_defaults_of_the_end_window_and_the_stall_window_on_both_sides():
+    """10 s runs, 0.25 s samples. End window 5 s (the samples from 5 s on): a peak 4.5 s before the end is in
+    it, one 5.5 s before is not. Stall window 5 s: a pause of 5.5 s holds a whole window (stalled), a pause
+    of 4.5 s does not."""
+    base = np.full(41, 0.5)
+    for before, seen in ((4.5, True), (5.5, False)):
+        y = base.copy()
+        y[int(round((10 - before) / 0.25))] = 1.0
+        out = evaluate(_res(y), "robot", {"no_stall": False})
+        assert out["end_backslide_m"] == (0.5 if seen else 0.0), before
+    t = np.arange(41) * 0.25
+    for pause, stalled in ((5.5, True), (4.5, False)):
+        speed = np.where((t > 2) & (t <= 2 + pause), 0.0, 0.5)
+        y = np.r_[0.0, np.cumsum(speed[1:] * 0.25)]
+        assert evaluate(_res(y), "robot", {})["stalled"] is stalled, pause
+
+
+def test_end_tilt_default_is_15_deg_on_both_sides():
+    y = _walk()
+    assert evaluate(_res(y, roll_deg=np.r_[np.zeros(40), 14.5]), "robot", {})["success"]
+    assert evaluate(_res(y, roll_deg=np.r_[np.zeros(40), 15.5]), "robot", {})["criteria_failed"] == ["end_tilt_deg"]
+
+
+def test_speed_is_over_the_recorded_span_not_from_time_zero():
+    """A run recorded from t = 10 s to 14 s that walks 2 m: 0.5 m/s."""
+    res = _res(0.125 * np.arange(17))
+    res.time = res.time + 10.0
+    assert evaluate(res, "robot", {})["speed_m_s"] == 0.5

@@ -538,3 +538,10 @@ def test_speed_is_over_the_recorded_span_not_from_time_zero():
     res = _res(0.125 * np.arange(17))
     res.time = res.time + 10.0
     assert evaluate(res, "robot", {})["speed_m_s"] == 0.5
+
+
+def test_the_fall_limit_defaults_to_45_deg_on_both_sides():
+    y = _walk()
+    spike = lambda a: np.where(np.arange(41) == 20, a, 0.0)  # noqa: E731
+    assert not evaluate(_res(y, roll_deg=spike(44.5)), "robot", {"max_tilt_deg": 90.0})["fell"]
+    assert evaluate(_res(y, roll_deg=spike(45.5)), "robot", {"max_tilt_deg": 90.0})["fell"]

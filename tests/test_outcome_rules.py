@@ -545,3 +545,14 @@ def test_the_fall_limit_defaults_to_45_deg_on_both_sides():
     spike = lambda a: np.where(np.arange(41) == 20, a, 0.0)  # noqa: E731
     assert not evaluate(_res(y, roll_deg=spike(44.5)), "robot", {"max_tilt_deg": 90.0})["fell"]
     assert evaluate(_res(y, roll_deg=spike(45.5)), "robot", {"max_tilt_deg": 90.0})["fell"]
+
+
+def test_a_touch_and_a_nan_tilt_at_the_same_sample_are_a_fall():
+    """Either alone is a fall, so both together are one too (a rule that let them cancel would miss it)."""
+    assert fall(_res([0] * 3, contact=[0, 1, 0], roll_deg=[0, np.nan, 0]), "robot") == \
+        (True, 0.25, "body touched the ground")
+
+
+def test_end_state_default_window_sees_a_peak_4_5_s_before_the_end():
+    y = np.where(np.arange(41) == 22, 1.0, 0.5)  # 5.5 s of 10 s: 4.5 s before the end
+    assert end_state(_res(y), "robot")["end_backslide_m"] == 0.5

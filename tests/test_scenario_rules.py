@@ -403,3 +403,27 @@ def test_toml_values_by_hand():
     assert dump_toml({"a": {"b": {"c": 1}}}) == "[a.b]\nc = 1\n"
     with pytest.raises(ScenarioError, match="cannot write None as TOML"):
         dump_toml({"x": None})
+
+
+def test_a_file_that_is_not_utf8_is_a_scenario_error(tmp_path):
+    """TOML files are UTF-8 (toml.io v1.0.0, Spec): other bytes are refused with the file's name."""
+    p = tmp_path / "latin.toml"
+    p.write_bytes(b'name = "caf\xe9"\nt_end = 1.0\n')
+    with pytest.raises(ScenarioError, match=re.escape(f"cannot read scenario file {p}:")):
+        load(p)
+
+
+def test_keys_after_a_parameter_table_are_still_checked():
+    """[controller] with its params table written first (an inline table), then a key out of range."""
+    msg = _err(BASE + "[controller]\nparams = {a = 1}\nFcx = -1.0\n")
+    assert msg.startswith("controller.Fcx = -1.0 is out of range: must be >= 0")
+    s = _doc(BASE + '[controller]\nparams = {a = 1}\nkind = "yu"\n')
+    assert s.doc["criteria"]["max_tilt_deg"] == 30.0
+
+
+def test_only_controller_paths_become_graph_parameters():
+    """Keys of other sections, including those that sort before 'controller', stay where they are."""
+    s = _doc(BASE)
+    assert resolve_key(s, "aliases.h") == ["aliases", "h"]
+    assert resolve_key(s, "criteria.cross") == ["criteria", "cross"]
+    assert resolve_key(s, "disturbance") == ["disturbance"]

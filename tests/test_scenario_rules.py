@@ -116,6 +116,7 @@ RANGES = [
     ("robot.kp", 1e-9, 0.0, None, None),  # servo gains, friction: positive
     ("robot.friction", 1e-9, 0.0, None, None),
     ("controller.Fcx", 0.0, -0.5, None, None),  # force thresholds (N): zero allowed
+    ("controller.Fcy", 0.0, -0.5, None, None),
     ("controller.Fcz", 0.0, -0.5, None, None),
     ("controller.clearance_elevator", 1e-9, 0.0, None, None),  # a clearance above the obstacle: positive
     ("controller.gait", 1, 0, 3, 4),  # 1 tripod, 2 tetrapod, 3 wave (Yu Y16)
@@ -427,3 +428,19 @@ def test_only_controller_paths_become_graph_parameters():
     assert resolve_key(s, "aliases.h") == ["aliases", "h"]
     assert resolve_key(s, "criteria.cross") == ["criteria", "cross"]
     assert resolve_key(s, "disturbance") == ["disturbance"]
+
+
+def test_a_table_header_with_a_comment_is_followed():
+    assert line_of("[robot]  # the robot\nkp = 1.0  # N*m/rad\n", "robot.kp") == 2
+
+
+def test_terrain_keys_after_an_inline_feature_are_still_checked():
+    feat = 's = {type = "step", height = 0.04, position_y = 0.5, side = "right"}'
+    msg = _err(BASE + f"[terrain]\n{feat}\njitter_m = -1.0\n")
+    assert msg.startswith("terrain.jitter_m = -1.0 is out of range: must be >= 0")
+
+
+def test_long_paths_outside_terrain_are_not_terrain_errors():
+    """The 'terrain.KEY or terrain.FEATURE.FIELD' rule is about terrain keys only."""
+    s = _doc(BASE)
+    assert resolve_key(s, "criteria.a.b.c") == ["criteria", "a", "b", "c"]

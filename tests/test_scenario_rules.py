@@ -444,3 +444,18 @@ def test_long_paths_outside_terrain_are_not_terrain_errors():
     """The 'terrain.KEY or terrain.FEATURE.FIELD' rule is about terrain keys only."""
     s = _doc(BASE)
     assert resolve_key(s, "criteria.a.b.c") == ["criteria", "a", "b", "c"]
+
+
+def test_a_sub_table_in_a_section_other_than_terrain_is_an_unknown_key():
+    """Only [terrain] holds named tables (features); [robot.sub] is no key of [robot]."""
+    assert _err(BASE + "[robot.sub]\na = 1\n").startswith("unknown key 'robot.sub'")
+
+
+def test_overrides_make_missing_tables_only_inside_sections():
+    s = _doc(BASE)
+    assert resolve_key(s, "terrain.friction") == ["terrain", "friction"]
+    apply_override(s, "robot.sub.x", 1)  # a table inside a section is made (validation judges it after)
+    assert s.doc["robot"]["sub"] == {"x": 1}
+    for key in ("nme.x.y", "zzz.x.y", "abc.x.y"):  # no such section: nothing is made
+        with pytest.raises(ScenarioError, match=re.escape(f"--set {key}: unknown key '{key}'")):
+            apply_override(s, key, 1)

@@ -39,10 +39,11 @@ ROOT = Path(__file__).resolve().parents[1]
 # module (repository path) -> the tests that specify it (quick ones, no robot runs)
 MODULES: dict[str, tuple[str, list[str]]] = {
     "units": ("components/units.py", ["tests/test_units.py"]),
-    "outcomes": ("harness/experiments/outcomes.py", ["tests/test_scenarios.py"]),
-    "importer-values": ("fmus/importer/description.py", ["tests/test_fmu_import.py"]),
-    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenarios.py"]),
+    "outcomes": ("harness/experiments/outcomes.py", ["tests/test_outcome_rules.py"]),
+    "importer-values": ("fmus/importer/values.py", ["tests/test_importer_values.py", "tests/test_exact_integers.py"]),
+    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenario_rules.py"]),
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py"]),
+    "reflexes": ("components/yu/reflexes.py", ["tests/test_reflex_rules.py"]),
 }
 
 

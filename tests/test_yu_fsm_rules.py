@@ -220,3 +220,71 @@ def test_a_reflex_that_aborted_a_stance_lets_the_landed_legs_start_their_stance_
     assert np.all(without[2:][:, A] == SWING_PROLONG) and np.all(without[:, B] == STANCE)
     assert np.all(with_reflex[4:7][:, B] == STANCE_PROLONG)
     assert np.all(with_reflex[7:][:, B] == STANCE) and np.all(with_reflex[7:][:, A] == STANCE)
+
+
+def _scripted(gait: int, reflex: bool = False, late: int = 0, samples: int = 600):
+    """The scripted robot of the test above, with (``reflex``) every swinging leg running a reflex (``active``)
+    in the 2nd to 4th samples of its swing, and (``late``) every foot that swung touching down (lambda_td)
+    only ``late`` samples after its swing ended. Returns the swing sets in order and, per sample, the inputs
+    (active, lambda_td) and outputs (state, slot, rate)."""
+    legs_ = Legs(gait)
+    state, since = None, np.zeros(6)
+    swinging: list[set] = []
+    trace = []
+    td_off = np.zeros(6)  # samples since the swing ended, for the legs still in the air
+    in_air = np.zeros(6, bool)
+    for _ in range(samples):
+        if state is None:
+            swing_flag, active = ALL, np.zeros(6)
+        else:
+            swing_flag = np.select([state == SWING, state == STANCE, state == STANCE_PROLONG],
+                                   [since < 3, since >= 3, True], False).astype(float)
+            active = ((state == SWING) & (since >= 1) & (since <= 3)).astype(float) if reflex else np.zeros(6)
+            in_air = (in_air | (state == SWING)) if late else in_air
+            td_off = np.where(in_air & (state != SWING), td_off + 1, 0)
+            in_air = in_air & ~(td_off > late)
+        td = np.where(in_air, 0.0, 1.0)
+        out = legs_.sample(swing=swing_flag, lambda_td=td, active=active)
+        since = np.where(out["state"] == state, since + 1, 0) if state is not None else np.zeros(6)
+        state = out["state"]
+        trace.append((active.copy(), td.copy(), state.copy(), float(out["slot"][0]), out["rate"].copy()))
+        now = {i for i in range(6) if state[i] == SWING}
+        if now and (not swinging or now != swinging[-1]):
+            swinging.append(now)
+    return swinging, trace
+
+
+ORDERS = [(1, [set(A), set(B)]), (2, TETRAPOD_ORDER), (3, WAVE_ORDER)]
+
+
+@pytest.mark.parametrize("gait, order", ORDERS)
+def test_a_reflex_in_every_slot_holds_the_standing_legs_and_keeps_the_order(gait, order):
+    """Module docstring: while any leg runs a reflex, legs in Stance go to StanceProlong at once (rate 0) and
+    no switch happens (SWITCH needs no reflex); the reflexing leg keeps running; when it ends the order of
+    the table goes on, twice round."""
+    swinging, trace = _scripted(gait, reflex=True)
+    assert swinging[:2 * len(order)] == order * 2
+    reflex_samples = 0
+    for k, (active, _, state, slot, rate) in enumerate(trace):
+        if active.any():
+            reflex_samples += 1
+            assert not np.any(state == STANCE), k  # every standing leg held
+            assert np.all(rate[state == STANCE_PROLONG] == 0.0) and np.all(rate[active > 0] > 0.0)
+            assert slot == trace[k - 1][3], k  # no switch while a reflex runs
+    assert reflex_samples >= 3 * 2 * len(order)  # three samples of reflex in every slot seen
+
+
+@pytest.mark.parametrize("gait, order", ORDERS)
+@pytest.mark.parametrize("late", [2, 6])
+def test_a_foot_that_lands_late_holds_the_switch_in_every_slot(gait, order, late):
+    """Table 2 as used here: NATD (some feet down, not all) blocks the exchange, ATD (all six) allows it.
+    Every swinging foot touches down ``late`` samples after its swing ended: no slot switch happens at a sample
+    with a foot in the air, the order of the table still holds, twice round."""
+    swinging, trace = _scripted(gait, late=late)
+    assert swinging[:2 * len(order)] == order * 2
+    switches = [k for k in range(1, len(trace)) if trace[k][3] != trace[k - 1][3]]
+    assert len(switches) >= 2 * len(order) - 1
+    for k in switches:
+        assert np.all(trace[k][1] == 1.0), (k, trace[k][1])  # every foot down at the switch
+        # and the switch did wait for the last foot: the sample before, some foot was still in the air
+        assert np.any(trace[k - 1][1] == 0.0), k

@@ -40,10 +40,17 @@ from typing import Any
 from cpgsim.components.core import normalize_unit
 from cpgsim.fmus.errors import MissingBinaryError, ModelDescriptionError, one_line
 from cpgsim.fmus.importer.archive import check_archive, open_zip, read_member
+from cpgsim.fmus.importer.values import (  # noqa: F401 (re-exported: the names this module had)
+    BOOL_TYPES,
+    INT_RANGES,
+    INT_TYPES,
+    REAL_TYPES,
+    kind_of,
+    number_attribute,
+    start_values,
+)
+from cpgsim.fmus.importer.values import exact_integers as _exact_integers
 
-REAL_TYPES = {"Real", "Float64", "Float32"}
-INT_TYPES = {"Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration"}
-BOOL_TYPES = {"Boolean"}
 MAX_XML_DEPTH = 64
 MAX_VARIABLES = 100_000
 MAX_ARRAY_ELEMENTS = 100_000
@@ -155,20 +162,6 @@ class ValueParamSpec:
         if kind_of(self.type) == "integer":  # exact ints (an Int64 beyond 2^53 does not survive a float64)
             return _exact_integers(value, self.type, where)
         return tuple(float(v) for v in arr.ravel())  # FMI 3 arrays are serialised row-major
-
-
-def _exact_integers(value: Any, fmi_type: str, where: str) -> tuple[int, ...]:
-    """``value`` (nested lists / array of integers) as exact Python ints, row-major, in ``fmi_type``'s range."""
-    import numpy as np
-
-    from cpgsim.components.core import ParameterError
-
-    out = [int(v) for v in np.asarray(value, dtype=object).ravel()]
-    lo, hi = INT_RANGES.get(fmi_type, (-2 ** 63, 2 ** 64 - 1))
-    bad = [v for v in out if not lo <= v <= hi]
-    if bad:
-        raise ParameterError(f"{where}: {bad[0]} is out of range for {fmi_type} [{lo}, {hi}]")
-    return tuple(out)
 
 
 def format_number(value: float | int) -> str:
@@ -293,16 +286,6 @@ def _names(names: Sequence[str]) -> str:
     return names[0] if len(names) == 1 else f"{names[0]} .. {names[-1]}"
 
 
-def kind_of(fmi_type: str) -> str | None:
-    if fmi_type in REAL_TYPES:
-        return "real"
-    if fmi_type in INT_TYPES:
-        return "integer"
-    if fmi_type in BOOL_TYPES:
-        return "boolean"
-    return None
-
-
 def identifier(name: str, taken: set[str]) -> str:
     """A valid, unused identifier for FMI name ``name`` (``damper.d`` -> ``damper_d``)."""
     base = _NAME_BAD.sub("_", name).strip("_") or "v"
@@ -314,42 +297,6 @@ def identifier(name: str, taken: set[str]) -> str:
         out, i = f"{base}_{i}", i + 1
     taken.add(out)
     return out
-
-
-INT_RANGES = {"Integer": (-2**31, 2**31 - 1), "Enumeration": (-2**31, 2**31 - 1), "Int8": (-2**7, 2**7 - 1),
-              "UInt8": (0, 2**8 - 1), "Int16": (-2**15, 2**15 - 1), "UInt16": (0, 2**16 - 1),
-              "Int32": (-2**31, 2**31 - 1), "UInt32": (0, 2**32 - 1), "Int64": (-2**63, 2**63 - 1),
-              "UInt64": (0, 2**64 - 1)}
-"""The value range of each FMI integer type (``Integer`` and ``Enumeration`` are FMI 2's 32-bit ``int``)."""
-_FLOAT_WORDS = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
-
-
-def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "Real") -> float | int:
-    """The number in ``attribute`` of ``element`` (e.g. ``<Integer start>`` of variable 'n'), checked.
-
-    An integer type's value must be an integer within the type's range, returned as an exact Python
-    ``int`` (an Int64/UInt64 start such as 2^62 + 1 does not fit a float64); a real one a float64 (an overflow
-    such as ``1e400`` is out of range; ``INF`` written as such stays infinite). Anything else is a
-    :class:`ModelDescriptionError` naming the element and the attribute.
-    """
-    token = str(text).strip()
-    where = f"{element}: attribute {attribute}={token!r}"
-    if fmi_type in INT_TYPES:
-        try:
-            value = int(token)
-        except ValueError:
-            raise ModelDescriptionError(f"{where} is not an integer ({fmi_type})") from None
-        lo, hi = INT_RANGES.get(fmi_type, (-2**63, 2**64 - 1))
-        if not lo <= value <= hi:
-            raise ModelDescriptionError(f"{where} is out of range for {fmi_type} [{lo}, {hi}]")
-        return value
-    try:
-        value = float(token)
-    except ValueError:
-        raise ModelDescriptionError(f"{where} is not a number") from None
-    if not math.isfinite(value) and token.lower() not in _FLOAT_WORDS:
-        raise ModelDescriptionError(f"{where} is out of range for a 64-bit float")
-    return value
 
 
 MAX_COUNT = 10_000_000
@@ -366,20 +313,7 @@ def _count(value: Any, attribute: str) -> int:
 
 
 def _parse_start(var: Any, fmi_type: str, count: int) -> tuple[float | int, ...] | None:
-    raw = var.start
-    if raw is None:
-        return None
-    text = str(raw).strip()
-    if fmi_type in BOOL_TYPES:
-        vals = [1.0 if t in ("true", "1") else 0.0 for t in text.split()]
-    else:
-        element = f"variable {var.name!r} <{fmi_type}>"
-        vals = [number_attribute(t, element, "start", fmi_type) for t in text.split()]
-    if len(vals) == 1 and count > 1:
-        vals = vals * count
-    if len(vals) != count:
-        raise ModelDescriptionError(f"variable {var.name!r}: {len(vals)} start values for {count} elements")
-    return tuple(vals)
+    return start_values(var.start, fmi_type, count, var.name)
 
 
 def _attr(var: Any, name: str) -> Any:

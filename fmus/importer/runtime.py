@@ -36,6 +36,8 @@ import numpy as np
 from cpgsim.fmus.errors import FmuRuntimeError, MissingBinaryError, one_line
 from cpgsim.fmus.importer.archive import remove_tree, safe_extract
 from cpgsim.fmus.importer.description import FmuDescription, check_binary, describe_fmu
+from cpgsim.fmus.importer.values import EXACT_INT, as_values
+from cpgsim.fmus.importer.values import to_fmi as _convert
 from cpgsim.harness.errors import StopRequested
 
 _FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8", "UInt8": "getUInt8",
@@ -44,40 +46,6 @@ _FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8"
 _FMI2_GET = {"Real": "getReal", "Integer": "getInteger", "Enumeration": "getInteger", "Boolean": "getBoolean"}
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 _ABANDONED: list = []  # instances that reported fmiFatal: not freed, library and logger kept alive
-
-
-EXACT_INT = {"Int64": np.int64, "UInt64": np.uint64}
-"""FMI 3 types whose values do not all fit a float64: kept as exact integers end to end."""
-_INT_RANGE = {"Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1)}
-
-
-def as_values(value: Any, fmi_type: str) -> np.ndarray:
-    """A port value as a flat array: float64, or exact int64/uint64 for the 64-bit integer types."""
-    if fmi_type not in EXACT_INT:
-        return np.atleast_1d(np.asarray(value, dtype=float)).ravel()
-    arr = np.atleast_1d(np.asarray(value)).ravel()
-    if arr.dtype.kind in "iu" and arr.dtype != np.dtype(EXACT_INT[fmi_type]):
-        arr = np.array([int(v) for v in arr], dtype=object)
-    if arr.dtype.kind not in "iu":  # floats or Python ints: exact conversion with a range check
-        lo, hi = _INT_RANGE[fmi_type]
-        ints = []
-        for v in arr:
-            iv = int(v) if isinstance(v, (int, np.integer)) or float(v).is_integer() else None
-            if iv is None or not lo <= iv <= hi:
-                raise ValueError(f"{v!r} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
-            ints.append(iv)
-        arr = np.array(ints, dtype=EXACT_INT[fmi_type])
-    return arr
-
-
-def _convert(fmi_type: str, values: np.ndarray) -> list:
-    if fmi_type in EXACT_INT:
-        return [int(v) for v in values]
-    if fmi_type == "Boolean":
-        return [bool(v > 0.5) for v in values]
-    if fmi_type in ("Real", "Float64", "Float32"):
-        return [float(v) for v in values]
-    return [int(round(float(v))) for v in values]
 
 
 class FmuRuntime:

@@ -1,0 +1,295 @@
+"""Yu's elevator and searching reflexes (Yu 2019, Sec. 4, eqs. 10-15) one rule at a time, on the reflex
+block alone with scripted inputs (quick tier: no robot, no network). Each expected value is read off the
+event table of :mod:`cpgsim.components.yu.reflexes` (its transcription of Yu's rules plus the documented
+gates), worked out by hand here:
+
+- the leader protracts (swings) while ``y1 > 0``; its swing ends when ``y1`` turns negative with ``x1 > 0``;
+- modes: 0 nominal, 1 elevator retraction, 2 elevator forward stroke, 3 searching, 4 return, 5 withdraw;
+  ``reflex``: 0 none, 1 elevator, 2 searching, 3 return, 4 withdraw;
+- row ``k`` of a recorded output shows the block after it has seen the inputs of sample ``k`` (``mode`` is
+  the committed state, the counters ``n_*`` count the events so far);
+- ``omega1 = 1`` here, so the leader's amplitude is ``A = sqrt(x1^2 + y1^2)`` and ``x1/A`` is worked out
+  by hand; the nominal ground is ``ground_h = -H = -0.12`` m (the block's ``height`` default).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpgsim.components.yu.reflexes import YuReflexLogic
+from cpgsim.harness.simulate import simulate
+
+DT = 0.01
+DEFAULTS = {"x1": 0.0, "y1": 0.0, "lambda_ob": 0.0, "lambda_td": 0.0, "rate": 1.0, "foot_h": 0.0, "support": 1.0,
+            "aim_h": 0.0}
+OUTS = ("mode", "reflex", "active", "swing", "lead_gain", "omega_scale1", "omega_scale23", "rate1", "rate23",
+        "landed", "gaveup", "n_ert", "n_srt", "n_found", "n_early", "n_giveup", "n_withdraw")
+
+
+def S(x1, y1, **kw) -> dict:
+    """One sample's inputs: leader (x1, y1), and ob, td, rate, foot, sup, aim by short names."""
+    names = {"ob": "lambda_ob", "td": "lambda_td", "foot": "foot_h", "sup": "support", "aim": "aim_h"}
+    return {"x1": x1, "y1": y1, **{names.get(k, k): v for k, v in kw.items()}}
+
+
+def run(samples: list[dict], **params) -> dict[str, np.ndarray]:
+    """The block over ``samples`` (one dict of inputs per sample, missing inputs at their defaults)."""
+    n = len(samples)
+    series = {k: np.array([[s.get(k, d) for s in samples]]) for k, d in DEFAULTS.items()}
+    blk = YuReflexLogic("r", **{"omega1": 1.0, **params})
+    res = simulate(blk, t_end=(n - 1) * DT, dt=DT, inputs=series)
+    return {o: res[f"r.{o}"] for o in OUTS}
+
+
+SWING = S(0.2, 1.0)  # mid-swing: x1/A = 0.196, inside every window
+STANCE = S(0.2, -1.0)
+
+
+# -- elevator: trigger (ERT) -----------------------------------------------------------------------------
+
+def test_an_obstacle_in_swing_starts_the_elevator_retraction():
+    """ERT: mode 0, swinging, clock running, x1 inside (-0.98, 0.9), rising obstacle flag -> mode 1; the
+    followers are frozen (rate23 0) and cut from the leader (lead_gain 0) while it retracts."""
+    r = run([SWING, SWING, S(0.2, 1.0, ob=1), S(0.2, -1.0, ob=1), S(0.1, -1.0)])
+    assert list(r["mode"]) == [0, 0, 1, 1, 1] and list(r["n_ert"]) == [0, 0, 1, 1, 1]
+    assert list(r["lead_gain"]) == [1, 1, 0, 0, 0] and list(r["rate23"]) == [1, 1, 0, 0, 0]
+    assert list(r["rate1"]) == [1] * 5  # the leader runs (its reversal is the network's y reset)
+    assert list(r["reflex"]) == [0, 0, 1, 1, 1] and list(r["active"]) == [0, 0, 1, 1, 1]
+    assert list(r["swing"]) == [1] * 5  # the whole elevator reflex is a swing
+
+
+@pytest.mark.parametrize("trigger, params, why", [
+    (S(0.2, -1.0, ob=1, td=1), {}, "in stance (the swing ended on the ground)"),
+    (S(0.2, 1.0, ob=1, rate=0.0), {}, "the FSM holds the leg"),
+    (S(0.9, 0.3, ob=1), {}, "x1 = 0.9 is not below x1_ob_max = 0.9"),
+    (S(-0.98, 0.3, ob=1), {}, "x1 = -0.98 is not above x1_ob_min = -0.98"),
+    (S(0.2, 1.0, ob=1), {"elevator": 0.0}, "the elevator is off"),
+    (S(0.2, 1.0, ob=0.5), {}, "lambda_ob = 0.5 is not set (a 0/1 flag, > 0.5)"),
+    (S(0.2, 1.0, ob=1, sup=1.0), {"ob_support_veto": 1.0}, "a supporting contact with the veto on"),
+])
+def test_no_elevator_without_every_condition(trigger, params, why):
+    r = run([SWING, SWING, trigger, trigger], **params)
+    assert r["n_ert"][-1] == 0 and list(r["mode"]) == [0, 0, 0, 0], why
+
+
+@pytest.mark.parametrize("trigger, params", [
+    (S(0.89, 0.3, ob=1), {}), (S(-0.97, 0.3, ob=1), {}),  # just inside the window
+    (S(0.2, 1.0, ob=1, sup=0.0), {"ob_support_veto": 1.0}),  # the veto needs a supporting contact
+    (S(0.2, 1.0, ob=1, sup=1.0), {"ob_support_veto": 0.0}),  # Yu's rule: support does not matter
+])
+def test_the_elevator_fires_just_inside_its_conditions(trigger, params):
+    r = run([SWING, SWING, trigger], **params)
+    assert list(r["mode"]) == [0, 0, 1] and r["n_ert"][-1] == 1
+
+
+def test_a_held_obstacle_flag_fires_once():
+    """A rising edge of the gated flag: held on through the retraction it does not count again."""
+    r = run([SWING, S(0.2, 1.0, ob=1), S(0.2, 1.0, ob=1), S(0.2, -1.0, ob=1), S(0.2, -1.0, ob=1)])
+    assert list(r["n_ert"]) == [0, 1, 1, 1, 1]
+    # flag on from the first sample while standing; the leg starts swinging with it still on: the gated
+    # flag rises then, an edge
+    r = run([S(0.2, -1.0, ob=1), S(0.2, -1.0, ob=1), S(0.2, 1.0, ob=1)])
+    assert list(r["mode"]) == [0, 0, 1]
+
+
+def test_after_liftoff_the_elevator_waits_for_the_foot_to_leave_the_ground():
+    """ob_after_liftoff = 1: only with landed cleared and the touchdown flag off for ob_clear_time.
+    Stance with contact (landed set, t_ground 0.01 s), then a swing without contact from 0.02 s: landed clears
+    at the first swing sample (x1 = 0.2 > x1_lift = -0.98); with ob_clear_time = 0.035 s the flag must be off
+    since 0.01 s until 0.045 s: an obstacle held from 0.03 s fires at 0.05 s (row 5), not before."""
+    seq = [S(0.2, -1.0, td=1), S(0.2, -1.0, td=1), SWING] + [S(0.2, 1.0, ob=1)] * 4
+    r = run(seq, ob_after_liftoff=1.0, ob_clear_time=0.035)
+    assert list(r["landed"]) == [1, 1, 0, 0, 0, 0, 0]
+    assert list(r["mode"]) == [0, 0, 0, 0, 0, 1, 2]  # y1 > 0 after the trigger: the forward stroke (E1)
+    r = run(seq, ob_after_liftoff=1.0)  # no clear time: as soon as the foot is off the ground
+    assert list(r["mode"]) == [0, 0, 0, 1, 2, 2, 2]
+    # a foot still on the ground when the swing begins (the flag stays on): no trigger
+    r = run([S(0.2, -1.0, td=1), S(0.2, 1.0, td=1, ob=1), S(0.2, 1.0, td=1, ob=1)], ob_after_liftoff=1.0)
+    assert r["n_ert"][-1] == 0
+    r = run([S(0.2, -1.0, td=1), S(0.2, 1.0, td=1, ob=1), S(0.2, 1.0, td=1, ob=1)])  # Yu's rule: it fires
+    assert r["n_ert"][-1] == 1
+
+
+# -- elevator: forward stroke (E1) and its end (E2) ------------------------------------------------------
+
+def _elevator(after: list[dict], **params) -> dict[str, np.ndarray]:
+    """ERT at row 1, retraction rows 1-2 (y1 < 0), then ``after`` from row 3."""
+    return run([SWING, S(0.2, 1.0, ob=1), S(0.1, -1.0)] + after, **params)
+
+
+def test_the_forward_stroke_starts_when_the_leader_turns_forward_and_holds_the_followers_until_the_apex():
+    """E1: mode 1 and y1 > 0 -> mode 2. Followers held (rate23 0) while x1/A < x1_apex = 0.5; then at
+    rate_descent = 1.75 times the leg's rate 0.8: 1.4. x1/A at (0.2, 1): 0.196; at (0.9, 0.3): 0.949."""
+    r = _elevator([S(-0.5, 1.0, rate=0.8), S(0.2, 1.0, rate=0.8), S(0.9, 0.3, rate=0.8)], x1_apex=0.5,
+                  rate_descent=1.75)
+    assert list(r["mode"]) == [0, 1, 1, 2, 2, 2]
+    assert list(r["rate23"][3:]) == pytest.approx([0.0, 0.0, 1.4]) and list(r["rate1"][3:]) == pytest.approx([0.8] * 3)
+    assert list(r["reflex"][3:]) == [1, 1, 1] and list(r["lead_gain"][3:]) == [0, 0, 0]
+    r = _elevator([S(0.2, 1.0)], x1_apex=0.1)  # 0.196 is past an apex at 0.1
+    assert r["rate23"][-1] == 1.0
+
+
+@pytest.mark.parametrize("td, mode, n_srt", [(1, 0, 0), (0, 3, 1)])
+def test_the_stroke_ends_at_the_new_aep_in_nominal_or_searching(td, mode, n_srt):
+    """E2: mode 2, y1 <= 0, x1 > 0 -> mode 0; without touchdown it is an SRT: mode 3."""
+    r = _elevator([S(0.2, 1.0, td=td), S(0.9, 0.0, td=td), S(0.9, -0.2, td=td)])
+    assert list(r["mode"]) == [0, 1, 1, 2, mode, mode] and r["n_srt"][-1] == n_srt
+
+
+def test_the_stroke_does_not_end_before_the_aep():
+    """y1 <= 0 with x1 <= 0 is no AEP: the stroke goes on."""
+    r = _elevator([S(0.2, 1.0, td=1), S(0.0, -0.2, td=1), S(-0.1, -0.2, td=1)])
+    assert list(r["mode"][3:]) == [2, 2, 2]
+
+
+# -- searching (SRT), found, give up, return ---------------------------------------------------------------
+
+def _search(after: list[dict], **params) -> dict[str, np.ndarray]:
+    """A swing (rows 0-1), its end without touchdown at row 2 (x1 > 0, y1 < 0): SRT; then ``after``."""
+    return run([SWING, SWING, S(0.9, -0.1)] + after, **params)
+
+
+def test_a_swing_that_ends_without_touchdown_starts_a_search():
+    """Y12, Y13: the leader at half speed, the followers 1.5 times faster, the leader cut from the network."""
+    r = _search([S(0.8, -0.5)])
+    assert list(r["mode"]) == [0, 0, 3, 3] and list(r["n_srt"]) == [0, 0, 1, 1]
+    assert list(r["omega_scale1"]) == [1, 1, 0.5, 0.5] and list(r["omega_scale23"]) == [1, 1, 1.5, 1.5]
+    assert list(r["lead_gain"]) == [1, 1, 0, 0] and list(r["reflex"]) == [0, 0, 2, 2]
+    assert list(r["active"]) == [0, 0, 1, 1] and list(r["swing"]) == [1, 1, 0, 0]
+    r = _search([S(0.8, -0.5)], search_scale1=0.25, search_scale23=2.0)
+    assert r["omega_scale1"][-1] == 0.25 and r["omega_scale23"][-1] == 2.0
+
+
+@pytest.mark.parametrize("end, params", [(S(0.9, -0.1, td=1), {}), (S(0.9, -0.1), {"searching": 0.0})])
+def test_no_search_after_a_touchdown_or_with_the_reflex_off(end, params):
+    r = run([SWING, SWING, end, S(0.8, -0.5)], **params)
+    assert list(r["mode"]) == [0, 0, 0, 0] and r["n_srt"][-1] == 0
+
+
+def test_no_search_while_the_leg_only_stands():
+    """No swing end without a swing: a leg that stands from the start never searches."""
+    r = run([STANCE, STANCE, S(0.9, -0.1), S(0.9, -0.2)])
+    assert r["n_srt"][-1] == 0 and r["mode"][-1] == 0
+
+
+def test_a_touchdown_ends_the_search():
+    """sTD: mode 3 and lambda_td -> mode 0 (a found foothold sets landed)."""
+    r = _search([S(0.8, -0.5), S(0.7, -0.5, td=1), S(0.6, -0.5, td=1)])
+    assert list(r["mode"]) == [0, 0, 3, 3, 0, 0] and r["n_found"][-1] == 1 and list(r["landed"][3:]) == [0, 1, 1]
+
+
+def test_found_support_needs_a_supporting_contact():
+    seq = [S(0.8, -0.5), S(0.7, -0.5, td=1, sup=0.0), S(0.6, -0.5, td=1, sup=1.0)]
+    r = _search(seq, found_support=1.0)
+    assert list(r["mode"][2:]) == [3, 3, 3, 0] and r["n_found"][-1] == 1
+    r = _search(seq)  # Yu's rule: the touchdown alone
+    assert list(r["mode"][2:]) == [3, 3, 0, 0]
+
+
+def test_a_search_without_touchdown_gives_up_after_its_period_and_returns():
+    """Give up: mode 3 and the searching leader's swing half ends again without touchdown -> mode 4
+    (return), gaveup 1; return end: mode 4 and the leader's stance ends (y1 rises above 0) -> mode 0.
+    gaveup stays 1 until a touchdown or the next swing end."""
+    seq = [S(0.5, 0.5), S(0.9, 0.1), S(0.9, -0.1), S(0.5, -0.5), S(-0.5, 0.5), S(0.2, 1.0), S(0.9, -0.1, td=1)]
+    r = _search(seq)
+    assert list(r["mode"]) == [0, 0, 3, 3, 3, 4, 4, 0, 0, 0]
+    assert list(r["n_giveup"]) == [0, 0, 0, 0, 0, 1, 1, 1, 1, 1] and list(r["reflex"][5:7]) == [3, 3]
+    assert list(r["gaveup"]) == [0, 0, 0, 0, 0, 1, 1, 1, 1, 0]
+    assert list(r["active"][5:7]) == [0, 0] and list(r["lead_gain"][5:7]) == [1, 1]  # Yu: the leg just waits
+    assert r["n_found"][-1] == 0 and r["n_srt"][-1] == 1
+
+
+# -- early touchdown ---------------------------------------------------------------------------------------
+
+HIGH = -0.10  # 20 mm above the nominal ground -0.12 m: above the 10 mm gate
+
+
+def test_a_touchdown_high_in_the_swing_ends_it_early():
+    """Early TD: mode 0 in swing, x1/A in (0, 0.95), the foot 10 mm above the aimed foothold, a rising edge
+    of touchdown with support -> the swing ends (landed, n_early); no search follows at the swing's end."""
+    r = run([SWING, SWING, S(0.2, 1.0, td=1, foot=HIGH), S(0.5, 0.5, td=1, foot=HIGH), S(0.9, -0.1, td=1)])
+    assert list(r["n_early"]) == [0, 0, 1, 1, 1] and list(r["landed"]) == [0, 0, 1, 1, 1]
+    assert list(r["mode"]) == [0] * 5 and r["n_srt"][-1] == 0
+
+
+@pytest.mark.parametrize("td_sample, params, why", [
+    (S(0.2, 1.0, td=1, foot=-0.115), {}, "5 mm above the ground: below the 10 mm gate"),
+    (S(0.2, 1.0, td=1, foot=HIGH, aim=0.02), {}, "the aimed foothold is 20 mm up: the foot is not above it"),
+    (S(0.2, 1.0, td=1, foot=-0.105), {"early_h_min": 0.02}, "15 mm is below a 20 mm gate"),
+    (S(0.96, 0.28, td=1, foot=HIGH), {}, "x1/A = 0.96 is past x1_td_max 0.95"),
+    (S(-0.2, 1.0, td=1, foot=HIGH), {}, "x1/A < 0: before x1_td_min 0"),
+    (S(0.2, 1.0, td=1, foot=HIGH, sup=0.0), {}, "no supporting contact"),
+    (S(0.2, 1.0, td=1, foot=HIGH, rate=0.0), {}, "the leg is held"),
+    (S(0.2, 1.0, td=1, foot=HIGH), {"early_td": 0.0}, "early touchdown off"),
+    (S(0.2, -1.0, td=1, foot=HIGH), {}, "in stance"),
+])
+def test_no_early_touchdown_without_every_condition(td_sample, params, why):
+    r = run([SWING, SWING, td_sample, td_sample], **params)
+    assert r["n_early"][-1] == 0, why
+
+
+def test_early_touchdown_needs_a_rising_edge():
+    """The touchdown flag starts on (td_prev = 1): contact held from the start of the run is no edge."""
+    held = S(0.2, 1.0, td=1, foot=HIGH)
+    assert run([held, held, held])["n_early"][-1] == 0
+    assert run([SWING, held, S(0.2, 1.0, foot=HIGH), held])["n_early"][-1] == 2  # on, off, on: two edges
+
+
+def test_early_touchdown_in_the_elevator_stroke_has_no_upper_window_bound():
+    """Mode 2: x1/A = 0.96 (past 0.95) still counts, and ends the stroke in mode 0 with no search."""
+    r = _elevator([S(0.5, 0.5), S(0.96, 0.28, td=1, foot=HIGH), S(0.9, -0.1, td=1)])
+    assert list(r["mode"][3:]) == [2, 0, 0] and r["n_early"][-1] == 1 and r["n_srt"][-1] == 0
+
+
+# -- landed (the FSM's ATD) --------------------------------------------------------------------------------
+
+def test_landed_is_set_in_stance_and_cleared_at_liftoff():
+    """Set by touchdown while not swinging; cleared by no contact while swinging past x1_lift (-0.98); a
+    leg waiting at its PEP (x1 = -0.99 <= x1_lift) keeps it; a touchdown while swinging does not set it
+    (the foot on the nominal ground, -0.12 m: no early touchdown either)."""
+    seq = [STANCE, S(0.2, -1.0, td=1), STANCE, S(-0.99, 0.5), S(-0.5, 0.5), S(0.2, 1.0, td=1, foot=-0.12)]
+    r = run(seq)
+    assert list(r["landed"]) == [0, 1, 1, 1, 0, 0]
+    r = run(seq, x1_lift=-0.4)  # x1 = -0.5 is not past a lift-off point at -0.4
+    assert list(r["landed"]) == [0, 1, 1, 1, 1, 1]
+
+
+def test_landed_is_cleared_during_a_reflex_without_contact():
+    r = _search([S(0.8, -0.5), S(0.7, -0.5)])
+    assert list(r["landed"]) == [0] * 5
+    r = run([S(0.2, -1.0, td=1), SWING, S(0.9, -0.1), S(0.8, -0.5, td=1)])
+    assert list(r["landed"]) == [1, 0, 0, 1]  # the swing ended without contact, then a found foothold
+
+
+# -- withdraw after a failed search (withdraw = 1) ---------------------------------------------------------
+
+GIVE_UP = [S(0.5, 0.5), S(0.9, 0.1), S(0.9, -0.1)]  # after _search's SRT: the searching half ends: row 5
+
+
+def test_withdraw_holds_the_leg_then_steps_back_and_ends_on_a_foothold():
+    """withdraw = 1: the return is held (active, network frozen: rate1 = rate23 = 0) for T_return = 0.03 s
+    after the give-up at 0.05 s, then mode 5 (withdraw, reflex 4) from 0.08 s; a supporting touchdown ends
+    it like a found foothold (mode 0, landed)."""
+    wait = [S(0.9, -0.2)] * 4
+    r = _search(GIVE_UP + wait + [S(0.9, -0.2, td=1)], withdraw=1.0, T_return=0.03, withdraw_timeout=1.0)
+    assert list(r["mode"][5:]) == [4, 4, 4, 5, 5, 0]
+    assert list(r["active"][5:]) == [1, 1, 1, 1, 1, 0] and list(r["rate1"][5:]) == [0, 0, 0, 0, 0, 1]
+    assert list(r["rate23"][5:9]) == [0, 0, 0, 0] and list(r["reflex"][5:]) == [3, 3, 3, 4, 4, 0]
+    assert r["n_withdraw"][-1] == 1 and r["n_found"][-1] == 1 and r["landed"][-1] == 1
+
+
+def test_withdraw_without_a_foothold_times_out_into_the_plain_return():
+    """withdraw_timeout = 0.02 s after the withdraw began at 0.08 s: mode 4 again at 0.10 s, not held (the
+    leg withdrew once): not active, the network runs."""
+    r = _search(GIVE_UP + [S(0.9, -0.2)] * 6, withdraw=1.0, T_return=0.03, withdraw_timeout=0.02)
+    assert list(r["mode"][5:]) == [4, 4, 4, 5, 5, 4, 4]
+    assert list(r["active"][10:]) == [0, 0] and list(r["rate1"][10:]) == [1, 1]
+    assert r["n_withdraw"][-1] == 1
+
+
+def test_a_foothold_while_held_ends_the_return():
+    r = _search(GIVE_UP + [S(0.9, -0.2), S(0.9, -0.2, td=1)], withdraw=1.0, T_return=1.0)
+    assert list(r["mode"][5:]) == [4, 4, 0] and r["n_found"][-1] == 1 and r["n_withdraw"][-1] == 0
+    r = _search(GIVE_UP + [S(0.9, -0.2), S(0.9, -0.2, td=1, sup=0.0)], withdraw=1.0, T_return=1.0)
+    assert list(r["mode"][5:]) == [4, 4, 4]  # a contact that does not support is no foothold

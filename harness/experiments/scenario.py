@@ -254,21 +254,22 @@ def _where(scenario: Scenario, key: str, overridden: bool) -> str:
 
 def line_of(text: str, key: str) -> int | None:
     """The line of ``text`` where dotted ``key`` is written (``[table]`` headers tracked), if found."""
+    def parts(dotted: str) -> list[str]:  # split at the dots outside quotes (TOML: "*.eps" is one key)
+        return [p.strip().strip('"') for p in re.split(r"\.(?=(?:[^\"]*\"[^\"]*\")*[^\"]*$)", dotted)]
+
     table: list[str] = []
-    parts = key.split(".")
+    wanted = ".".join(parts(key))  # compared as joined text: a path given with or without the quotes
     for n, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
         m = re.fullmatch(r"\[+\s*([^\]]+?)\s*\]+", line)
         if m:
-            table = [p.strip().strip('"') for p in m.group(1).split(".")]
-            if table == parts:
+            table = parts(m.group(1))
+            if ".".join(table) == wanted:
                 return n
             continue
         m = re.match(r'("[^"]*"|[A-Za-z0-9_\-.]+)\s*=', line)
-        if m:
-            k = [p.strip().strip('"') for p in re.split(r"\.(?=(?:[^\"]*\"[^\"]*\")*[^\"]*$)", m.group(1))]
-            if table + k == parts:
-                return n
+        if m and ".".join(table + parts(m.group(1))) == wanted:
+            return n
     return None
 
 

@@ -339,9 +339,9 @@ def test_simulator_stream_flushes_every_simulated_second(tmp_path):
     seen = []
     orig = ResultsWriter.flush
 
-    def spy(self):
-        orig(self)
-        seen.append(self.rows_written)
+    def spy(self, wait=True):
+        orig(self, wait)
+        seen.append(self.rows_written)  # a CSV stream is written at once, whatever ``wait`` says
 
     ResultsWriter.flush = spy
     try:

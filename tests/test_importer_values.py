@@ -94,6 +94,8 @@ def test_array_starts_are_space_separated_and_one_value_fills_every_element():
     assert v.start_values("true false 1 0", "Boolean", 4, "b") == (1.0, 0.0, 1.0, 0.0)
     assert v.start_values("1 2.5 -3", "Float64", 3, "x") == (1.0, 2.5, -3.0)
     assert v.start_values("2.5", "Real", 3, "x") == (2.5, 2.5, 2.5)
+    assert v.start_values("7", "Int32", 2, "n") == (7, 7)  # the smallest array a single start fills
+    assert v.start_values("7", "Int32", 1, "n") == (7,)
     big = v.start_values("4611686018427387905 -1", "Int64", 2, "n")  # 2^62 + 1: exact, not a float
     assert big == (2 ** 62 + 1, -1) and all(type(x) is int for x in big)
     assert v.start_values(None, "Real", 3, "x") is None
@@ -236,3 +238,10 @@ def test_exact_integers_use_the_types_range_or_the_64_bit_hull():
         v.exact_integers([2 ** 64], "Other", "w")
     with pytest.raises(ParameterError, match="out of range"):
         v.exact_integers([-2 ** 63 - 1], "Other", "w")
+
+
+def test_every_integer_type_has_its_range():
+    """number_attribute reads the range of each of INT_TYPES from INT_RANGES: a type added to one table but
+    not the other would be read without its range check (FMI 3.0 Sec. 2.2.1: each type's range from its
+    bit width)."""
+    assert set(v.INT_RANGES) == v.INT_TYPES

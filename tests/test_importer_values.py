@@ -233,6 +233,8 @@ def test_exact_integers_use_the_types_range_or_the_64_bit_hull():
     assert v.exact_integers([[1, 2], [3, 4]], "Int8", "w") == (1, 2, 3, 4)
     with pytest.raises(ParameterError, match=r"w: -129 is out of range for Int8 \[-128, 127\]"):
         v.exact_integers([0, -129], "Int8", "w")
+    with pytest.raises(ParameterError, match=r"w: 300 is out of range"):  # the first bad element is named
+        v.exact_integers([300, 0, 400], "Int8", "w")
     assert v.exact_integers([-2 ** 63, 2 ** 64 - 1], "Other", "w") == (-2 ** 63, 2 ** 64 - 1)
     with pytest.raises(ParameterError, match="out of range"):
         v.exact_integers([2 ** 64], "Other", "w")

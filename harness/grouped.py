@@ -159,17 +159,10 @@ class Schedule:
     def has_discrete(self) -> bool:
         return bool(self.discrete_groups)
 
-    def derivative_reads(self) -> np.ndarray:
-        """Pool mask of what the derivative groups read (their inputs)."""
+    def reads(self, groups: list[Group]) -> np.ndarray:
+        """Pool mask of what ``groups`` read (their inputs): the derivative groups, or the sampled update's."""
         needed = np.zeros(self.pool_size, dtype=bool)
-        for g in self.derivative_groups:
-            needed[g.u_idx.ravel()] = True
-        return needed
-
-    def discrete_reads(self) -> np.ndarray:
-        """Pool mask of what the sampled update (resets and discrete updates) reads."""
-        needed = np.zeros(self.pool_size, dtype=bool)
-        for g in self.discrete_groups:
+        for g in groups:
             needed[g.u_idx.ravel()] = True
         return needed
 
@@ -499,6 +492,11 @@ def _group_rows(g: Group, k: int) -> np.ndarray:
     return (g.out_off[k][:, None] + np.arange(size)[None, :]).ravel()
 
 
+def _derived(g: Group, outs: list[ca.SX], tag: str) -> ca.Function:
+    """A function of ``g``'s kind computing ``outs``, named after ``g``'s function with ``_tag`` appended."""
+    return g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_{tag}", outs)
+
+
 def _group_outputs(g: Group) -> list[ca.SX]:
     """The expression of every output of ``g`` in its kind's generic symbols."""
     return g.fn.call(g.kind.args)
@@ -541,8 +539,7 @@ def _pruned_group(g: Group, keep: list[np.ndarray], tag: str) -> tuple[Group | N
         return None, []
     u = g.kind.args[3]
     cols = sorted(set(ca.jacobian_sparsity(ca.vertcat(*exprs), u).get_triplet()[1])) if u.numel() else []
-    fn = g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_{tag}", exprs)
-    return Group(g.kind, fn, g.x_off, g.z_off, g.p_off, g.u_idx, offs, targets), cols
+    return Group(g.kind, _derived(g, exprs, tag), g.x_off, g.z_off, g.p_off, g.u_idx, offs, targets), cols
 
 
 def _pruned_levels(s: Schedule, needed: np.ndarray, present: np.ndarray | None,
@@ -597,7 +594,7 @@ def _sampled_pass(pre: list[Group], discrete: list[Group]) -> list[Group]:
             rest.append(d)
             continue
         g = seq[i]
-        fn = g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_sampled", _group_outputs(g) + _group_outputs(d))
+        fn = _derived(g, _group_outputs(g) + _group_outputs(d), "sampled")
         seq[i] = Group(g.kind, fn, g.x_off, g.z_off, g.p_off, d.u_idx, [*g.out_off, *d.out_off],
                        [*g.out_target, *d.out_target])
     return seq + rest
@@ -738,8 +735,8 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     from cpgsim.harness.native import casadi_c_source
 
     fused = _fused_first_stage(s)
-    inner, reused = _pruned_levels(s, s.derivative_reads(), ~_stage_variant(s), "stage")
-    pre = _pruned_levels(s, s.discrete_reads(), None, "pre")[0] if s.has_discrete else []
+    inner, reused = _pruned_levels(s, s.reads(s.derivative_groups), ~_stage_variant(s), "stage")
+    pre = _pruned_levels(s, s.reads(s.discrete_groups), None, "pre")[0] if s.has_discrete else []
     sample = _sampled_pass(pre, s.discrete_groups)
     reused_rows = np.flatnonzero(reused[:s.n_sig])
     groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + list(fused.values())

@@ -103,6 +103,10 @@ typedef struct {
    readout failed (row recorded), 3 MuJoCo's state went non-finite or out of range in the sub-steps after
    the last recorded row (mj_step warns and resets its data then; the readout is not updated).
    The one loop both entry points run: cpgsim_mj_loop (one trial) and cpgsim_mj_batch (many, threads). */
+static int bad_state_warnings(const mjData *d) {  /* mj_step's count of non-finite/huge qpos, qvel, qacc */
+  return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number + d->warning[mjWARN_BADQACC].number;
+}
+
 static void trial_loop(cpgsim_mj_trial *t) {
   const mjModel *m = t->m;
   mjData *d = t->d;
@@ -120,11 +124,8 @@ static void trial_loop(cpgsim_mj_trial *t) {
     for (i = 0; i < t->nO; ++i) orow[i] = O[i];
     if (rc == 1) { t->status = 1; t->rows = k - k0 + 1; return; }
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
-    nbad0 = d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number
-            + d->warning[mjWARN_BADQACC].number;
-    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags)
-        || d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number
-           + d->warning[mjWARN_BADQACC].number != nbad0) {
+    nbad0 = bad_state_warnings(d);
+    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags) || bad_state_warnings(d) != nbad0) {
       t->status = 3; t->rows = k - k0 + 1; return;
     }
     for (i = 0; i < m->nq; ++i) t->rpos[i] = d->qpos[i];

@@ -429,19 +429,17 @@ class ResultsWriter:
         hand-over); they are on the disk when a later ``flush()`` or the end of the stream returns.
         """
         self._last = _time.monotonic()
-        if (self._file is None and self._arrow is None) or not self._pending:
-            if wait and self._background is not None:
-                self._background.drain()
+        if self._file is None and self._arrow is None:
             return
         pending, self._pending = self._pending, []
         if self._arrow is not None:  # one record batch per pending block, each fsynced, on the writer thread
+            send = self._write_batch if self._background is None else self._background.put
             for table, exact in pending:  # the batch is built here: the thread then runs without the GIL
-                if self._background is None:
-                    self._write_batch(self._arrow.batch(table, exact), len(table))
-                else:
-                    self._background.put(self._arrow.batch(table, exact), len(table))
+                send(self._arrow.batch(table, exact), len(table))
             if wait and self._background is not None:
                 self._background.drain()
+            return
+        if not pending:
             return
         try:
             text = "".join(csv_rows(table, exact) for table, exact in pending)
@@ -484,7 +482,7 @@ class ResultsWriter:
             self._close_stream(ended=False)
 
     def _write_batch(self, batch: Any, rows: int) -> None:
-        """One record batch into the Arrow stream (on the writer thread)."""
+        """One record batch into the Arrow stream (on the writer thread, or the caller's without one)."""
         try:
             self._arrow.write_batch(batch)
         except OSError as exc:  # a full disk: say which file

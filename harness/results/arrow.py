@@ -59,9 +59,9 @@ class ArrowStream:
         self.schema = schema(columns, units, integer_columns, meta)
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
         self._file = os.fdopen(fd, "wb", buffering=0)
-        # Arrow's own file object writes straight to the descriptor (a Python file object in between cost
-        # a third of the write); buffers are compressed on the calling thread (use_threads=False: a
-        # background writer must take one core at most, whatever the machine's load)
+        # an unbuffered Python file behind a 1 MB Arrow buffer: pyarrow gathers a batch's many small
+        # buffers there and hands them over in large writes; buffers are compressed on the calling thread
+        # (use_threads=False: a background writer must take one core at most, whatever the machine's load)
         self._sink = pa.output_stream(self._file, buffer_size=1 << 20)
         options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
         self._writer = pa.ipc.new_stream(self._sink, self.schema, options=options)

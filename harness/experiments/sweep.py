@@ -245,8 +245,7 @@ def run_in_batch(jobs: dict[Any, tuple[Callable[..., dict[str, Any]], tuple, dic
     def done(i: int, rec: Any, exc: BaseException | None) -> None:
         _, args, _ = jobs[keys[i]]
         if exc is not None:
-            rec = {"seed": args[1], "dir": args[3], "status": "failed", "error": f"{type(exc).__name__}: {exc}",
-                   "outcome": {}}
+            rec = failed_record(args[1], args[3], exc)
         records[keys[i]] = rec
         _tick(bar, rec)
 
@@ -258,6 +257,11 @@ def run_in_batch(jobs: dict[Any, tuple[Callable[..., dict[str, Any]], tuple, dic
         info["batch"] = {"threads": last.threads, "calls": last.calls, "chunks": last.chunks,
                          "c_time_s": last.c_time_s}
     return records
+
+
+def failed_record(seed: int, folder: str, exc: BaseException) -> dict[str, Any]:
+    """The record of a trial whose function raised (serial, batch) or whose Dask task failed."""
+    return {"seed": seed, "dir": folder, "status": "failed", "error": f"{type(exc).__name__}: {exc}", "outcome": {}}
 
 
 def _trial_dir(out: Path, group: Group, n_groups: int, i: int, seed: int) -> Path:
@@ -303,8 +307,7 @@ def run_sweep(scenario: str, trials: int, seed: int, out: str | Path, sets: dict
                 try:
                     records[(g.label, i)] = trial_fn(scenario, s, g.sets, d, t_end, plots)
                 except Exception as exc:  # noqa: BLE001 - same record as a failed dask task
-                    records[(g.label, i)] = {"seed": s, "dir": d, "status": "failed",
-                                             "error": f"{type(exc).__name__}: {exc}", "outcome": {}}
+                    records[(g.label, i)] = failed_record(s, d, exc)
                 _tick(bar, records[(g.label, i)])
         elif batched:
             jobs = {(g.label, i): (trial_fn, (scenario, s, g.sets, str(_trial_dir(out, g, len(groups), i, s)), t_end,
@@ -385,8 +388,7 @@ def run_on_dask(client: Any, jobs: dict[Any, tuple[Callable[..., dict[str, Any]]
         try:
             rec = receive_files(fut.result())
         except Exception as exc:  # noqa: BLE001 - worker died or the task could not run
-            rec = {"seed": args[1], "dir": args[3], "status": "failed", "error": f"{type(exc).__name__}: {exc}",
-                   "outcome": {}}
+            rec = failed_record(args[1], args[3], exc)
         records[key] = rec
         _tick(bar, rec)
     return records

@@ -46,16 +46,33 @@ def fused_runner(plan: Any, cs: dict, step: Any, u: np.ndarray, y: np.ndarray, n
     return make(commit_fn, step._ctx, nx, nz, u, y, u_map, inputs, plan.yi, dt)
 
 
+def column_runs(columns: np.ndarray) -> list[tuple[slice, slice]]:
+    """``(columns slice, positions slice)`` for each run of consecutive column numbers in ``columns``.
+
+    ``data[:, columns] = Y`` with an index array costs numpy an element-wise scatter (2-6 us per row for the
+    448 signal columns of the hexapod's controller, about a tenth of the fused loop); the same copy as slices
+    is a strided block copy. The recorded signals usually form one run."""
+    cols = np.asarray(columns, dtype=np.int64)
+    if cols.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(cols) != 1) + 1
+    starts = np.r_[0, breaks]
+    stops = np.r_[breaks, cols.size]
+    return [(slice(int(cols[a]), int(cols[b - 1]) + 1), slice(int(a), int(b)))
+            for a, b in zip(starts, stops, strict=True)]
+
+
 def run_fused(runner: Any, plan: Any, rec: Any, times: np.ndarray, n: int, progress_bar: Any,
               on_diverged, chunk: int = CHUNK) -> int:
     """Macro steps ``0 .. n-1`` through ``runner`` in chunks; returns ``n`` (the next row for the master)."""
     slices = runner.plant.output_slices
+    y_runs = column_runs(plan.yj)
     k = 0
     while k < n:
         rows, status, Y, outs = runner.run(k, min(n, k + chunk), times)
         data = rec.data[k:k + rows]
-        if plan.yj.size:
-            data[:, plan.yj] = Y
+        for cols, pos in y_runs:
+            data[:, cols] = Y[:, pos]
         for _path, port, sl in plan.c_slices:
             data[:, sl] = outs[:, slices[port]]
         for _path, port, cols, elems in plan.c_fancy:

@@ -7,16 +7,23 @@ state recorded at every step. The horizon is 20 s (20,000 steps) up to 1,800 neu
 (20 s of 36,000 states would be 5.8 GB); sizes are compared by *cost per neuron-step*,
 wall / (steps x neurons), so the horizons need not be equal.
 
-Runners (each timed as the median of ``--repeat`` runs, the C reference and cpgsim after one untimed
-warm-up run; set-up and compilation are outside the timing and cpgsim's is printed):
+Runners, all set up and compiled first (outside the timing; cpgsim's one-time costs are printed), then
+timed *interleaved*: round ``i`` runs every runner once before round ``i + 1`` (``--repeat`` rounds,
+default 5; medians), so a change of the machine's load hits all runners alike. The C reference and
+cpgsim run once untimed before the first round (first-touch page faults); a peer's probe runs warm it.
+With the default ``--peer-budget`` of 4 s the whole benchmark takes about 3 minutes here (187 s on
+2026-12-02 at load 2.6-3.8).
 
 * **C reference** (``benchmarks/reference_rk4.c``, gcc -O2, ctypes): RK4 at 1 ms written by hand, every
   state stored into a ``np.empty`` buffer the caller allocates (first-touch page faults are paid, as in
   cpgsim's result buffers). The limit cpgsim is measured against (target: cpgsim within 2x of it).
-* **cpgsim**: ``Simulator(networks(n), dt=1e-3, backend=--backend, record=["*.z?.x", "*.z?.y"])``,
-  ``.prepare()`` untimed, ``.run(T)`` timed. Its columns are checked against the C reference (same RK4,
-  same operation order: agreement is to rounding, or exact). Its one-time costs are printed separately:
-  ``Simulator(...)`` (graph compile) and ``.prepare()`` (C generation + gcc), by default with a fresh
+* **cpgsim**, twice: ``Simulator(networks(n), dt=1e-3, backend=--backend, record=["*.z?.x", "*.z?.y"])``
+  (the six states per network the C reference stores) and ``Simulator(networks(n), dt=1e-3)`` with its
+  default recording (every signal: the six states and three coupling signals per network, 1.5x the
+  bytes; target: within 1.3x of the C reference); ``.prepare()`` untimed, ``.run(T)`` timed. Its columns
+  are checked against the C reference (same RK4, same operation order: agreement is to rounding, or
+  exact). Its one-time costs are printed separately: ``Simulator(...)`` (graph compile) and ``.prepare()``
+  (C generation + gcc), by default with a fresh
   (cold) build cache; ``--warm-cache`` uses the usual one.
 * **Peers** (optional, ``pip install -e '.[bench]'``; target: cpgsim >= 10x ahead of the fastest):
 
@@ -52,12 +59,13 @@ warm-up run; set-up and compilation are outside the timing and cpgsim's is print
 
 Peers at large sizes: a 10-step warm-up, then runs of 100, 1,000 ... steps while they take under a quarter
 of ``--peer-budget``, estimate a peer's cost; when a
-full-horizon run would exceed ``--peer-budget`` seconds the peer runs a shorter horizon (printed), and at
+full-horizon run would exceed half of ``--peer-budget`` seconds the peer runs a shorter horizon (printed:
+this flatters pycollimator, whose cost per step grows with the horizon), and at
 sizes above 1,800 neurons a peer whose full-horizon run is estimated above ``--peer-skip`` seconds is
 skipped ("skipped (est. X s)"). Peer runs stop repeating once they have used ``--peer-budget``.
 Every runner uses one core (for JAX this was checked: process CPU time = wall time).
 
-    python benchmarks/bench_scale.py [--sizes 6,60,600,6000] [--backend native] [--repeat 3]
+    python benchmarks/bench_scale.py [--sizes 6,60,600,6000] [--backend native] [--repeat 5]
                                      [--no-peers] [--json FILE]
 """
 
@@ -75,6 +83,7 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -91,7 +100,7 @@ START = (-1.0, 0.0, 0.5, 0.0, -0.5, 0.0)  # x1, y1, x2, y2, x3, y3
 NP_PER_NET = 9  # eps, b, omega1, omega2, omega3, k12, k13, k23, k32 (reference_rk4.c)
 FULL_HORIZON, LARGE_HORIZON, LARGE_ABOVE = 20.0, 2.0, 1800  # neurons above LARGE_ABOVE: LARGE_HORIZON
 WARM_STEPS = 10  # a peer's first (warm-up) run; its cost is then estimated from runs 10x, 100x longer
-TARGET_C, TARGET_PEER = 2.0, 10.0
+TARGET_C, TARGET_DEFAULT, TARGET_PEER = 2.0, 1.3, 10.0
 DEFAULT_SIZES = "6,60,600,6000"
 INSTALL_HINT = "pip install -e '.[bench]'"
 
@@ -368,27 +377,6 @@ PEERS: tuple[type[Peer], ...] = (DrakeSymbolic, DrakeNumpy, CollimatorRK4, Colli
 
 
 # -- measuring --------------------------------------------------------------------------------------
-def median_time(fn: Callable[[], object], repeat: int, budget: float = math.inf,
-                warmup: bool = False) -> tuple[float, int, object]:
-    """Median wall time of ``fn`` over ``repeat`` runs (fewer once ``budget`` seconds are used).
-
-    ``warmup``: one untimed run first. The first large allocation of a process is slow to fault in
-    (the kernel finds and zeroes huge pages for it): measured here, the C reference's first 2 s run at
-    18,000 neurons took 1.7 s and the next four 0.63-0.74 s; cpgsim's likewise.
-    """
-    times, result = [], None
-    if warmup:
-        result = fn()
-    for _ in range(repeat):
-        result = None  # free the last result before the next run allocates its own
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-        if sum(times) > budget:
-            break
-    return statistics.median(times), len(times), result
-
-
 def max_abs_diff(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b))) if a.size else 0.0
 
@@ -401,26 +389,71 @@ def row(name: str, steps: int, runs: int, wall: float, neurons: int, c_wall_per:
             "max_abs_diff_vs_c": diff, "note": note}
 
 
-def run_cpgsim(n: int, steps: int, backend: str, repeat: int, c_out: np.ndarray) -> tuple[dict, dict]:
+@dataclass
+class Job:
+    """One runner of a size, set up and compiled: ``run()`` is what is timed; ``check(out)`` -> max |x - C|."""
+
+    name: str
+    steps: int
+    run: Callable[[], object]
+    check: Callable[[object], float]
+    budget: float = math.inf  # seconds of timed runs after which this runner stops repeating
+    warmup: bool = True  # one untimed run first (a peer's probes have warmed it already)
+    note: str = ""
+    info: dict = field(default_factory=dict)
+    times: list[float] = field(default_factory=list)
+    diff: float | None = None
+
+
+def interleaved(jobs: list[Job], repeat: int) -> None:
+    """Time the jobs round-robin: run ``i`` of every job before run ``i + 1`` of any (so a change of the
+    machine's load hits all runners alike), one untimed warm-up each first; a job stops repeating once its
+    timed runs have used its ``budget``. Fills ``job.times`` and ``job.diff`` (from its first run).
+
+    The warm-up matters: the first large allocation of a process is slow to fault in (the kernel finds and
+    zeroes huge pages for it): measured here, the C reference's first 2 s run at 18,000 neurons took 1.7 s
+    and the next four 0.63-0.74 s; cpgsim's likewise."""
+    for job in jobs:
+        if job.warmup:
+            job.diff = job.check(job.run())  # first-touch page faults; the accuracy check
+    for _ in range(repeat):
+        for job in jobs:
+            if sum(job.times) > job.budget:
+                continue
+            t0 = time.perf_counter()
+            out = job.run()
+            job.times.append(time.perf_counter() - t0)
+            if job.diff is None:
+                job.diff = job.check(out)
+            del out
+
+
+def cpgsim_job(n: int, steps: int, backend: str, c_out: np.ndarray, default_recording: bool) -> tuple[Job, dict]:
+    """cpgsim's simulator, built and prepared (timed separately: the returned dict); the job runs ``T``.
+
+    ``default_recording``: ``Simulator(g)`` as a user calls it (every signal recorded: per network the six
+    states and three coupling signals); else ``record=`` the six states, what the C reference stores."""
     from cpgsim.harness.simulate import Simulator
 
     graph = networks(n)
     t0 = time.perf_counter()
-    sim = Simulator(graph, dt=DT, backend=backend, record=["*.z?.x", "*.z?.y"])
+    record = None if default_recording else ["*.z?.x", "*.z?.y"]
+    sim = Simulator(graph, dt=DT, backend=backend, record=record)
     t1 = time.perf_counter()
     sim.prepare()
     t2 = time.perf_counter()
-    wall, runs, res = median_time(lambda: sim.run(steps * DT), repeat, warmup=True)
-    diff = 0.0
-    for j, col in enumerate(columns(n)):
-        diff = max(diff, max_abs_diff(np.asarray(res[col]), c_out[:, j]))
-    build = {"construct_s": t1 - t0, "prepare_s": t2 - t1}
-    return build, {"wall": wall, "runs": runs, "diff": diff}
+
+    def check(res) -> float:
+        return max(max_abs_diff(np.asarray(res[col]), c_out[:, j]) for j, col in enumerate(columns(n)))
+
+    label = "default recording" if default_recording else "states recorded"
+    job = Job(f"cpgsim ({backend}, {label})", steps, lambda: sim.run(steps * DT), check)
+    return job, {"construct_s": t1 - t0, "prepare_s": t2 - t1}
 
 
-def run_peer(cls: type[Peer], n: int, steps_full: int, repeat: int, budget: float, skip_limit: float,
-             c_out: np.ndarray) -> dict:
-    """Set up, probe, maybe cap or skip, then time one peer; returns its measurements (or why it did not run)."""
+def peer_job(cls: type[Peer], n: int, steps_full: int, budget: float, skip_limit: float,
+             c_out: np.ndarray) -> Job | dict:
+    """Set up, probe, maybe cap the horizon of, and compile one peer: its job, or why it does not run."""
     neurons = 3 * n
     peer = cls()
     t0 = time.perf_counter()
@@ -436,24 +469,37 @@ def run_peer(cls: type[Peer], n: int, steps_full: int, repeat: int, budget: floa
         peer.run(nxt)
         per_step, probe = (time.perf_counter() - t0) / nxt, nxt
     est_full = per_step * steps_full
-    info = {"setup_s": setup_s, "est_full_s": est_full, "note": ""}
+    info = {"setup_s": setup_s, "est_full_s": est_full}
     if neurons > LARGE_ABOVE and est_full > skip_limit:
         info["skipped"] = f"skipped (est. {est_full:.0f} s)"
         return info
-    steps = steps_full
-    if est_full > budget:
-        steps = max(probe, int(budget / per_step) // 100 * 100)
-        info["note"] = f"capped: {steps * DT:g} s of {steps_full * DT:g} s (est. {est_full:.0f} s for all)"
+    steps, note = steps_full, ""
+    if est_full > budget / 2:  # half: a peer's cost per step can grow with the horizon (pycollimator's does)
+        steps = max(probe, int(budget / 2 / per_step) // 100 * 100)
+        note = f"capped: {steps * DT:g} s of {steps_full * DT:g} s (est. {est_full:.0f} s for all)"
     t0 = time.perf_counter()
     peer.prepare(steps)
     info["prepare_s"] = time.perf_counter() - t0
-    if steps != probe and per_step * steps < 0.2 * budget:
-        peer.run(steps)  # untimed warm-up of the run actually timed, when it is cheap
-    wall, runs, out = median_time(lambda: peer.run(steps), repeat, budget)
-    if out.shape != (steps + 1, 6 * n):
-        raise RuntimeError(f"{cls.name}: recorded {out.shape}, expected {(steps + 1, 6 * n)}")
-    info.update(steps=steps, wall=wall, runs=runs, diff=max_abs_diff(out, c_out[: steps + 1]))
-    return info
+
+    def check(out) -> float:
+        if out.shape != (steps + 1, 6 * n):
+            raise RuntimeError(f"{cls.name}: recorded {out.shape}, expected {(steps + 1, 6 * n)}")
+        return max_abs_diff(out, c_out[: steps + 1])
+
+    return Job(cls.name, steps, lambda: peer.run(steps), check, budget=budget, warmup=False, note=note, info=info)
+
+
+def versions() -> dict[str, str | None]:
+    """Installed versions of what the figures depend on (peers' speed changes with their versions)."""
+    from importlib import metadata
+
+    out: dict[str, str | None] = {}
+    for dist in ("cpgsim", "numpy", "casadi", "drake", "pycollimator", "jax", "jaxlib"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
 
 
 def fmt_time(s: float) -> str:
@@ -461,15 +507,15 @@ def fmt_time(s: float) -> str:
 
 
 def print_table(rows: list[dict], cpgsim_ns: float) -> None:
-    print(f"  {'runner':26s} {'horizon':>8s} {'runs':>4s} {'median wall':>12s} {'ns/neuron-step':>15s} "
+    print(f"  {'runner':36s} {'horizon':>8s} {'runs':>4s} {'median wall':>12s} {'ns/neuron-step':>15s} "
           f"{'runner/C':>9s} {'peer/cpgsim':>11s} {'max|x - C|':>10s}")
     for r in rows:
         if "skipped" in r:
-            print(f"  {r['runner']:26s} {r['skipped']}")
+            print(f"  {r['runner']:36s} {r['skipped']}")
             continue
         lead = r["ns_per_neuron_step"] / cpgsim_ns if r.get("peer") else None
         r["peer_over_cpgsim"] = lead
-        print(f"  {r['runner']:26s} {r['horizon_s']:6.1f} s {r['runs']:4d} {fmt_time(r['median_wall_s']):>12s} "
+        print(f"  {r['runner']:36s} {r['horizon_s']:6.1f} s {r['runs']:4d} {fmt_time(r['median_wall_s']):>12s} "
               f"{r['ns_per_neuron_step']:15.1f} {r['ratio_vs_c']:9.2f} "
               f"{(f'{lead:11.1f}' if lead is not None else '-'):>11s} {r['max_abs_diff_vs_c']:10.1e}"
               + (f"   {r['note']}" if r["note"] else ""))
@@ -480,10 +526,10 @@ def main() -> None:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default=DEFAULT_SIZES, help="numbers of networks, comma-separated (3 neurons each)")
     ap.add_argument("--backend", default="native", choices=("native", "casadi", "auto"), help="cpgsim backend")
-    ap.add_argument("--repeat", type=int, default=3, help="timed runs per runner (median)")
+    ap.add_argument("--repeat", type=int, default=5, help="timed runs per runner, interleaved (median)")
     ap.add_argument("--peers", action=argparse.BooleanOptionalAction, default=None,
                     help="run Drake / pycollimator (default: those installed)")
-    ap.add_argument("--peer-budget", type=float, default=30.0,
+    ap.add_argument("--peer-budget", type=float, default=4.0,
                     help="seconds one peer run may take before its horizon is shortened (and its repeats stop)")
     ap.add_argument("--peer-skip", type=float, default=120.0,
                     help=f"above {LARGE_ABOVE} neurons, skip a peer whose full run is estimated over this many s")
@@ -507,7 +553,8 @@ def main() -> None:
             print(f"{package} not installed: {INSTALL_HINT}")
 
     report: dict = {"dt": DT, "backend": args.backend, "repeat": args.repeat, "cold_cache": not args.warm_cache,
-                    "peer_budget_s": args.peer_budget, "peer_skip_s": args.peer_skip, "sizes": [], "ratios": []}
+                    "peer_budget_s": args.peer_budget, "peer_skip_s": args.peer_skip, "versions": versions(),
+                    "sizes": [], "ratios": []}
     with tempfile.TemporaryDirectory(prefix="bench_scale_") as tmp:
         workdir = Path(tmp)
         if not args.warm_cache:
@@ -520,45 +567,68 @@ def main() -> None:
             horizon = horizon_for(neurons)
             steps = int(round(horizon / DT))
             print(f"\n== {n} networks = {neurons:,} neurons, horizon {horizon:g} s ({steps:,} steps) ==", flush=True)
+            t_size = time.perf_counter()
             params, x0 = parameters(n), initial_state(n)
-            c_wall, c_runs, c_out = median_time(lambda: ref.run(params, x0, steps), args.repeat,  # noqa: B023
-                                                warmup=True)
-            c_per = c_wall / (steps * neurons)
-            rows = [row("C reference (gcc -O2)", steps, c_runs, c_wall, neurons, c_per, 0.0)]
-            build, cp = run_cpgsim(n, steps, args.backend, args.repeat, c_out)
+            c_out = ref.run(params, x0, steps)  # the reference states every runner is checked against
+            jobs = [Job("C reference (gcc -O2)", steps, lambda: ref.run(params, x0, steps),  # noqa: B023
+                        lambda out, ref_out=c_out: max_abs_diff(out, ref_out))]
+            builds = {}
+            for default_recording in (False, True):
+                job, build = cpgsim_job(n, steps, args.backend, c_out, default_recording)
+                jobs.append(job)
+                builds[job.name] = build
             built = "C build" + ("" if args.warm_cache else ", cold cache")
             built = "no C to build" if args.backend == "casadi" else built
-            print(f"  cpgsim one-time cost: Simulator() {build['construct_s']:.2f} s (graph compile) + prepare() "
-                  f"{build['prepare_s']:.2f} s ({built})")
-            rows.append(row(f"cpgsim ({args.backend})", steps, cp["runs"], cp["wall"], neurons, c_per, cp["diff"],
-                            "bit-exact vs C" if cp["diff"] == 0 else ""))
-            cpgsim_ns = rows[-1]["ns_per_neuron_step"]
+            for name, build in builds.items():
+                print(f"  {name} one-time cost: Simulator() {build['construct_s']:.2f} s (graph compile) + "
+                      f"prepare() {build['prepare_s']:.2f} s ({built})")
+                built = "C build, warm cache: the same step"
+            skipped = []
             for cls in peers:
-                print(f"  ... {cls.name}", flush=True)
-                info = run_peer(cls, n, steps, args.repeat, args.peer_budget, args.peer_skip, c_out)
-                if "skipped" in info:
-                    rows.append({"runner": cls.name, "skipped": info["skipped"], "peer": True,
-                                 "est_full_s": info["est_full_s"]})
-                    continue
-                r = row(cls.name, info["steps"], info["runs"], info["wall"], neurons, c_per, info["diff"],
-                        info["note"])
-                r.update(peer=True, setup_s=info["setup_s"], prepare_s=info["prepare_s"])
+                print(f"  ... setting up {cls.name}", flush=True)
+                job = peer_job(cls, n, steps, args.peer_budget, args.peer_skip, c_out)
+                if isinstance(job, dict):
+                    skipped.append({"runner": cls.name, "skipped": job["skipped"], "peer": True,
+                                    "est_full_s": job["est_full_s"]})
+                else:
+                    jobs.append(job)
+            t_setup = time.perf_counter() - t_size
+            interleaved(jobs, args.repeat)
+            t_runs = time.perf_counter() - t_size - t_setup
+            print(f"  set-up of all runners {t_setup:.1f} s, interleaved runs {t_runs:.1f} s")
+            c_per = statistics.median(jobs[0].times) / (steps * neurons)
+            rows = []
+            for k, job in enumerate(jobs):
+                note = job.note or ("bit-exact vs C" if k in (1, 2) and job.diff == 0 else "")
+                r = row(job.name, job.steps, len(job.times), statistics.median(job.times), neurons, c_per,
+                        job.diff, note)
+                if k > 2:
+                    r.update(peer=True, setup_s=job.info["setup_s"], prepare_s=job.info["prepare_s"])
                 rows.append(r)
-            del c_out
+            rows += skipped
+            build = builds[jobs[1].name]
+            cpgsim_ns = rows[1]["ns_per_neuron_step"]
+            del c_out, jobs
             print_table(rows, cpgsim_ns)
             ran = [r for r in rows if r.get("peer") and "skipped" not in r]
             fastest = min(ran, key=lambda r: r["ns_per_neuron_step"]) if ran else None
             ratio_c = rows[1]["ratio_vs_c"]
+            ratio_default = rows[2]["ratio_vs_c"]
             ratio_peer = fastest["ns_per_neuron_step"] / cpgsim_ns if fastest else None
             report["sizes"].append({"networks": n, "neurons": neurons, "horizon_s": horizon, "steps": steps,
-                                    "cpgsim_build": build, "rows": rows})
-            report["ratios"].append({"neurons": neurons, "cpgsim_over_c": ratio_c, "fastest_peer": fastest and
+                                    "cpgsim_build": build, "cpgsim_builds": builds, "rows": rows})
+            report["ratios"].append({"neurons": neurons, "cpgsim_over_c": ratio_c,
+                                     "cpgsim_default_over_c": ratio_default, "fastest_peer": fastest and
                                      fastest["runner"], "fastest_peer_over_cpgsim": ratio_peer})
         print()
         for r in report["ratios"]:
             met = "met" if r["cpgsim_over_c"] <= TARGET_C else "not met"
             print(f"RATIO cpgsim/C at {r['neurons']} neurons = {r['cpgsim_over_c']:.2f} "
                   f"(target <= {TARGET_C:g}: {met})")
+        for r in report["ratios"]:
+            met = "met" if r["cpgsim_default_over_c"] <= TARGET_DEFAULT else "not met"
+            print(f"RATIO cpgsim default recording/C at {r['neurons']} neurons = {r['cpgsim_default_over_c']:.2f} "
+                  f"(target <= {TARGET_DEFAULT:g}: {met})")
         for r in report["ratios"]:
             if r["fastest_peer_over_cpgsim"] is None:
                 print(f"RATIO fastest_peer/cpgsim at {r['neurons']} neurons = n/a (no peer ran)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import shutil
+import sys
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ def _load_bench_scale():
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_scale.py"
     spec = importlib.util.spec_from_file_location("bench_scale", path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
 
@@ -89,3 +91,19 @@ def test_drake_derivative_is_the_rhs(peer):
     context.SetContinuousState(s)
     np.testing.assert_allclose(system.EvalTimeDerivatives(context).CopyToVector(), y5(0.0, s, bs.parameters(n)),
                                rtol=0, atol=1e-13)
+
+
+def test_runners_are_timed_round_robin_with_one_warm_up_each():
+    """Round i of every runner before round i + 1 of any; warm-up only where asked; the first output checked;
+    a runner whose budget is used stops repeating (budget -1: used before any timed run)."""
+    calls = []
+
+    def job(name, warmup=True, budget=float("inf")):
+        return bs.Job(name, 1, lambda: calls.append(name) or name, lambda out: len(out) * 0.5,
+                      budget=budget, warmup=warmup)
+
+    jobs = [job("c"), job("cpg"), job("peer", warmup=False), job("broke", warmup=False, budget=-1.0)]
+    bs.interleaved(jobs, repeat=3)
+    assert calls == ["c", "cpg"] + ["c", "cpg", "peer"] * 3
+    assert [len(j.times) for j in jobs] == [3, 3, 3, 0]
+    assert [j.diff for j in jobs] == [0.5, 1.5, 2.0, None]

@@ -18,10 +18,11 @@ The harness time is split into the plant block's own Python around ``world.step(
 cProfile breakdown of one more run.
 
 ``--grouping`` instead compares the controller compiled grouped (the default, :mod:`cpgsim.harness.grouped`)
-and flat, both on the master thread. ``--native`` instead compares the DART plant's C step (the default) and
-its Python loop (``CPGSIM_DART_NATIVE=0``), master thread, interleaved, and prints the loop / ``world.step``
-ratio of each (``--profile`` then profiles one run of each). ``--scenario`` picks the scenario (default
-``flat``).
+and flat, both on the master thread. ``--native`` instead compares, interleaved on the master thread, the
+controller + DART loop in C (the default: :mod:`cpgsim.robots.dart_fused`), the plant's C step under the
+master's Python loop (:mod:`cpgsim.robots.dart_native`, the fast path refused) and everything in Python
+(``CPGSIM_DART_NATIVE=0``: the code before the C step), and prints the loop / ``world.step`` ratio of each
+(``--profile`` then profiles one run of each). ``--scenario`` picks the scenario (default ``flat``).
 
 Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile] [--grouping]
 [--native] [--scenario flat]``.
@@ -118,10 +119,11 @@ def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
     plant_time = sum(p.plant_time for p in proxies)
     steps = sum(p.steps for p in proxies) + sum(n for _, n, _ in native)
     ctl_time = sum(c for _, _, c in native)  # the controller's step inside the fused C loop (else 0)
+    c_loop = sum(getattr(blk, "_bench_loop_time", 0.0) for blk in plants)  # inside the fused loop's C calls
     fused = plant_time < step_time  # the plant's calls were bypassed: the closed loop ran in C
     out = {"seconds": float(res.time[-1]), "wall": wall, "step_time": step_time, "steps": steps,
            "plant_py": float("nan") if fused else plant_time - step_time,
-           "master": wall - max(plant_time, step_time), "ctl_c": ctl_time,
+           "master": wall - max(plant_time, step_time), "ctl_c": ctl_time, "c_loop": c_loop,
            "rtf": float(res.time[-1]) / wall, "share": 1.0 - step_time / wall, "prepare": t_prepare,
            "loop_ratio": wall / step_time if step_time else float("nan"),
            "distance": float(res[f"{setup.robot}.body_position"][-1, 1])}
@@ -149,6 +151,7 @@ def _keep_native_time(graph) -> None:
             def timed_terminate(blk=blk, terminate=terminate) -> None:
                 if blk._native is not None:
                     blk._bench_native_time = blk._native.step_time()
+                    blk._bench_loop_time = blk._native.loop_time()
                 terminate()
             blk.terminate = timed_terminate
 
@@ -192,28 +195,36 @@ def measure_grouping(seconds: float, repeat: int) -> dict[str, list[dict[str, fl
 
 
 @contextlib.contextmanager
-def dart_native(on: bool) -> Iterator[None]:
-    """The DART plant's C step on or off (``CPGSIM_DART_NATIVE``) for the runs inside the block."""
+def dart_native(on: bool, fused: bool = True) -> Iterator[None]:
+    """The DART plant's C step on or off (``CPGSIM_DART_NATIVE``) for the runs inside the block; ``fused=False``
+    keeps the master's Python loop (the master's fast path, :mod:`cpgsim.harness.fused`, refused)."""
+    import cpgsim.harness.fused as fused_path
+
     old = os.environ.get("CPGSIM_DART_NATIVE")
     os.environ["CPGSIM_DART_NATIVE"] = "1" if on else "0"
+    runner = fused_path.fused_runner
+    if not fused:
+        fused_path.fused_runner = lambda *args: None
     try:
         yield
     finally:
+        fused_path.fused_runner = runner
         if old is None:
             del os.environ["CPGSIM_DART_NATIVE"]
         else:
             os.environ["CPGSIM_DART_NATIVE"] = old
 
 
-NATIVE_MODES = {"DART step in C (default)": True, "DART step from Python": False}
+NATIVE_MODES = {"loop in C (default)": (True, True), "C plant, Python master": (True, False),
+                "all Python (before)": (False, False)}
 
 
 def measure_native(seconds: float, repeat: int, scenario: str) -> dict[str, list[dict[str, float]]]:
     """The DART plant's C step and its Python loop, master thread, interleaved."""
     runs: dict[str, list[dict[str, float]]] = {m: [] for m in NATIVE_MODES}
-    for _ in range(repeat):
+    for _ in range(repeat):  # interleaved, so all see the same machine load
         for mode, on in NATIVE_MODES.items():
-            with dart_native(on):
+            with dart_native(*on):
                 runs[mode].append(bench(seconds, scenario, step_thread=False))
     return runs
 
@@ -225,12 +236,14 @@ def report_loop_ratio(runs: dict[str, list[dict[str, float]]]) -> None:
         print(f"  {mode:27s} loop / world.step = {med:.3f} (runs: "
               + ", ".join(f"{r['loop_ratio']:.3f}" for r in rs) + ")")
         if all(r["ctl_c"] for r in rs):  # the closed loop in C: its time split (medians, us per step)
-            n = rs[0]["steps"]
-            split = {k: float(np.median([r[k] for r in rs])) / n * 1e6 for k in ("wall", "step_time", "ctl_c")}
-            rest = split["wall"] - split["step_time"] - split["ctl_c"]
-            print(f"  {'':27s} per step: wall {split['wall']:.1f} us = world.step {split['step_time']:.1f} + "
-                  f"controller step {split['ctl_c']:.1f} + the rest {rest:.1f}"
-                  " (contacts, readout, recording, Python per chunk, setup)")
+            mid = sorted(rs, key=lambda r: r["loop_ratio"])[len(rs) // 2]  # the median run's own split
+            split = {k: mid[k] / mid["steps"] * 1e6 for k in ("wall", "step_time", "ctl_c", "c_loop")}
+            c_rest = split["c_loop"] - split["step_time"] - split["ctl_c"]
+            print(f"  {'':27s} median run per world step: wall {split['wall']:.1f} us = "
+                  f"world.step {split['step_time']:.1f} + "
+                  f"controller step {split['ctl_c']:.1f} + the rest of the C loop {c_rest:.1f} (servo forces, "
+                  f"contacts, state, readout, recording) + outside the C loop {split['wall'] - split['c_loop']:.1f} "
+                  "(block setup, Python per chunk, the first steps' checks)")
 
 
 def report(label: str, runs: dict[str, list[dict[str, float]]]) -> float:
@@ -247,10 +260,12 @@ def report(label: str, runs: dict[str, list[dict[str, float]]]) -> float:
               f"{med['plant_py'] / n * us:9.1f} {med['master'] / n * us:11.1f}")
         print(f"  {'':27s} real time per run: " + ", ".join(f"{r['rtf']:.2f}x" for r in rs)
               + "; share: " + ", ".join(f"{r['share']:.0%}" for r in rs))
-    a, b = (float(np.median([r["rtf"] for r in rs])) for rs in runs.values())
-    first, second = list(runs)
-    print(f"  {label}: {first} / {second} = {a / b:.2f} (real-time factors; above 1: the first is faster)")
-    return a / b
+    rtf = {mode: float(np.median([r["rtf"] for r in rs])) for mode, rs in runs.items()}
+    *modes, last = list(runs)
+    for mode in modes:
+        print(f"  {label}: {mode} / {last} = {rtf[mode] / rtf[last]:.2f} (real-time factors; above 1: the "
+              f"first is faster)")
+    return rtf[modes[0]] / rtf[last]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -273,12 +288,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.native:
         runs = measure_native(args.seconds, args.repeat, args.scenario)
         print(f"{args.scenario} run, {args.seconds:g} s simulated at 1 ms, {args.repeat} runs each, interleaved")
-        ratio = report("DART step in C vs from Python", runs)
+        ratio = report("DART in C vs Python", runs)
         report_loop_ratio(runs)
-        print(f"RATIO C / Python real-time factor = {ratio:.2f} (above 1: the C step is faster)")
+        print(f"RATIO loop in C / all Python real-time factor = {ratio:.2f} (above 1: the C loop is faster)")
         if args.profile:
             for mode, on in NATIVE_MODES.items():
-                with dart_native(on):
+                with dart_native(*on):
                     r = bench(args.seconds, args.scenario, profile=True, step_thread=False)
                 print(f"cProfile run, {mode} (overhead inflates Python frames): wall {r['wall']:.2f} s")
                 print(r["profile"])

@@ -11,7 +11,9 @@ getVelocity``. The addresses of the C++ objects are those pybind11 keeps in its 
 pointer after the object header), and the ``Contact`` fields read are DART's struct (``point, normal,
 force`` as three ``Eigen::Vector3d``, then ``collisionObject1, collisionObject2``).
 
-Nothing here is trusted blindly: :func:`bind` checks the world's time step and the skeleton's dof count
+The same library holds ``cpgsim_dart_loop``, the controller + plant loop of :mod:`cpgsim.robots.dart_fused`.
+
+Nothing here is trusted blindly: :class:`NativeDartStep` checks the world's time step and the skeleton's dof count
 and positions through the C calls against the bindings, and the plant compares the C readout with its
 Python readout, bit for bit, over the first steps of every set-up (:attr:`NativeDartStep.checks_left`);
 any difference switches the plant back to Python for good. Collision objects are told apart by their
@@ -82,8 +84,14 @@ typedef struct {
     feval_t readout; void *readout_ctx;   /* the compiled readout, or NULL */
     size_t nobj; const void *obj[MAX_OBJECTS]; int code[MAX_OBJECTS];
     double step_seconds; long step_count;  /* time inside World::step (benchmarks) */
-    double ctrl_seconds;                   /* time inside the controller step of cpgsim_dart_loop */
+    double ctrl_seconds, loop_seconds;     /* time in the controller step of cpgsim_dart_loop, in the loop */
 } plant_ctx;
+
+static double seconds_since(const struct timespec *t0) {
+    struct timespec t1;
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    return (double)(t1.tv_sec - t0->tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0->tv_nsec);
+}
 
 static int code_of(const plant_ctx *c, const void *obj) {
     for (size_t i = 0; i < c->nobj; i++) if (c->obj[i] == obj) return c->code[i];
@@ -164,12 +172,11 @@ int cpgsim_dart_outputs(void *vc, int body) {
    reads that step's contacts itself), -1 when the readout failed. */
 int cpgsim_dart_step(void *vc) {
     plant_ctx *c = vc;
-    struct timespec t0, t1;
+    struct timespec t0;
     c->api.set_forces(c->skel, &c->forces);  /* world.step() clears them */
     clock_gettime(CLOCK_MONOTONIC, &t0);
     c->api.world_step(c->world, 1);
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    c->step_seconds += (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    c->step_seconds += seconds_since(&t0);
     c->step_count++;
     int rc = read_contacts(c, c->force_world, c->link);
     if (rc == 1) return 1;
@@ -178,6 +185,11 @@ int cpgsim_dart_step(void *vc) {
 }
 
 typedef int (*commit_t)(void *, double, int, int);
+static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
+                     int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
+                     const long long *qt_idx, double *qt, int *changed, int *updated, double kp, int npick,
+                     const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
+                     int *status);
 
 /* The closed loop of a compiled controller step and this plant for macro steps k0 .. k1-1 (one world step
    each), as the co-simulation master and the plant's Python do them (Jacobi, no feedthrough): u <- plant
@@ -195,16 +207,28 @@ int cpgsim_dart_loop(void *vc, void *step_commit, void *sctx, int nx, int nz, do
                      const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
                      int *status) {
     plant_ctx *c = vc;
+    struct timespec l0;
+    clock_gettime(CLOCK_MONOTONIC, &l0);
+    int rows = dart_loop(c, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx, O, nO, qt_idx, qt, changed, updated,
+                         kp, npick, yi, Yrec, Orec, k0, k1, times, status);
+    c->loop_seconds += seconds_since(&l0);
+    return rows;
+}
+
+static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
+                     int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
+                     const long long *qt_idx, double *qt, int *changed, int *updated, double kp, int npick,
+                     const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
+                     int *status) {
     commit_t commit = (commit_t)step_commit;
     double q[18];
     for (int k = k0; k < k1; ++k) {
         double *yr = Yrec + (long)(k - k0) * npick, *orow = Orec + (long)(k - k0) * nO;
         for (int i = 0; i < nmap; ++i) u[u_idx[i]] = O[o_idx[i]];
-        struct timespec t0, t1;
+        struct timespec t0;
         clock_gettime(CLOCK_MONOTONIC, &t0);
         int rc = commit(sctx, times[k], nx, nz);
-        clock_gettime(CLOCK_MONOTONIC, &t1);
-        c->ctrl_seconds += (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+        c->ctrl_seconds += seconds_since(&t0);
         if (rc == 2) { *status = 2; return k - k0; }
         for (int i = 0; i < npick; ++i) yr[i] = y[yi[i]];
         for (int i = 0; i < nO; ++i) orow[i] = O[i];
@@ -232,6 +256,7 @@ int cpgsim_dart_loop(void *vc, void *step_commit, void *sctx, int nx, int nz, do
 double cpgsim_dart_step_seconds(void *vc) { return ((plant_ctx *)vc)->step_seconds; }
 long cpgsim_dart_step_count(void *vc) { return ((plant_ctx *)vc)->step_count; }
 double cpgsim_dart_ctrl_seconds(void *vc) { return ((plant_ctx *)vc)->ctrl_seconds; }
+double cpgsim_dart_loop_seconds(void *vc) { return ((plant_ctx *)vc)->loop_seconds; }
 """
 
 
@@ -248,10 +273,22 @@ def address(obj: object) -> int:
 _HEADER = ctypes.sizeof(ctypes.c_ssize_t) + ctypes.sizeof(ctypes.c_void_p)  # ob_refcnt, ob_type
 _LIB: ctypes.PyDLL | None = None
 _FNS: ctypes.Array | None = None
+_FAILED: NativeUnavailable | None = None  # why the library is unavailable in this process (tried once)
 
 
 def _library() -> tuple[ctypes.PyDLL, ctypes.Array]:
-    """The compiled C (cached) and the table of DART function pointers, once per process."""
+    """The compiled C (cached) and the table of DART function pointers, once per process (a failure too)."""
+    global _FAILED
+    if _FAILED is not None:
+        raise _FAILED
+    try:
+        return _load()
+    except NativeUnavailable as exc:
+        _FAILED = exc
+        raise
+
+
+def _load() -> tuple[ctypes.PyDLL, ctypes.Array]:
     global _LIB, _FNS
     if _LIB is None:
         try:
@@ -284,6 +321,8 @@ def _library() -> tuple[ctypes.PyDLL, ctypes.Array]:
         lib.cpgsim_dart_step_count.restype = ctypes.c_long
         lib.cpgsim_dart_ctrl_seconds.argtypes = [vp]
         lib.cpgsim_dart_ctrl_seconds.restype = ctypes.c_double
+        lib.cpgsim_dart_loop_seconds.argtypes = [vp]
+        lib.cpgsim_dart_loop_seconds.restype = ctypes.c_double
         _LIB, _FNS = lib, fns
     return _LIB, _FNS  # type: ignore[return-value]
 
@@ -292,8 +331,8 @@ class NativeDartStep:
     """One set-up plant's world, skeleton and buffers bound to the C step (see the module docstring).
 
     ``step()`` runs one world step and returns the C status (0, 2 with body contact, 1 an unregistered
-    collision object met: contacts and outputs not read, -1 the readout failed); ``register(obj, code)`` tells the C
-    which code a collision object (a dartpy wrapper) has. The arrays passed in must stay the plant's
+    collision object met: contacts and outputs not read, -1 the readout failed); ``register(obj, code)``
+    tells the C which code a collision object (a dartpy wrapper) has. The arrays passed in must stay the plant's
     buffers (written in place) for the binding's life; :meth:`close` before the world goes.
     """
 
@@ -333,6 +372,10 @@ class NativeDartStep:
         spent in the controller's step by the closed loop (``cpgsim_dart_loop``): for benchmarks."""
         return (self._lib.cpgsim_dart_step_seconds(self._ctx), self._lib.cpgsim_dart_step_count(self._ctx),
                 self._lib.cpgsim_dart_ctrl_seconds(self._ctx))
+
+    def loop_time(self) -> float:
+        """Seconds spent inside the closed loop's C calls (``cpgsim_dart_loop``), for benchmarks."""
+        return self._lib.cpgsim_dart_loop_seconds(self._ctx)
 
     def register(self, obj, code: int) -> None:
         """The collision object ``obj`` (a dartpy wrapper) has the plant's ``code``."""

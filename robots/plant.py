@@ -39,13 +39,18 @@ tibia box counts as a toe force too (a leg hitting a step edge with its shank is
 toe contact). Contact forces are impulses divided by the step, so touchdowns spike; over a macro
 step ``dt`` longer than the world step the force is averaged over the sub-steps.
 
-Cost (``benchmarks/bench_run.py``, docs/performance.md). A 1 kHz closed loop calls ``set_inputs``,
-``do_step`` and ``get_outputs`` 1000 times per simulated second, so the Python around
-``world.step()`` is kept lean: one ``setForces`` for the servos; collision objects are identified
-by their (kept-alive) wrappers' ``id()`` after the first sight (two ``getShape()`` calls less per
-contact; the terrain is usually object 1, so object 2 is looked at first); and every output (foot
-centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi function
-(:mod:`cpgsim.robots.readout`, about 1 us per call) on the skeleton's positions and velocities.
+Cost (``benchmarks/bench_run.py``, docs/performance.md, "The DART loop"). A 1 kHz closed loop steps the
+plant 1000 times per simulated second. With a C compiler, ``do_step`` is one C call
+(:mod:`cpgsim.robots.dart_native`: ``setForces``, ``World::step``, the contact sums, the state read and
+the readout, through the DART symbols dartpy exports), and with a compiled controller and no other
+co-simulation block the whole loop runs in C, chunks of 100 macro steps per call
+(:meth:`DartHexapod.closed_loop`, :mod:`cpgsim.robots.dart_fused`). The Python loop below stays the
+reference and the fallback (``CPGSIM_DART_NATIVE=0``, pushes, several world steps per macro step; the C
+step is checked against it over each set-up's first steps): one ``setForces`` for the servos; collision
+objects identified by their (kept-alive) wrappers' ``id()`` after the first sight (the terrain is usually
+object 1, so object 2 is looked at first); every output (foot centres, body-frame toe forces,
+roll/pitch/yaw) from one compiled CasADi function (:mod:`cpgsim.robots.readout`) on the skeleton's
+positions and velocities.
 """
 
 from __future__ import annotations
@@ -462,10 +467,27 @@ class DartHexapod(PlantCommon, CoSimBlock):
             native.close()
             self._native = None
 
+    def _native_step(self) -> None:
+        """One world step through the C step: ``setForces``, ``world.step()``, contact sums, outputs."""
+        native = self._native
+        rc = native.step()
+        if rc == 1:  # a collision object met for the first time: this step's contacts in Python
+            self._read_contacts()
+            self._update_outputs()
+        elif rc < 0:
+            raise RuntimeError("compiled function of the plant readout reported an evaluation error")
+        else:
+            self._body_contact = rc == 2
+            if native.checks_left:
+                self._check_native()
+
     def _settle(self, seconds: float) -> None:
-        """Simulate ``seconds`` with the targets held (before the clock starts)."""
+        """Simulate ``seconds`` with the targets held (before the clock starts; no pushes)."""
         for _ in range(int(round(seconds / self.time_step))):
             self._update_servo_forces(self.time_step)
+            if self._native is not None:  # the same operations in C (its outputs are read again after)
+                self._native_step()
+                continue
             self._skel.setForces(self._forces)
             self.world.step()
             self._read_contacts()
@@ -510,18 +532,8 @@ class DartHexapod(PlantCommon, CoSimBlock):
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
         self._update_servo_forces(dt)
         world, skel, forces = self.world, self._skel, self._forces
-        native = self._native
-        if native is not None and n == 1 and not self.pushes:
-            rc = native.step()  # setForces, world.step(), contact sums, outputs in one C call
-            if rc == 1:  # a collision object met for the first time: this step's contacts in Python
-                self._read_contacts()
-                self._update_outputs()
-            elif rc < 0:
-                raise RuntimeError("compiled function of the plant readout reported an evaluation error")
-            else:
-                self._body_contact = rc == 2
-                if native.checks_left:
-                    self._check_native()
+        if self._native is not None and n == 1 and not self.pushes:
+            self._native_step()
             self._t = t + dt
             self._n_steps += 1
             return

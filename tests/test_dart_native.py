@@ -21,19 +21,20 @@ def _walk(robot: DartHexapod, steps: int) -> np.ndarray:
     return np.array(rows)
 
 
-def test_c_step_equals_python_step(monkeypatch):
+@pytest.mark.parametrize("settle", [0.0, 0.1])
+def test_c_step_equals_python_step(monkeypatch, settle):
     monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
-    slow = DartHexapod()
+    slow = DartHexapod(settle=settle)
     a = _walk(slow, 1500)
     assert slow._native is None
     monkeypatch.setenv("CPGSIM_DART_NATIVE", "1")
-    fast = DartHexapod()
+    fast = DartHexapod(settle=settle)  # the settling steps in C too
     b = _walk(fast, 1500)
     if fast._native is None:
         pytest.skip("no C step here (no C compiler or a dartpy without DART's symbols)")
     assert fast._native.checks_left == 0  # compared with the Python readout, then on its own
     seconds, steps, _ = fast._native.step_time()
-    assert steps == 1500 and seconds > 0
+    assert steps == 1500 + round(settle * 1000) and seconds > 0
     np.testing.assert_array_equal(a, b)
     assert np.abs(a[:, :18]).max() > 0  # something moved
     assert fast.link_contacts().dtype == bool and slow.link_contacts().tolist() == fast.link_contacts().tolist()
@@ -100,3 +101,35 @@ def test_fused_dart_loop_equals_python_master(monkeypatch):
     assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
     np.testing.assert_array_equal(a.data, b.data)
     assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
+
+
+def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
+    """A controller step that sends NaN targets: the C loop stops before stepping DART with them and the
+    plant's ``set_inputs`` refuses them, as under the Python master."""
+    import ctypes
+
+    from cpgsim.components.core import ModelError
+
+    robot = DartHexapod()
+    robot.setup(0.0)
+    if robot._native is None:
+        pytest.skip("no C step here")
+    y, u, q0 = np.zeros(18), np.zeros(3), robot.q0.copy()
+    calls: list[float] = []
+
+    @ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_int)
+    def commit(ctx, t, nx, nz):  # a stand-in for the compiled controller step: y <- targets
+        calls.append(t)
+        y[:] = np.nan if len(calls) == 60 else q0
+        return 0
+
+    loop = robot.closed_loop(ctypes.cast(commit, ctypes.c_void_p).value, 0, 0, 0, u, y,
+                             [(slice(0, 3), "body_position")], {"q_target": slice(0, 18)}, np.arange(3), 1e-3)
+    assert loop is not None
+    times = np.arange(201) * 1e-3
+    with pytest.raises(ModelError, match="not finite"):
+        loop.run(0, 100, times)
+    assert len(calls) == 60 and robot.time == pytest.approx(0.059)
+    body = robot.output_slices["body_position"]
+    np.testing.assert_array_equal(u, loop.O[59, body])  # the controller's input: the plant's body position
+    robot.terminate()

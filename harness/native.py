@@ -516,6 +516,10 @@ class NativeFunction:
         if self._eval(self._ctx):
             raise RuntimeError(f"compiled function {self.name} reported an evaluation error")
 
+    def c_entry(self) -> tuple[int, int]:
+        """``(address of int eval(void *ctx), ctx)``: this evaluation for other C code to call."""
+        return ctypes.cast(self._eval, ctypes.c_void_p).value, self._ctx
+
     def close(self) -> None:
         if self._ctx:
             self._lib.cpgsim_funbind(self._ctx)

@@ -39,13 +39,18 @@ tibia box counts as a toe force too (a leg hitting a step edge with its shank is
 toe contact). Contact forces are impulses divided by the step, so touchdowns spike; over a macro
 step ``dt`` longer than the world step the force is averaged over the sub-steps.
 
-Cost (``benchmarks/bench_run.py``, docs/performance.md). A 1 kHz closed loop calls ``set_inputs``,
-``do_step`` and ``get_outputs`` 1000 times per simulated second, so the Python around
-``world.step()`` is kept lean: one ``setForces`` for the servos; collision objects are identified
-by their (kept-alive) wrappers' ``id()`` after the first sight (two ``getShape()`` calls less per
-contact; the terrain is usually object 1, so object 2 is looked at first); and every output (foot
-centres, body-frame toe forces, roll/pitch/yaw) comes from one compiled CasADi function
-(:mod:`cpgsim.robots.readout`, about 1 us per call) on the skeleton's positions and velocities.
+Cost (``benchmarks/bench_run.py``, docs/performance.md, "The DART loop"). A 1 kHz closed loop steps the
+plant 1000 times per simulated second. With a C compiler, ``do_step`` is one C call
+(:mod:`cpgsim.robots.dart_native`: ``setForces``, ``World::step``, the contact sums, the state read and
+the readout, through the DART symbols dartpy exports), and with a compiled controller and no other
+co-simulation block the whole loop runs in C, chunks of 100 macro steps per call
+(:meth:`DartHexapod.closed_loop`, :mod:`cpgsim.robots.dart_fused`). The Python loop below stays the
+reference and the fallback (``CPGSIM_DART_NATIVE=0``, pushes, several world steps per macro step; the C
+step is checked against it over each set-up's first steps): one ``setForces`` for the servos; collision
+objects identified by their (kept-alive) wrappers' ``id()`` after the first sight (the terrain is usually
+object 1, so object 2 is looked at first); every output (foot centres, body-frame toe forces,
+roll/pitch/yaw) from one compiled CasADi function (:mod:`cpgsim.robots.readout`) on the skeleton's
+positions and velocities.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import struct
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -62,6 +68,7 @@ import numpy as np
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry, leg_ik
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots import dart_native
 from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
 from cpgsim.robots.hexapod import HexapodModel, build_hexapod, tilt_angle
 from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
@@ -268,6 +275,7 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self.model: HexapodModel | None = None
         self._q_target = q0_arr.copy()
         self._resume: PlantSnapshot | None = None
+        self._native: dart_native.NativeDartStep | None = None
         self.last_snapshot: PlantSnapshot | None = None
         super().__init__(name, **params)
 
@@ -348,6 +356,7 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self._body_contact = False
         self._link_contact = np.zeros(6, dtype=bool)
         self._bind_readout()
+        self._bind_native()
         resume, self._resume = self._resume, None
         if resume is not None:
             if abs(resume.t - float(t0)) > 0.5 * self.time_step:
@@ -420,10 +429,65 @@ class DartHexapod(PlantCommon, CoSimBlock):
                 self._readout_out[:] = np.asarray(fn(self._pos, self._vel, self._force_world, self._contact)).ravel()
             self._readout = evaluate
 
+    def _bind_native(self) -> None:
+        """The C step (:mod:`cpgsim.robots.dart_native`) on this plant's world and buffers, when it works."""
+        self._native = None
+        if not dart_native.enabled():
+            return
+        readout = self._readout.c_entry() if isinstance(self._readout, NativeFunction) else None
+        try:
+            self._native = dart_native.NativeDartStep(
+                self.world, self._skel, self._forces, self._force_world, self._link_contact, self._pos, self._vel,
+                self._contact, readout)
+        except NativeUnavailable as exc:
+            warnings.warn(f"{self.name}: DART's step stays in Python ({exc})", RuntimeWarning, stacklevel=3)
+        if self._native is not None and readout is None:
+            step = self._native.step
+
+            def step_and_readout() -> int:  # the readout in CasADi's VM (no C compiler for it)
+                rc = step()
+                if rc in (0, 2):
+                    self._readout()
+                return rc
+            self._native.step = step_and_readout
+
+    def _check_native(self) -> None:
+        """Compare the C step's contact sums and state with the Python readout of the same step (bit for bit);
+        on any difference keep Python from now on (the Python values are in place either way)."""
+        native = self._native
+        native.checks_left -= 1
+        c_values = (self._force_world.tobytes(), self._link_contact.tobytes(), self._body_contact,
+                    self._pos.tobytes(), self._vel.tobytes())
+        self._read_contacts()
+        self._update_outputs()
+        if c_values != (self._force_world.tobytes(), self._link_contact.tobytes(), self._body_contact,
+                        self._pos.tobytes(), self._vel.tobytes()):
+            warnings.warn(f"{self.name}: the C step's contact readout differs from the bindings'; "
+                          "DART's step stays in Python", RuntimeWarning, stacklevel=3)
+            native.close()
+            self._native = None
+
+    def _native_step(self) -> None:
+        """One world step through the C step: ``setForces``, ``world.step()``, contact sums, outputs."""
+        native = self._native
+        rc = native.step()
+        if rc == 1:  # a collision object met for the first time: this step's contacts in Python
+            self._read_contacts()
+            self._update_outputs()
+        elif rc < 0:
+            raise RuntimeError("compiled function of the plant readout reported an evaluation error")
+        else:
+            self._body_contact = rc == 2
+            if native.checks_left:
+                self._check_native()
+
     def _settle(self, seconds: float) -> None:
-        """Simulate ``seconds`` with the targets held (before the clock starts)."""
+        """Simulate ``seconds`` with the targets held (before the clock starts; no pushes)."""
         for _ in range(int(round(seconds / self.time_step))):
             self._update_servo_forces(self.time_step)
+            if self._native is not None:  # the same operations in C (its outputs are read again after)
+                self._native_step()
+                continue
             self._skel.setForces(self._forces)
             self.world.step()
             self._read_contacts()
@@ -448,6 +512,9 @@ class DartHexapod(PlantCommon, CoSimBlock):
                 self.last_snapshot = self.snapshot()
             except (AttributeError, ModelError):  # a setup that failed half-way: nothing to continue from
                 self.last_snapshot = None
+        if self._native is not None:
+            self._native.close()  # holds the world's C++ address
+        self._native = None
         self.world = None
         self.model = None
         self._shapes = []
@@ -465,6 +532,11 @@ class DartHexapod(PlantCommon, CoSimBlock):
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
         self._update_servo_forces(dt)
         world, skel, forces = self.world, self._skel, self._forces
+        if self._native is not None and n == 1 and not self.pushes:
+            self._native_step()
+            self._t = t + dt
+            self._n_steps += 1
+            return
         if n == 1 and not self.pushes:
             skel.setForces(forces)
             world.step()
@@ -485,7 +557,7 @@ class DartHexapod(PlantCommon, CoSimBlock):
                 link |= self._link_contact
             self._force_world[:] = total / n
             self._body_contact = body
-            self._link_contact = link
+            self._link_contact[:] = link  # in place: the C step holds this buffer
         self._t = t + dt
         self._n_steps += n
         self._update_outputs()
@@ -514,6 +586,13 @@ class DartHexapod(PlantCommon, CoSimBlock):
         code = self._shape_leg.get(id(obj.getShape()), _OTHER)
         self._objects.append(obj)
         self._object_code[id(obj)] = code
+        if self._native is not None:
+            try:
+                self._native.register(obj, code)
+            except NativeUnavailable as exc:
+                warnings.warn(f"{self.name}: DART's step stays in Python ({exc})", RuntimeWarning, stacklevel=2)
+                self._native.close()
+                self._native = None
         return code
 
     def _read_contacts(self) -> None:
@@ -565,6 +644,49 @@ class DartHexapod(PlantCommon, CoSimBlock):
             raise ModelError(f"{self.name}: get_outputs before setup")
         out = self._readout_out.copy()  # the next do_step overwrites the bound buffer
         return {name: out[sl] for name, sl in _PORT_SLICES}
+
+    # -- the closed loop in C --------------------------------------------------------------------
+    def closed_loop(self, commit_fn: int, ctx: int, nx: int, nz: int, u: np.ndarray, y: np.ndarray,
+                    u_map: list[tuple[slice, str]], inputs: dict[str, slice], yi: np.ndarray, dt: float):
+        """A :class:`~cpgsim.robots.dart_fused.FusedLoop` running this plant with a controller's bound compiled
+        step (``commit_fn(ctx, t, nx, nz)``, the ``cpgsim_step_commit`` of :mod:`cpgsim.harness.native`) in
+        one C loop (the master's fast path, :mod:`cpgsim.harness.fused`), or None when this plant cannot: no C
+        step or compiled readout, ``velocity_ff`` on, pushes, more than one world step per macro step, an
+        input that is not ``q_target``.
+
+        ``u_map``: which slice of the controller's input vector ``u`` takes which output port; ``inputs``: the
+        slice of the controller's signals ``y`` feeding each input port; ``yi``: the recorded signals.
+        """
+        if (self._native is None or not isinstance(self._readout, NativeFunction) or self.values["velocity_ff"]
+                or self.pushes or set(inputs) != {"q_target"} or self._steps_for(dt) != 1):
+            return None
+        from cpgsim.robots.dart_fused import FusedLoop
+
+        sl = inputs["q_target"]
+        qt_idx = np.arange(sl.start, sl.stop)
+        if qt_idx.size != 18:
+            return None
+        ports = dict(_PORT_SLICES)
+        u_idx: list[int] = []
+        o_idx: list[int] = []
+        for u_sl, port in u_map:
+            o_sl = ports[port]
+            u_idx += list(range(u_sl.start, u_sl.stop))
+            o_idx += list(range(o_sl.start, o_sl.stop))
+        self.output_slices = ports
+        return FusedLoop(self, self._native, commit_fn, ctx, nx, nz, u, y, np.array(u_idx), np.array(o_idx), qt_idx,
+                         np.asarray(yi))
+
+    def _after_fused(self, t: float, q_target: np.ndarray, changed: bool, updated: bool) -> None:
+        """The Python side brought up to date after the C loop stepped the plant to ``t`` (targets ``q_target``;
+        ``updated``: some step took a new target, as :meth:`_update_servo_forces` does)."""
+        self._n_steps += int(round((t - self._t) / self.time_step))
+        self._t = t
+        if updated:
+            self._q_target = q_target.copy()
+            self._q_target_prev = self._q_target
+        self._target_changed = changed
+        self._body_contact = bool(self._contact[0])
 
     # -- helpers ----------------------------------------------------------------------------------
 

@@ -1,0 +1,94 @@
+"""The controller's compiled step and the DART plant in one C loop (``cpgsim_dart_loop``, :mod:`.dart_native`).
+
+Built by :meth:`cpgsim.robots.plant.DartHexapod.closed_loop` for the master's fast path
+(:mod:`cpgsim.harness.fused`). ``run(k0, k1, times)`` does macro steps ``k0 .. k1-1`` and returns
+``(rows, status, Y, O)`` like the MuJoCo plant's loop: the rows recorded, the status (0 done, 1 the
+controller's state went non-finite at the last row, 2 an evaluation error), the recorded signals ``y[yi]``
+and the plant's output vectors per row. What the C loop leaves to Python, Python does within the same call,
+then the loop goes on: a servo target that is not finite goes through the plant's ``set_inputs`` (which
+refuses it, as in the master's loop), and a collision object met for the first time through the plant's
+Python contact readout (which registers it with the C step). The first
+:attr:`~cpgsim.robots.dart_native.NativeDartStep.CHECK_STEPS` steps of a set-up run one per call, each
+compared with the plant's Python readout (:meth:`~cpgsim.robots.plant.DartHexapod._check_native`); a
+difference ends the run with an error naming ``CPGSIM_DART_NATIVE=0`` (the loop cannot go on in Python).
+So the numbers are the Python loop's.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from cpgsim.robots.dart_native import NativeDartStep
+
+
+class FusedLoop:
+    """One plant's world and one controller's bound step, looped in C (see the module docstring)."""
+
+    def __init__(self, plant, native: NativeDartStep, commit_fn: int, ctx: int, nx: int, nz: int,
+                 u: np.ndarray, y: np.ndarray, u_idx: np.ndarray, o_idx: np.ndarray, qt_idx: np.ndarray,
+                 yi: np.ndarray, chunk: int = 100) -> None:
+        self.plant, self.native = plant, native
+        dp = ctypes.POINTER(ctypes.c_double)
+        lp = ctypes.POINTER(ctypes.c_longlong)
+        self._keep = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, qt_idx, yi)]
+        self._y, self._qt_idx = y, np.asarray(qt_idx)
+        self.Y = np.zeros((chunk, max(1, len(yi))))
+        self.O = np.zeros((chunk, plant._readout_out.size))
+        self.chunk = chunk
+        self.q_target = plant._q_target.copy()  # the C loop's target (copied to the plant after each call)
+        self._changed = ctypes.c_int(int(plant._target_changed))
+        self._updated = ctypes.c_int(0)
+        self._status = ctypes.c_int(0)
+        self._fn = native._lib.cpgsim_dart_loop
+        u_i, o_i, q_i, y_i = (a.ctypes.data_as(lp) for a in self._keep)
+        self._head = (native._ctx, ctypes.c_void_p(commit_fn), ctypes.c_void_p(ctx), nx, nz, u.ctypes.data_as(dp),
+                      y.ctypes.data_as(dp), len(u_idx), u_i, o_i, plant._readout_out.ctypes.data_as(dp),
+                      plant._readout_out.size, q_i, self.q_target.ctypes.data_as(dp), ctypes.byref(self._changed),
+                      ctypes.byref(self._updated), float(plant.values["kp"]), len(yi), y_i)
+        self._times = np.zeros(0)
+        self._times_keep: np.ndarray | None = None
+
+    def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
+        """Macro steps ``k0 .. k1-1`` (at most a chunk); see the module docstring."""
+        k1 = min(k1, k0 + self.chunk)
+        if self._times_keep is not times:
+            self._times = np.ascontiguousarray(times, dtype=np.float64)
+            self._times_keep = times
+        times_p = self._times.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        plant, k, status = self.plant, k0, 0
+        while k < k1:
+            if plant._native is not self.native:
+                raise RuntimeError(f"{plant.name}: the C step of DART disagreed with dartpy's bindings; "
+                                   "run with CPGSIM_DART_NATIVE=0")
+            checking = self.native.checks_left > 0
+            row = k - k0
+            rows = self._fn(*self._head, self._rows(self.Y, row), self._rows(self.O, row), k,
+                            k + 1 if checking else k1, times_p, ctypes.byref(self._status))
+            status = self._status.value
+            k += rows
+            self._sync(k - 1 if status in (1, 4) else k)  # 1, 4: the last row recorded, its plant step not done
+            if status in (1, 2):
+                break
+            if status == 4:  # a target not finite: the plant refuses it (ModelError), as in the master's loop
+                plant.set_inputs({"q_target": self._y[self._qt_idx].copy()})
+                plant.do_step(float(times[k - 1]), float(times[k] - times[k - 1]))
+                self.q_target[:] = plant._q_target
+                self._changed.value = int(plant._target_changed)
+            elif status == 5:  # the world step met a collision object for the first time
+                plant._read_contacts()
+                plant._update_outputs()
+            elif checking:
+                plant._check_native()
+            status = 0
+        return k - k0, status, self.Y[:k - k0], self.O[:k - k0]
+
+    @staticmethod
+    def _rows(a: np.ndarray, row: int):
+        return ctypes.cast(a.ctypes.data + row * a.strides[0], ctypes.POINTER(ctypes.c_double))
+
+    def _sync(self, k: int) -> None:
+        """The plant's Python state once the C loop has stepped it to ``times[k]``."""
+        updated, self._updated.value = self._updated.value, 0
+        self.plant._after_fused(float(self._times[k]), self.q_target, bool(self._changed.value), updated > 0)

@@ -1,0 +1,135 @@
+"""The DART plant's C step and the controller + DART loop in C (robots/dart_native.py, robots/dart_fused.py):
+the same numbers as the plant's Python loop and the Python master, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpgsim.robots.plant import DartHexapod
+
+
+def _walk(robot: DartHexapod, steps: int) -> np.ndarray:
+    """Moving targets large enough to bang shanks and links on the ground; every output of every step."""
+    robot.setup(0.0)
+    rows = []
+    for k in range(steps):
+        q = robot.q0 + 0.5 * np.sin(2 * np.pi * k / 400.0 + np.arange(18))
+        robot.set_inputs({"q_target": q})
+        robot.do_step(robot.time, 1e-3)
+        rows.append(np.concatenate([v.ravel() for v in robot.get_outputs().values()]))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("settle", [0.0, 0.1])
+def test_c_step_equals_python_step(monkeypatch, settle):
+    monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
+    slow = DartHexapod(settle=settle)
+    a = _walk(slow, 1500)
+    assert slow._native is None
+    monkeypatch.setenv("CPGSIM_DART_NATIVE", "1")
+    fast = DartHexapod(settle=settle)  # the settling steps in C too
+    b = _walk(fast, 1500)
+    if fast._native is None:
+        pytest.skip("no C step here (no C compiler or a dartpy without DART's symbols)")
+    assert fast._native.checks_left == 0  # compared with the Python readout, then on its own
+    seconds, steps, _ = fast._native.step_time()
+    assert steps == 1500 + round(settle * 1000) and seconds > 0
+    np.testing.assert_array_equal(a, b)
+    assert np.abs(a[:, :18]).max() > 0  # something moved
+    assert fast.link_contacts().dtype == bool and slow.link_contacts().tolist() == fast.link_contacts().tolist()
+    assert fast.body_contact() == slow.body_contact()
+    snap_a, snap_b = slow.snapshot(), fast.snapshot()
+    for field in ("t", "positions", "velocities", "q_target", "forces", "force_world", "link_contact", "n_steps"):
+        np.testing.assert_array_equal(getattr(snap_a, field), getattr(snap_b, field))
+
+
+def test_a_readout_that_differs_switches_back_to_python(monkeypatch):
+    robot = DartHexapod()
+    robot.setup(0.0)
+    if robot._native is None:
+        pytest.skip("no C step here")
+    python_readout = robot._read_contacts
+
+    def skewed() -> None:  # the Python readout sees another force than the C step
+        python_readout()
+        robot._force_world[2] += 1.0
+    monkeypatch.setattr(robot, "_read_contacts", skewed)
+    with pytest.warns(RuntimeWarning, match="stays in Python"):
+        for _ in range(5):
+            robot.set_inputs({"q_target": robot.q0})
+            robot.do_step(robot.time, 1e-3)
+    assert robot._native is None
+    robot.set_inputs({"q_target": robot.q0})
+    robot.do_step(robot.time, 1e-3)  # the Python loop goes on
+    assert robot.time == pytest.approx(0.006)
+
+
+def test_native_step_off_by_environment(monkeypatch):
+    monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
+    robot = DartHexapod()
+    robot.setup(0.0)
+    assert robot._native is None
+    robot.terminate()
+
+
+def test_fused_dart_loop_equals_python_master(monkeypatch):
+    """The controller + DART loop in C (the master's fast path) records what the Python master and the
+    plant's Python loop record."""
+    import cpgsim.harness.fused as fused
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.simulate import Simulator
+
+    runs, used = {}, {}
+    original = fused.fused_runner
+    for native in ("1", "0"):
+        monkeypatch.setenv("CPGSIM_DART_NATIVE", native)
+
+        def runner(*args, native=native):
+            r = original(*args)
+            used[native] = r is not None
+            return r
+
+        monkeypatch.setattr(fused, "fused_runner", runner)
+        setup = build_scenario("step", {})
+        sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=False).prepare()
+        runs[native] = sim.run(1.25)  # the checked steps one by one, a chunk boundary inside, a partial chunk
+    if not used["1"]:
+        pytest.skip("no fused loop here (no C compiler or no C step of DART)")
+    assert used == {"1": True, "0": False}
+    a, b = runs["1"], runs["0"]
+    assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
+    np.testing.assert_array_equal(a.data, b.data)
+    assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
+
+
+def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
+    """A controller step that sends NaN targets: the C loop stops before stepping DART with them and the
+    plant's ``set_inputs`` refuses them, as under the Python master."""
+    import ctypes
+
+    from cpgsim.components.core import ModelError
+
+    robot = DartHexapod()
+    robot.setup(0.0)
+    if robot._native is None:
+        pytest.skip("no C step here")
+    y, u, q0 = np.zeros(18), np.zeros(3), robot.q0.copy()
+    calls: list[float] = []
+
+    @ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_int)
+    def commit(ctx, t, nx, nz):  # a stand-in for the compiled controller step: y <- targets
+        calls.append(t)
+        y[:] = np.nan if len(calls) == 60 else q0
+        return 0
+
+    loop = robot.closed_loop(ctypes.cast(commit, ctypes.c_void_p).value, 0, 0, 0, u, y,
+                             [(slice(0, 3), "body_position")], {"q_target": slice(0, 18)}, np.arange(3), 1e-3)
+    assert loop is not None
+    times = np.arange(201) * 1e-3
+    with pytest.raises(ModelError, match="not finite"):
+        loop.run(0, 100, times)
+    assert len(calls) == 60 and robot.time == pytest.approx(0.059)
+    body = robot.output_slices["body_position"]
+    np.testing.assert_array_equal(u, loop.O[59, body])  # the controller's input: the plant's body position
+    robot.terminate()

@@ -288,9 +288,19 @@ def _library() -> tuple[ctypes.PyDLL, ctypes.Array]:
         raise
 
 
+VERIFIED_DARTPY = ("6.20.",)
+"""dartpy releases whose object layouts (pybind11's instance, DART's ``Contact``) the C step was checked
+against. The set-up checks would catch most mismatches, but a wrong object address could crash before a
+check sees it, so other releases keep the Python loop (same numbers, slower)."""
+
+
 def _load() -> tuple[ctypes.PyDLL, ctypes.Array]:
     global _LIB, _FNS
     if _LIB is None:
+        version = getattr(dart, "__version__", "")
+        if not version.startswith(VERIFIED_DARTPY):
+            raise NativeUnavailable(f"dartpy {version or '(unknown version)'}: the C step was verified on "
+                                    f"dartpy {', '.join(v + 'x' for v in VERIFIED_DARTPY)} only")
         try:
             dart_lib = ctypes.CDLL(dart.__file__)
             fns = (ctypes.c_void_p * len(_SYMBOLS))(

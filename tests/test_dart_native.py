@@ -133,3 +133,18 @@ def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
     body = robot.output_slices["body_position"]
     np.testing.assert_array_equal(u, loop.O[59, body])  # the controller's input: the plant's body position
     robot.terminate()
+
+
+def test_unverified_dartpy_keeps_the_python_loop(monkeypatch):
+    """Another dartpy release: no C step (its object layouts were not checked), a warning, the same numbers."""
+    from cpgsim.robots import dart_native
+
+    monkeypatch.setattr(dart_native.dart, "__version__", "6.99.0", raising=False)
+    monkeypatch.setattr(dart_native, "_LIB", None)
+    monkeypatch.setattr(dart_native, "_FAILED", None)
+    with pytest.raises(dart_native.NativeUnavailable, match=r"dartpy 6\.99\.0: the C step was verified on"):
+        dart_native._library()
+    robot = DartHexapod()
+    with pytest.warns(RuntimeWarning, match="DART's step stays in Python"):
+        robot.setup(0.0)
+    assert robot._native is None

@@ -390,20 +390,21 @@ class Simulator:
 
     def _run_chunk(self, k: int, c: int, times, x, z, p, u_free, y_idx: np.ndarray, rows: np.ndarray):
         """``c`` steps from step ``k``, the signals ``y_idx`` of each step written into ``rows`` (``c`` rows):
-        ``(X_end, Z_end, bad)`` with ``bad`` = first bad step or -1."""
+        ``(X_end, Z_end, bad, finite)`` with ``bad`` = first bad step or -1 and ``finite`` True when every
+        row written is known to hold finite values only (the C loop checks them as it writes them)."""
         native = self._native()
         if native is not None:
-            x_end, z_end, _, bad = native.run(c, float(times[k]), self.model.dt, x, z, u_free[:, k:k + c], p,
-                                              picks=y_idx, out=rows)
-            return x_end, z_end, bad
+            x_end, z_end, _, bad, bad_row = native.run_checked(c, float(times[k]), self.model.dt, x, z,
+                                                               u_free[:, k:k + c], p, picks=y_idx, out=rows)
+            return x_end, z_end, bad, bad_row < 0
         fn = self._chunk_fn(c)
         X, Z, Y = (np.asarray(a) for a in fn(times[k:k + c][None, :], x, z, u_free[:, k:k + c], p))
         rows[:] = Y.T[:, y_idx]
         bad = ~np.all(np.isfinite(X), axis=0)
         if bad.any():
             j = int(np.argmax(bad))
-            return (X[:, j - 1] if j > 0 else x), (Z[:, j - 1] if j > 0 else z), j
-        return X[:, -1].copy(), Z[:, -1].copy(), -1
+            return (X[:, j - 1] if j > 0 else x), (Z[:, j - 1] if j > 0 else z), j, False
+        return X[:, -1].copy(), Z[:, -1].copy(), -1, False
 
     def _run_horizon(self, times, x, z, p, u_free, picks, rec: _Recorder, progress: bool) -> None:
         m = self.model
@@ -416,7 +417,10 @@ class Simulator:
         try:
             while k < n:
                 c = min(chunk, n - k, rec.flush_rows if rec.writer is not None else n)
-                x_new, z_new, bad = self._run_chunk(k, c, times, x, z, p, u_free, y_idx, rec.data[rec.n:rec.n + c])
+                x_new, z_new, bad, finite = self._run_chunk(k, c, times, x, z, p, u_free, y_idx,
+                                                            rec.data[rec.n:rec.n + c])
+                if finite and rec.checked == rec.n:  # checked in C while written: no second pass
+                    rec.checked = rec.n + (bad + 1 if bad >= 0 else c)
                 if bad >= 0:
                     rec.commit_rows(bad + 1)
                     x_bad = np.asarray(m.step(times[k + bad], x_new, z_new, u_free[:, k + bad], p)[0]).ravel()

@@ -62,6 +62,21 @@ def test_a_nan_output_with_finite_states_fails_the_run(backend):
     assert not res.complete and np.isfinite(res.data).all() and res.time[-1] == pytest.approx(1.0)
 
 
+def test_the_c_loop_reports_the_first_row_with_a_nan_as_it_writes_it():
+    """x(t) = 1.005 - t at dt = 0.01: x(1.01) = -0.005 < 0 first at step 101, so sqrt is NaN from row 101
+    (by hand); a horizon that ends before it has no bad row. A missed row would let NaNs into results."""
+    sim = Simulator(sqrt_graph(), dt=0.01, backend="native")
+    native = sim._native()
+    if native is None:
+        pytest.skip("no C compiler")
+    m = sim.model
+    U = np.zeros((m.inputs.size, 300))
+    *_, rc, bad_row = native.run_checked(300, 0.0, 0.01, m.x0, m.z0, U, m.p0)
+    assert rc == -1 and bad_row == 101
+    *_, rc, bad_row = native.run_checked(101, 0.0, 0.01, m.x0, m.z0, U[:, :101], m.p0)
+    assert rc == -1 and bad_row == -1
+
+
 def test_cli_exit_1_complete_false_and_the_signal_named(tmp_path, monkeypatch, capsys):
     module = tmp_path / "g.py"
     here = str(Path(__file__).parent)

@@ -38,7 +38,7 @@ def run(samples: list[dict], **params) -> dict[str, np.ndarray]:
     n = len(samples)
     series = {k: np.array([[s.get(k, d) for s in samples]]) for k, d in DEFAULTS.items()}
     blk = YuReflexLogic("r", **{"omega1": 1.0, **params})
-    res = simulate(blk, t_end=(n - 1) * DT, dt=DT, inputs=series)
+    res = simulate(blk, t_end=(n - 1) * DT, dt=DT, inputs=series, backend="casadi")
     return {o: res[f"r.{o}"] for o in OUTS}
 
 

@@ -32,7 +32,7 @@ def run(steps: int, flags, gait: int = 1, **params):
         for n, v in flags(k).items():
             series[n][:, k] = v
     fsm = YuGaitFSM("fsm", gait=gait, **{"T_g": 5.0, "T_net": 5.0, "T_half": 1.0, **params})
-    res = simulate(fsm, t_end=steps * DT, dt=DT, inputs=series)
+    res = simulate(fsm, t_end=steps * DT, dt=DT, inputs=series, backend="casadi")
     return tuple(res[f"fsm.{o}"] for o in ("state", "rate", "slot", "n_switch", "atd", "natd", "atd_alien"))
 
 

@@ -90,6 +90,27 @@ def in_annotation(spans, start: tuple[int, int], end: tuple[int, int]) -> bool:
     return any(a <= tuple(start) and tuple(end) <= b for a, b in spans)
 
 
+SAMPLE_NOTE = "skipped: not in the random sample (--sample)"
+
+
+def keep_a_sample(session: Path, size: int, seed: int = 26) -> int:
+    """Mark all but ``size`` pending work items of ``session``, drawn uniformly at random (``seed``), as skipped
+    (as :func:`skip_annotation_mutants`): a run that cannot test every mutant in its time scores an unbiased
+    sample of them instead. Returns how many were left out."""
+    import random
+
+    from cosmic_ray.work_db import use_db
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
+
+    with use_db(str(session)) as db:
+        ids = sorted(item.job_id for item in db.pending_work_items)
+        keep = set(random.Random(seed).sample(ids, min(size, len(ids))))
+        out = [i for i in ids if i not in keep]
+        if out:
+            db.set_multiple_results(out, WorkResult(output=SAMPLE_NOTE, worker_outcome=WorkerOutcome.SKIPPED))
+    return len(out)
+
+
 def skip_annotation_mutants(session: Path, module_file: Path) -> int:
     """Mark every pending work item of ``session`` whose mutation lies inside an annotation of
     ``module_file`` (:func:`annotation_spans`) as skipped, the way cosmic-ray's own filters
@@ -121,13 +142,26 @@ def _counts(session: Path) -> dict[str, int]:
         rows = con.execute("SELECT test_outcome, COUNT(*) FROM work_results WHERE worker_outcome != 'SKIPPED' "
                            "GROUP BY test_outcome").fetchall()
         total = con.execute("SELECT COUNT(*) FROM work_items").fetchone()[0]
-        skipped = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED'").fetchone()[0]
+        skipped = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
+                              (ANNOTATION_NOTE,)).fetchone()[0]
+        unsampled = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
+                                (SAMPLE_NOTE,)).fetchone()[0]
     finally:
         con.close()
     out = {str(k).split(".")[-1].lower(): int(v) for k, v in rows}
     out["total"] = int(total)
     out["annotation"] = int(skipped)
+    out["unsampled"] = int(unsampled)
     return out
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion ``k / n`` (for a score measured on a random sample)."""
+    if n == 0:
+        return 0.0, 1.0
+    p, d = k / n, 1 + z * z / n
+    c, h = (p + z * z / (2 * n)) / d, z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / d
+    return max(0.0, c - h), min(1.0, c + h)
 
 
 def _scores(killed: int, survived: int, annotation: int) -> tuple[float, float]:
@@ -137,7 +171,7 @@ def _scores(killed: int, survived: int, annotation: int) -> tuple[float, float]:
 
 
 def run_module(name: str, work: Path, timeout: float, survivors: bool,
-               annotations: bool = False) -> dict[str, object]:
+               annotations: bool = False, sample: int | None = None) -> dict[str, object]:
     module_path, tests = MODULES[name]
     cfg = work / f"{name}.toml"
     cfg.write_text(_config(module_path, tests, timeout))
@@ -151,15 +185,23 @@ def run_module(name: str, work: Path, timeout: float, survivors: bool,
                    capture_output=True, text=True)
     if not annotations:
         skip_annotation_mutants(session, work / module_path)
+    if sample is not None:
+        keep_a_sample(session, sample)
     subprocess.run(["cosmic-ray", "exec", str(cfg), str(session)], cwd=work, env=env, check=True,
                    capture_output=True, text=True)
     counts = _counts(session)
     killed, survived = counts.get("killed", 0) + counts.get("timeout", 0), counts.get("survived", 0)
-    incompetent, annotation = counts.get("incompetent", 0), counts["annotation"]
-    score_all, score = _scores(killed, survived, annotation)
+    incompetent, annotation, unsampled = counts.get("incompetent", 0), counts["annotation"], counts["unsampled"]
+    if unsampled:  # the sample is drawn from the mutants outside annotations (which all survive)
+        score = killed / max(1, killed + survived)
+        score_all = score * (counts["total"] - annotation) / max(1, counts["total"])
+    else:
+        score_all, score = _scores(killed, survived, annotation)
     row = {"module": module_path, "mutants": counts["total"], "annotation": annotation, "killed": killed,
            "survived": survived, "incompetent": incompetent, "score_all": score_all, "score": score,
-           "wall_s": round(time.perf_counter() - t0, 1)}
+           "unsampled": unsampled, "wall_s": round(time.perf_counter() - t0, 1)}
+    if unsampled:
+        row["interval"] = wilson(killed, killed + survived)
     if survivors and survived:
         dump = subprocess.run(["cosmic-ray", "dump", str(session)], cwd=work, capture_output=True, text=True).stdout
         row["survivors"] = [json.loads(line) for line in dump.splitlines() if '"survived"' in line.lower()]
@@ -234,6 +276,9 @@ def main() -> int:
     ap.add_argument("--annotations", action="store_true",
                     help="also run the mutants inside annotations (skipped by default where the module has "
                          "'from __future__ import annotations': never evaluated, so they always survive)")
+    ap.add_argument("--sample", type=int, default=None, metavar="N",
+                    help="test only N mutants drawn at random (fixed seed) from those left after the annotation "
+                         "filter: an unbiased estimate of the score, printed with its 95 %% interval")
     ap.add_argument("--keep", type=Path, default=None, help="copy each module's session (sqlite) into this folder")
     ap.add_argument("--recheck", type=Path, default=None, metavar="SESSION",
                     help="with one --module: run the current tests against the survivors of a kept session")
@@ -258,7 +303,7 @@ def main() -> int:
         return 2
     base, work = _worktree()
     try:
-        rows = [run_module(name, work, args.timeout, args.survivors, args.annotations)
+        rows = [run_module(name, work, args.timeout, args.survivors, args.annotations, args.sample)
                 for name in (args.module or MODULES)]
         if args.keep is not None:
             args.keep.mkdir(parents=True, exist_ok=True)
@@ -271,6 +316,11 @@ def main() -> int:
     for r in rows:
         print(f"{r['module']:40s} {r['mutants']:8d} {r['annotation']:7d} {r['killed']:7d} {r['survived']:9d} "
               f"{r['score']:7.1%} {r['score_all']:7.1%} {r['wall_s']:6.0f}s")
+        if r.get("unsampled"):
+            lo, hi = r["interval"]
+            print(f"   a random sample: {r['mutants'] - r['unsampled'] - r['annotation']} of the "
+                  f"{r['mutants'] - r['annotation']} mutants outside annotations run; 95 % interval of the score "
+                  f"{lo:.1%} .. {hi:.1%}")
         for s in r.get("survivors", []):
             print("   survivor:", json.dumps(s)[:400])
     return 0

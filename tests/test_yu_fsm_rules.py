@@ -288,3 +288,76 @@ def test_a_foot_that_lands_late_holds_the_switch_in_every_slot(gait, order, late
         assert np.all(trace[k][1] == 1.0), (k, trace[k][1])  # every foot down at the switch
         # and the switch did wait for the last foot: the sample before, some foot was still in the air
         assert np.any(trace[k - 1][1] == 0.0), k
+
+
+def test_after_an_early_stance_the_switch_comes_and_the_landed_legs_stay_in_stance():
+    """Module docstring, "Early stance after an aborted stance": a slot-0 leg in early Stance "counts as ready
+    for the switch; at the switch it simply stays in Stance". The script of the test above; from sample 9 the
+    standing legs' leaders pass their PEP (swing flag) and every foot is down: at 9 they go to StanceProlong
+    (their part done), at 10 every leg is ready (slot-0 legs in Stance, the others in StanceProlong, done), ATD,
+    no reflex, the next slot's legs see slot-0 feet down (aTD): the switch, B swings, A stays in Stance."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(12):
+        rows.append(fsm.sample(swing=legs(*A) if k < 2 else legs(*B) if k >= 9 else np.zeros(6), landed=legs(*A),
+                               active=legs(0) if 4 <= k <= 6 else np.zeros(6),
+                               lambda_td=legs(*A) if k < 9 else ALL))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    assert np.all(state[7:9][:, A] == STANCE) and np.all(state[7:9][:, B] == STANCE)  # early stance, resumed
+    assert np.all(state[9, B] == STANCE_PROLONG) and np.all(slot[:10] == 0)
+    assert slot[10] == 1 and rows[10]["n_switch"][0] == 1
+    assert np.all(state[10, B] == SWING) and np.all(state[10, A] == STANCE)
+
+
+def test_natd_needs_some_but_not_all_feet_down():
+    """Table 2: NATD = 0 < sum(lambda_td) < 6: no foot down is not NATD, one to five are, six are not."""
+    for down, expect in (((), 0), ((3,), 1), ((0, 1, 2, 3, 4), 1), ((0, 1, 2, 3, 4, 5), 0)):
+        *_, natd, _ = run(2, lambda k, down=down: {"swing": legs(*A), "lambda_td": legs(*down)})
+        assert np.all(natd == expect), down
+
+
+@pytest.mark.parametrize("late_leg", [0, 1, 2, 3, 4, 5])
+def test_the_exchange_waits_for_every_single_leg(late_leg):
+    """SWITCH needs every leg ready: the tripod exchange of test_switch_needs_every_leg_ready_atd_and_no_reflex,
+    with one leg late -- a slot-0 leg still swinging (its swing flag stays up until sample 4) or a standing leg
+    whose leader passes its PEP only at sample 4 (its flag rises then). The exchange waits for that leg: the
+    others are ready from sample 2, the switch comes at sample 5 (the sample after the late leg's part ends;
+    StanceProlong needs its part done at the sample of the switch)."""
+    def flags(k):
+        swing = legs(*A) if k < 2 else legs(*B)
+        if k < 4:
+            swing[late_leg] = 1.0 if late_leg in A else 0.0
+        else:
+            swing[late_leg] = 0.0 if late_leg in A else 1.0
+        return {"swing": swing, "lambda_td": ALL}
+    state, rate, slot, n_switch, *_ = run(8, flags)
+    assert np.all(n_switch[:5] == 0) and np.all(slot[:5] == 0)
+    assert np.all(n_switch[5:] == 1) and np.all(slot[5:] == 1)
+
+
+def test_a_stance_begun_at_a_switch_counts_its_progress_from_the_switch():
+    """tau (the network time run since the stance began) restarts when a leg goes from SwingProlong to Stance.
+    Tetrapod, T_g = T_net = 5 s, T_half = 0.8 s: swing rate 3/2, stance rate 3/4 (Y16 over omega1). Slot 0: L3
+    and R2 swing (flag up for samples 0-9: about 0.15 s of network time), L1 and R3 end their part at 0.53 s
+    (the tetrapod test above), L2 and R1 (who swing next) pass their PEP at sample 60. Every foot is down: the
+    switch to slot 1 comes at sample 61. In slot 1, L3 stands with j = (1 - 0 - 1) mod 3 = 0: its part ends at
+    (1/2 - p_tol) * T_half = 0.3992 s of network time, 0.3992 / 0.75 = 53.2 samples after the switch, within two
+    samples (as above). Counted from its swing instead, the part would end about 0.15 / 0.75 = 20 samples
+    sooner."""
+    fsm = Legs(2, T_half=0.8)
+    rows = []
+    for k in range(140):
+        swing = np.zeros(6)
+        if k < 10:
+            swing[[2, 4]] = 1.0
+        if k >= 60:
+            swing[[1, 3]] = 1.0  # L2, R1 leaders past PEP (and their swing after the switch)
+        rows.append(fsm.sample(swing=swing, lambda_td=ALL))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    ks = int(np.argmax(slot == 1))
+    assert ks == 61 and state[ks, 2] == STANCE and state[ks - 1, 2] == SWING_PROLONG
+    k_end = ks + int(np.argmax(state[ks:, 2] == STANCE_PROLONG))
+    assert 53.2 <= k_end - ks <= 53.2 + 2, k_end - ks
+    assert np.all(state[ks:k_end, 2] == STANCE)

@@ -49,6 +49,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     # units) is part of a block's contract; it runs last, so it costs time only on the mutants that survive
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py", BLOCKS_MD]),
     "reflexes": ("components/yu/reflexes.py", ["tests/test_reflex_rules.py", BLOCKS_MD]),
+    "steps": ("harness/steps.py", ["tests/test_steps.py"]),  # the compile's substep and horizon arithmetic
 }
 
 ANNOTATION_NOTE = "skipped: inside an annotation (never evaluated: from __future__ import annotations)"

@@ -293,3 +293,70 @@ def test_a_foothold_while_held_ends_the_return():
     assert list(r["mode"][5:]) == [4, 4, 0] and r["n_found"][-1] == 1 and r["n_withdraw"][-1] == 0
     r = _search(GIVE_UP + [S(0.9, -0.2), S(0.9, -0.2, td=1, sup=0.0)], withdraw=1.0, T_return=1.0)
     assert list(r["mode"][5:]) == [4, 4, 4]  # a contact that does not support is no foothold
+
+
+# -- the commands to the network and the converter at the sample of each event ----------------------------
+
+SETS = {"x1_peak": 1.1, "x2_aep": 0.3, "y2_aep": -0.7, "x2_apex": 0.9}  # chosen values (not Table 1's)
+COMMANDS = ("y1_reset", "set1", "x1_set", "y1_set", "set23", "x23_set", "y23_set", "mode_cmd", "capture", "swing")
+
+
+def commands(samples: list[dict], **params) -> list[dict[str, float]]:
+    """What the rest of the network reads from the block at each sample: its outputs with the inputs of that
+    sample and the states before its update (the compile resolves every signal inside the sampled update
+    from the states before it: module docstring, "reset requests ... are evaluated with this sample's
+    events"), sample by sample."""
+    from cpgsim.harness.compile import compile_graph
+
+    m = compile_graph(YuReflexLogic("r", **{"omega1": 1.0, **SETS, **params}), dt=DT)
+    x, z, p = m.x0.copy(), m.z0.copy(), m.p0.copy()
+    out = []
+    for k, s in enumerate(samples):
+        u = np.zeros(m.inputs.size)
+        for name, d in DEFAULTS.items():
+            u[m.inputs.index("$" + name).slice] = s.get(name, d)
+        y = np.asarray(m.signals(k * DT, x, z, u, p)).ravel()
+        out.append({c: float(y[m.signals_layout.index(f"r.{c}").slice][0]) for c in COMMANDS})
+        x, z = (np.asarray(a).ravel() for a in m.discrete(k * DT, x, z, u, p))
+    return out
+
+
+def test_the_elevator_trigger_reverses_the_leader_and_nothing_else():
+    """ERT -> Y10: leader reset y1 = -1 keeping x1 (``y1_reset``), no state set; converter mode 1."""
+    c = commands([SWING, SWING, S(0.2, 1.0, ob=1)])
+    assert c[2]["y1_reset"] == 1 and c[2]["set1"] == 0 and c[2]["set23"] == 0 and c[2]["mode_cmd"] == 1
+    assert c[2]["swing"] == 1 and c[2]["capture"] == 0
+    assert all(c[k]["y1_reset"] == 0 and c[k]["set1"] == 0 and c[k]["set23"] == 0 for k in (0, 1))
+    assert c[0]["mode_cmd"] == 0 and c[0]["swing"] == 1
+
+
+def test_the_forward_stroke_sets_the_followers_to_their_maximum_and_its_end_to_the_aep_state():
+    """E1 end: followers set to their maximum (m, 0) = (x2_apex, 0), converter mode 2; E2 end: the whole network
+    set to the AEP state (x1_peak, 0; x2_aep, y2_aep), converter mode 0 (touchdown) or 3 (SRT)."""
+    for td, mode in ((1, 0), (0, 3)):
+        c = commands([SWING, S(0.2, 1.0, ob=1), S(0.1, -1.0), S(0.2, 1.0, td=td), S(0.9, 0.0, td=td)])
+        e1, e2 = c[3], c[4]
+        assert (e1["set23"], e1["x23_set"], e1["y23_set"], e1["set1"], e1["mode_cmd"]) == (1, 0.9, 0.0, 0, 2)
+        assert (e2["set1"], e2["x1_set"], e2["y1_set"]) == (1, 1.1, 0.0)
+        assert (e2["set23"], e2["x23_set"], e2["y23_set"]) == (1, 0.3, -0.7) and e2["mode_cmd"] == mode
+        assert c[2]["set23"] == 0 and c[2]["set1"] == 0 and c[2]["mode_cmd"] == 1  # retracting: no set
+
+
+def test_an_early_touchdown_sets_the_aep_state_captures_and_ends_the_swing_at_once():
+    c = commands([SWING, SWING, S(0.2, 1.0, td=1, foot=HIGH)])
+    e = c[2]
+    assert (e["set1"], e["set23"], e["capture"], e["swing"], e["mode_cmd"]) == (1, 1, 1, 0, 0)
+    assert (e["x1_set"], e["x23_set"], e["y23_set"]) == (1.1, 0.3, -0.7)
+    assert c[1]["capture"] == 0 and c[1]["swing"] == 1
+
+
+def test_a_search_starts_without_a_set_and_ends_on_the_aep_state():
+    """SRT: converter mode 3, no set (the network searches from where it is); found: the AEP state and
+    ``capture``, mode 0; give up: the AEP state without capture, mode 4 (return)."""
+    c = commands([SWING, SWING, S(0.9, -0.1), S(0.8, -0.5), S(0.7, -0.5, td=1)])
+    assert c[2]["mode_cmd"] == 3 and c[2]["set1"] == 0 and c[2]["set23"] == 0 and c[2]["swing"] == 0
+    assert c[3]["mode_cmd"] == 3 and c[3]["set1"] == 0
+    assert (c[4]["set1"], c[4]["set23"], c[4]["capture"], c[4]["mode_cmd"]) == (1, 1, 1, 0)
+    c = commands([SWING, SWING, S(0.9, -0.1)] + GIVE_UP)
+    assert (c[5]["set1"], c[5]["set23"], c[5]["capture"], c[5]["mode_cmd"]) == (1, 1, 0, 4)
+    assert all(c[k]["set1"] == 0 for k in (2, 3, 4))

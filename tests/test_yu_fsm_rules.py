@@ -361,3 +361,24 @@ def test_a_stance_begun_at_a_switch_counts_its_progress_from_the_switch():
     k_end = ks + int(np.argmax(state[ks:, 2] == STANCE_PROLONG))
     assert 53.2 <= k_end - ks <= 53.2 + 2, k_end - ks
     assert np.all(state[ks:k_end, 2] == STANCE)
+
+
+@pytest.mark.parametrize("down", range(6))
+def test_atd_alien_is_a_touchdown_of_any_leg_of_another_slot(down):
+    """aTD_i: some leg j with slot(j) != slot(i) touches down. One foot down (lambda_td of leg ``down`` only):
+    in the tripod every leg of the other group sees it, the legs of its own group (itself included) do not."""
+    *_, alien = run(2, lambda k: {"swing": legs(*A), "lambda_td": legs(down)})
+    own = A if down in A else B
+    expect = np.array([0.0 if i in own else 1.0 for i in range(6)])
+    assert np.all(alien == expect)
+
+
+def test_only_the_legs_that_swing_next_need_an_alien_touchdown():
+    """The mirror of test_liftoff_needs_an_alien_touchdown: the slot-0 legs touch down, the standing legs (who
+    swing next) are supported only as searches given up. ATD holds; the legs that swing next see slot-0 feet
+    down (aTD); the slot-0 legs, who stand next, see no alien touchdown and need none: the exchange happens."""
+    def flags(k):
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": legs(*A), "gaveup": legs(*B)}
+    state, _, slot, n_switch, atd, _, alien = run(6, flags)
+    assert np.all(atd == 1) and np.all(alien[:, B] == 1) and np.all(alien[:, A] == 0)
+    assert n_switch[-1] == 1 and slot[-1] == 1 and np.all(state[-1, B] == SWING)

@@ -382,3 +382,29 @@ def test_only_the_legs_that_swing_next_need_an_alien_touchdown():
     state, _, slot, n_switch, atd, _, alien = run(6, flags)
     assert np.all(atd == 1) and np.all(alien[:, B] == 1) and np.all(alien[:, A] == 0)
     assert n_switch[-1] == 1 and slot[-1] == 1 and np.all(state[-1, B] == SWING)
+
+
+def test_the_gait_table_has_yu_y16_slot_counts_and_names():
+    """Y16: gamma = 2 (tripod), 3 (tetrapod), 6 (wave) slots per cycle; each slot table uses exactly gamma slots,
+    each of them at least once (the module docstring's table). Names and numbers select the same gait; an
+    unknown name or number is refused."""
+    from cpgsim.components.core import ParameterError
+    from cpgsim.components.yu.fsm import GAITS, gait_id
+
+    assert {g: (name, gamma) for g, (name, gamma, _) in GAITS.items()} == {1: ("tripod", 2), 2: ("tetrapod", 3),
+                                                                           3: ("wave", 6)}
+    for _, gamma, slots in GAITS.values():
+        assert sorted(set(slots)) == list(range(gamma)) and len(slots) == 6
+    assert [gait_id(n) for n in ("tripod", "tetrapod", "wave")] == [1, 2, 3] == [gait_id(g) for g in (1, 2, 3)]
+    for bad in ("gallop", "Tripod", 0, 4):
+        with pytest.raises(ParameterError):
+            gait_id(bad)
+
+
+def test_the_last_part_of_a_stance_ends_only_at_the_pep():
+    """Tetrapod slot 0: L2 (slot 1) stands with j = (0 - 1 - 1) mod 3 = 1, target (j + 1)/(gamma - 1) = 1: its
+    part is the stance's end, which comes when its leader passes its PEP (the swing flag), not when its network
+    time reaches T_half. With T_half = 0.8 s at the stance rate 3/4 that time passes at 1.07 s; the leg still
+    stands at 1.5 s, and goes to StanceProlong at the sample its flag rises (1.5 s)."""
+    state, *_ = run(160, lambda k: {"swing": legs(2, 4) if k < 150 else legs(1, 2, 4)}, gait=2, T_half=0.8)
+    assert np.all(state[:150, 1] == STANCE) and np.all(state[150:, 1] == STANCE_PROLONG)

@@ -408,3 +408,15 @@ def test_the_last_part_of_a_stance_ends_only_at_the_pep():
     stands at 1.5 s, and goes to StanceProlong at the sample its flag rises (1.5 s)."""
     state, *_ = run(160, lambda k: {"swing": legs(2, 4) if k < 150 else legs(1, 2, 4)}, gait=2, T_half=0.8)
     assert np.all(state[:150, 1] == STANCE) and np.all(state[150:, 1] == STANCE_PROLONG)
+
+
+def test_the_state_output_uses_the_documented_codes():
+    """The ``state`` port's description (module docstring, docs/blocks.md): 0 Swing, 1 Stance, 2 SwingProlong,
+    3 StanceProlong -- numbers written here, not the module's constants: a reflex on L1 while slot-0 legs swing
+    (tripod) holds the standing legs in 3; a slot-0 leg whose swing flag fell waits in 2."""
+    from cpgsim.components.yu.fsm import STATE_NAMES
+
+    assert STATE_NAMES == ("Swing", "Stance", "SwingProlong", "StanceProlong")
+    state, *_ = run(3, lambda k: {"swing": legs(0, 4) if k else legs(*A), "active": legs(0) if k else np.zeros(6)})
+    assert list(state[0]) == [0, 1, 0, 1, 0, 1]
+    assert list(state[2]) == [0, 3, 2, 3, 0, 3]

@@ -175,3 +175,18 @@ def test_chunks_cover_the_horizon_exactly_once():
         calls.append(chunk_length(k, n, 5_000, 1_000))
         k += calls[-1]
     assert k == n and calls == [1_000] * 12 + [345]
+
+
+def test_each_refusal_says_what_was_given():
+    # the messages with the numbers given (worked out here: (3e8 - 1e8) / 0.5 = 4e8 steps over the limit)
+    cases = [((1.0, 0.5, 0.1), "t_end must be a finite time after t0=1, got 0.5"),
+             ((0.0, 1.0, -0.1), "the macro step dt must be a positive finite number, got -0.1"),
+             ((1e8, 3e8, 0.5), "horizon 2e+08 s at dt=0.5 s is 4e+08 steps, more than the limit of 200000000"),
+             ((0.5, 1.5, 0.3), "t_end=1.5 s is not a whole number of macro steps dt=0.3 s from t0=0.5 s "
+                               "(3.33333 steps)")]
+    for args, text in cases:
+        with pytest.raises(ModelError) as e:
+            horizon_steps(*args)
+        assert text in str(e.value), (args, str(e.value))
+    with pytest.raises(ModelError, match=r"substeps must be a positive integer, got 2\.5$"):
+        check_substeps(2.5)

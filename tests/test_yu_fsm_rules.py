@@ -420,3 +420,15 @@ def test_the_state_output_uses_the_documented_codes():
     state, *_ = run(3, lambda k: {"swing": legs(0, 4) if k else legs(*A), "active": legs(0) if k else np.zeros(6)})
     assert list(state[0]) == [0, 1, 0, 1, 0, 1]
     assert list(state[2]) == [0, 3, 2, 3, 0, 3]
+
+
+def test_a_reflex_of_one_sample_still_counts_as_an_abort():
+    """The abort is latched "from the moment a reflex sends a Stance leg to StanceProlong" (module docstring):
+    a reflex on L1 at sample 4 only. At 4 the standing legs go to StanceProlong; at 5 no reflex runs, they
+    resume (their parts are not done) and the landed slot-0 legs start their stance at once, as after the
+    three-sample reflex above."""
+    fsm = Legs(1)
+    state = np.array([fsm.sample(swing=legs(*A) if k < 2 else np.zeros(6), landed=legs(*A), lambda_td=legs(*A),
+                                 active=legs(0) if k == 4 else np.zeros(6))["state"] for k in range(8)])
+    assert np.all(state[2:4][:, A] == SWING_PROLONG) and np.all(state[4, B] == STANCE_PROLONG)
+    assert np.all(state[5:] == STANCE)

@@ -432,3 +432,33 @@ def test_a_reflex_of_one_sample_still_counts_as_an_abort():
                                  active=legs(0) if k == 4 else np.zeros(6))["state"] for k in range(8)])
     assert np.all(state[2:4][:, A] == SWING_PROLONG) and np.all(state[4, B] == STANCE_PROLONG)
     assert np.all(state[5:] == STANCE)
+
+
+def test_the_stance_fraction_tolerance_ends_a_part_early():
+    """``p_tol``: a part ends when the progress reaches its fraction minus p_tol. The tetrapod test above with
+    p_tol = 0.2: L1's part (fraction 1/2) ends at (0.5 - 0.2) * 0.8 s = 0.24 s of network time, 0.24 / 0.75 =
+    0.32 s, within two samples (with p_tol added instead it would be 0.7 * 0.8 / 0.75 = 0.75 s)."""
+    state, *_ = run(100, lambda k: {"swing": legs(2, 4)}, gait=2, T_half=0.8, p_tol=0.2)
+    k = int(np.argmax(state[:, 0] == STANCE_PROLONG))
+    assert 0.32 <= k * DT <= 0.32 + 2 * DT + 1e-9, k
+
+
+def test_the_first_leg_too_needs_an_alien_touchdown_to_swing_next():
+    """Wave (one leg per slot, L1 in slot 2): every standing leg's leader is past its PEP (swing flags up: parts
+    done); L3 swings (slot 0) until sample 3, the switch to slot 1 comes at 4 (everything down), and L3's flag
+    rises again (its stance part done at once). In slot 1 L2
+    swings until sample 6; from sample 4 only L1's foot is down, the others are supported as searches given
+    up: ATD holds, but L1, who swings next, sees no touchdown of another leg, so the switch to slot 2 waits --
+    until every foot is down again at sample 10."""
+    def flags(k):
+        swing = np.ones(6)
+        if k in (3, 4):
+            swing[2] = 0.0  # L3's swing ends; in its stance from the switch its leader is past PEP at once
+        if k >= 6:
+            swing[1] = 0.0  # L2's swing ends
+        if 4 <= k < 10:
+            return {"swing": swing, "lambda_td": legs(0), "gaveup": legs(1, 2, 3, 4, 5)}
+        return {"swing": swing, "lambda_td": ALL}
+    state, _, slot, n_switch, atd, _, alien = run(14, flags, gait=3)
+    assert np.all(slot[:4] == 0) and np.all(slot[4:10] == 1) and np.all(slot[10:] == 2)
+    assert np.all(atd[4:10] == 1) and np.all(alien[4:10, 0] == 0) and state[10, 0] == SWING

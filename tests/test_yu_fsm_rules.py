@@ -462,3 +462,26 @@ def test_the_first_leg_too_needs_an_alien_touchdown_to_swing_next():
     state, _, slot, n_switch, atd, _, alien = run(14, flags, gait=3)
     assert np.all(slot[:4] == 0) and np.all(slot[4:10] == 1) and np.all(slot[10:] == 2)
     assert np.all(atd[4:10] == 1) and np.all(alien[4:10, 0] == 0) and state[10, 0] == SWING
+
+
+def test_a_leg_whose_early_stance_ended_before_the_switch_does_not_hold_the_gait():
+    """Module docstring: after an abort a landed slot-0 leg starts its stance early, "it ends its stance (at its
+    PEP) early and waits in StanceProlong for the next switch". Here that end comes before the switch: the
+    reflex on L1 at samples 4-6 aborts the standing legs, at 7 they resume and the landed slot-0 legs start
+    their stance; at 9 the slot-0 legs' leaders pass their PEP (swing flags up: StanceProlong); the standing
+    legs' parts end at 12 and their feet touch down then (ATD from 12). Every leg is then waiting on its part's
+    end: the switch must come at 13 (StanceProlong at 12, ready at 13), B swings."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(18):
+        swing = legs(*A) if k < 2 else np.zeros(6)
+        if k >= 9:
+            swing[A] = 1.0
+        if k >= 12:
+            swing[B] = 1.0
+        rows.append(fsm.sample(swing=swing, landed=legs(*A), lambda_td=legs(*A) if k < 12 else ALL,
+                               active=legs(0) if 4 <= k <= 6 else np.zeros(6)))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    assert np.all(state[7:9][:, A] == STANCE) and np.all(state[9:13][:, A] == STANCE_PROLONG)
+    assert np.all(slot[:13] == 0) and np.all(slot[13:] == 1) and np.all(state[13, B] == SWING)

@@ -339,17 +339,17 @@ def test_the_exchange_waits_for_every_single_leg(late_leg):
 def test_a_stance_begun_at_a_switch_counts_its_progress_from_the_switch():
     """tau (the network time run since the stance began) restarts when a leg goes from SwingProlong to Stance.
     Tetrapod, T_g = T_net = 5 s, T_half = 0.8 s: swing rate 3/2, stance rate 3/4 (Y16 over omega1). Slot 0: L3
-    and R2 swing (flag up for samples 0-9: about 0.15 s of network time), L1 and R3 end their part at 0.53 s
-    (the tetrapod test above), L2 and R1 (who swing next) pass their PEP at sample 60. Every foot is down: the
-    switch to slot 1 comes at sample 61. In slot 1, L3 stands with j = (1 - 0 - 1) mod 3 = 0: its part ends at
+    and R2 swing (flag up for samples 0-59: about 0.9 s of network time; their swing ends one sample before
+    the switch, so no sample in SwingProlong but that one), L1 and R3 end their part at 0.53 s (the tetrapod
+    test above), L2 and R1 (who swing next) pass their PEP at sample 60. Every foot is down: the switch to
+    slot 1 comes at sample 61. In slot 1, L3 stands with j = (1 - 0 - 1) mod 3 = 0: its part ends at
     (1/2 - p_tol) * T_half = 0.3992 s of network time, 0.3992 / 0.75 = 53.2 samples after the switch, within two
-    samples (as above). Counted from its swing instead, the part would end about 0.15 / 0.75 = 20 samples
-    sooner."""
+    samples (as above). Counted from its swing instead (0.9 > 0.3992), the part would end at once."""
     fsm = Legs(2, T_half=0.8)
     rows = []
     for k in range(140):
         swing = np.zeros(6)
-        if k < 10:
+        if k < 60:
             swing[[2, 4]] = 1.0
         if k >= 60:
             swing[[1, 3]] = 1.0  # L2, R1 leaders past PEP (and their swing after the switch)
@@ -485,3 +485,24 @@ def test_a_leg_whose_early_stance_ended_before_the_switch_does_not_hold_the_gait
     slot = np.array([r["slot"][0] for r in rows])
     assert np.all(state[7:9][:, A] == STANCE) and np.all(state[9:13][:, A] == STANCE_PROLONG)
     assert np.all(slot[:13] == 0) and np.all(slot[13:] == 1) and np.all(state[13, B] == SWING)
+
+
+@pytest.mark.parametrize("r3_done_at, early", [(8, False), (12, True)])
+def test_the_early_stance_waits_for_a_standing_leg_still_to_resume(r3_done_at, early):
+    """Module docstring: after an abort a landed slot-0 leg starts its stance early only when it "sees the
+    standing legs resume (no reflex runs and some leg of another slot has its stance part still to do)". A
+    one-sample reflex on L1 at 4; the slot-0 feet land only at 10; L2 and R1 end their parts at 8, R3 at
+    ``r3_done_at``; the standing feet never touch down (no ATD, no switch). With R3 still standing at 10 the
+    slot-0 legs start their stance then; with every standing part done they wait in SwingProlong."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(14):
+        swing = legs(*A) if k < 2 else np.zeros(6)
+        swing[[1, 3]] = 1.0 if k >= 8 else 0.0
+        swing[5] = 1.0 if k >= r3_done_at else 0.0
+        down = legs(*A) if k >= 10 else np.zeros(6)
+        rows.append(fsm.sample(swing=swing, landed=down, lambda_td=down,
+                               active=legs(0) if k == 4 else np.zeros(6)))
+    state = np.array([r["state"] for r in rows])
+    assert np.all(state[2:10][:, A] == SWING_PROLONG) and rows[-1]["n_switch"][0] == 0
+    assert np.all(state[10:12][:, A] == (STANCE if early else SWING_PROLONG))

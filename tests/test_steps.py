@@ -133,8 +133,9 @@ def test_the_whole_number_tolerance_is_one_part_in_a_billion():
         horizon_steps(0.0, (100 + 2e-7) * 0.01, 0.01)
     # below one step the tolerance is absolute, 1e-9 of a step: 1 - 5e-10 steps is one step
     assert horizon_steps(0.0, (1 - 5e-10) * 0.5, 0.5) == 1
-    with pytest.raises(ModelError, match="not a whole number"):
-        horizon_steps(0.0, (1 - 3e-9) * 0.5, 0.5)
+    for off in (3e-9, 1.5e-9):  # 1.5e-9: above 1e-9 of one step, below the 2e-9 a coarser floor would allow
+        with pytest.raises(ModelError, match="not a whole number"):
+            horizon_steps(0.0, (1 - off) * 0.5, 0.5)
 
 
 def test_a_refused_horizon_names_its_numbers():

@@ -109,6 +109,7 @@ def test_a_horizon_has_its_length_over_dt_steps(t0, t_end, dt, n):
     (0.0, 1.0, 0.3, "not a whole number of macro steps"),  # 3.33 steps
     (0.0, 1.0, 0.4, "not a whole number"),  # 2.5 steps (rounds to 2, not within tolerance)
     (0.0, 0.25, 0.5, "not a whole number"),  # half a step: rounds to 0
+    (0.0, 1e-12, 1.0, "not a whole number"),  # 1e-12 steps: within 1e-9 of 0 steps, but a run has at least one
     (0.0, 0.0, 0.1, "finite time after t0"),  # empty
     (1.0, 0.5, 0.1, "finite time after t0"),  # backwards
     (0.0, math.inf, 0.1, "finite time after t0"),

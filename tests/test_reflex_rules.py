@@ -360,3 +360,19 @@ def test_a_search_starts_without_a_set_and_ends_on_the_aep_state():
     c = commands([SWING, SWING, S(0.9, -0.1)] + GIVE_UP)
     assert (c[5]["set1"], c[5]["set23"], c[5]["capture"], c[5]["mode_cmd"]) == (1, 1, 0, 4)
     assert all(c[k]["set1"] == 0 for k in (2, 3, 4))
+
+
+def test_the_elevator_descent_rate_is_one_at_the_followers_maximum_and_faster_later():
+    """:func:`elevator_descent_rate` (module docstring, E1 end): the followers' time from their maximum to the
+    AEP over the leader's time from ``x1_apex`` to the AEP. With ``x1_apex`` where the locked orbit has the
+    followers at their maximum (``x1_at_max``, -0.035 on Table 1) both times are the same stretch of the
+    orbit: rate 1 (to the 1 ms sampling of the orbit). A later apex leaves the leader less time: faster.
+    An apex the leader never reaches in a swing (above its amplitude 1) is refused."""
+    from cpgsim.components.yu.converter import locked_orbit
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    o = locked_orbit()
+    assert elevator_descent_rate(o.x1_at_max) == pytest.approx(1.0, abs=0.01)
+    assert elevator_descent_rate(0.6) > 1.2
+    with pytest.raises(ValueError, match="not reached"):
+        elevator_descent_rate(1.5)

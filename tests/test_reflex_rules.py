@@ -376,3 +376,11 @@ def test_the_elevator_descent_rate_is_one_at_the_followers_maximum_and_faster_la
     assert elevator_descent_rate(0.6) > 1.2
     with pytest.raises(ValueError, match="not reached"):
         elevator_descent_rate(1.5)
+
+
+def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
+    """x1/A with A = sqrt(x1^2 + (y1/omega1)^2) (omega1 = 1 here): (0.6, 0.8) is 0.6 of a unit amplitude, below an
+    apex at 0.7: the followers are held; (0.8, 0.6) is 0.8: released at rate_descent. (Over |y1| alone the
+    first would read 0.75 and be released.)"""
+    r = _elevator([S(0.6, 0.8), S(0.8, 0.6)], x1_apex=0.7, rate_descent=1.5)
+    assert list(r["mode"][3:]) == [2, 2] and list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])

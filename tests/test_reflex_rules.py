@@ -384,3 +384,18 @@ def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
     first would read 0.75 and be released.)"""
     r = _elevator([S(0.6, 0.8), S(0.8, 0.6)], x1_apex=0.7, rate_descent=1.5)
     assert list(r["mode"][3:]) == [2, 2] and list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
+
+
+def test_the_settable_neuron_sets_its_state_and_the_set_wins_over_y_reset():
+    """:class:`SettableVanDerPolNeuron` (its docstring): ``set = 1`` puts ``(x, y) = (x_set, y_set)`` at the
+    sampled update, ``set`` takes precedence over ``y_reset`` (Y10: ``y`` to ``y_reset_value``, -1). The clock
+    is frozen (rate 0), so only the resets move the state: set at sample 3, y_reset at 6, both at 8."""
+    from cpgsim.components.yu.reflexes import SettableVanDerPolNeuron
+
+    n = 10
+    flag = lambda *ks: np.array([[1.0 if k in ks else 0.0 for k in range(n)]])  # noqa: E731
+    inputs = {"rate": np.zeros((1, n)), "set": flag(3, 8), "y_reset": flag(6, 8),
+              "x_set": np.full((1, n), 0.7), "y_set": np.full((1, n), -0.2)}
+    res = simulate(SettableVanDerPolNeuron("n"), t_end=(n - 1) * DT, dt=DT, inputs=inputs, backend="casadi")
+    assert list(res["n.x"]) == pytest.approx([0.0] * 3 + [0.7] * 7)
+    assert list(res["n.y"]) == pytest.approx([0.0] * 3 + [-0.2] * 3 + [-1.0] * 2 + [-0.2] * 2)

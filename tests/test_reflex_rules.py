@@ -298,7 +298,8 @@ def test_a_foothold_while_held_ends_the_return():
 # -- the commands to the network and the converter at the sample of each event ----------------------------
 
 SETS = {"x1_peak": 1.1, "x2_aep": 0.3, "y2_aep": -0.7, "x2_apex": 0.9}  # chosen values (not Table 1's)
-COMMANDS = ("y1_reset", "set1", "x1_set", "y1_set", "set23", "x23_set", "y23_set", "mode_cmd", "capture", "swing")
+COMMANDS = ("y1_reset", "set1", "x1_set", "y1_set", "set23", "x23_set", "y23_set", "mode_cmd", "capture", "swing",
+            "n_ert")
 
 
 def commands(samples: list[dict], **params) -> list[dict[str, float]]:
@@ -328,6 +329,7 @@ def test_the_elevator_trigger_reverses_the_leader_and_nothing_else():
     assert c[2]["swing"] == 1 and c[2]["capture"] == 0
     assert all(c[k]["y1_reset"] == 0 and c[k]["set1"] == 0 and c[k]["set23"] == 0 for k in (0, 1))
     assert c[0]["mode_cmd"] == 0 and c[0]["swing"] == 1
+    assert [c[k]["n_ert"] for k in range(3)] == [0, 0, 1]  # "events so far": this sample's trigger included
 
 
 def test_the_forward_stroke_sets_the_followers_to_their_maximum_and_its_end_to_the_aep_state():
@@ -399,3 +401,9 @@ def test_the_settable_neuron_sets_its_state_and_the_set_wins_over_y_reset():
     res = simulate(SettableVanDerPolNeuron("n"), t_end=(n - 1) * DT, dt=DT, inputs=inputs, backend="casadi")
     assert list(res["n.x"]) == pytest.approx([0.0] * 3 + [0.7] * 7)
     assert list(res["n.y"]) == pytest.approx([0.0] * 3 + [-0.2] * 3 + [-1.0] * 2 + [-0.2] * 2)
+
+
+def test_the_retraction_ends_only_when_the_leader_turns_forward():
+    """E1 end needs y1 > 0: a leader still retracting, whatever its speed (y1 = -0.5, -0.01), stays in mode 1."""
+    r = _elevator([S(0.0, -0.5), S(-0.1, -0.01), S(-0.2, 0.3)])
+    assert list(r["mode"][3:]) == [1, 1, 2]

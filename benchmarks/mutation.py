@@ -235,7 +235,10 @@ def recheck(session: Path, name: str, timeout: float) -> dict[str, object]:
         rows = con.execute("SELECT m.module_path, m.operator_name, m.occurrence FROM work_results r JOIN "
                            "mutation_specs m ON r.job_id = m.job_id WHERE r.test_outcome = 'SURVIVED'").fetchall()
         total = con.execute("SELECT COUNT(*) FROM work_results").fetchone()[0]
-        annotation = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED'").fetchone()[0]
+        annotation = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
+                                 (ANNOTATION_NOTE,)).fetchone()[0]
+        total -= con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
+                             (SAMPLE_NOTE,)).fetchone()[0]  # a sampled session: its sample (and annotations)
         killed0 = con.execute("SELECT COUNT(*) FROM work_results WHERE test_outcome IN ('KILLED', 'TIMEOUT')"
                               ).fetchone()[0]
     finally:

@@ -28,6 +28,7 @@ from cpgsim.components import memo
 from cpgsim.components.core import Block, CoSimBlock, ModelError, Port
 from cpgsim.components.graph import AlgebraicLoopError, FlatGraph, Graph, as_graph
 from cpgsim.harness import cache
+from cpgsim.harness.steps import check_substeps, substep_offsets
 
 if TYPE_CHECKING:
     from cpgsim.harness.grouped import Schedule
@@ -183,8 +184,7 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
         raise ModelError(f"grouping must be 'auto', 'flat' or 'kinds', got {grouping!r}")
     if not (dt > 0 and np.isfinite(dt)):
         raise ModelError(f"macro step dt must be a positive number, got {dt!r}")
-    if int(substeps) != substeps or substeps < 1:
-        raise ModelError(f"substeps must be a positive integer, got {substeps!r}")
+    substeps = check_substeps(substeps)
     graph = as_graph(item)
     flat = graph.flatten()
     if grouping == "auto":
@@ -416,10 +416,10 @@ class _Compiler:
         t, X, Z, U, P = args
         xp, zp = discrete(t, X, Z, U, P)
         y = signals(t, xp, zp, U, P)
-        h = self.dt / self.substeps
+        h, offsets = substep_offsets(self.dt, self.substeps)
         x = xp
-        for i in range(self.substeps):
-            ti = t + i * h
+        for offset in offsets:
+            ti = t + offset
             k1 = ode(ti, x, zp, U, P)
             k2 = ode(ti + h / 2, x + h / 2 * k1, zp, U, P)
             k3 = ode(ti + h / 2, x + h / 2 * k2, zp, U, P)

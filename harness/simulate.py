@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import fnmatch
 import functools
-import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from cpgsim.harness.compile import CompiledModel, compile_graph
 from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
 from cpgsim.harness.master import run_master
 from cpgsim.harness.results import Results
+from cpgsim.harness.steps import MAX_STEPS, chunk_length, horizon_steps, rows_per_second  # noqa: F401 (MAX_STEPS, horizon_steps: public names here too)
 
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
 """Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM for an
@@ -39,8 +39,6 @@ Since the grouped compile (:mod:`cpgsim.harness.grouped`) this only concerns gra
 with very large blocks: large graphs are grouped, their step is a few hundred MX instructions and
 their C (independent of the number of instances) builds in about a second, so they run natively."""
 
-MAX_STEPS = 200_000_000
-"""The most macro steps one run may have (55 hours at 1 ms); more is refused before anything is allocated."""
 
 STREAM_FLUSH_SECONDS = 2.0
 """A streamed run (``Simulator.run(stream=...)``) writes what it recorded at least this often (wall time)."""
@@ -152,7 +150,7 @@ class Simulator:
             from cpgsim.harness.results import ResultsWriter
 
             rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
-            rec.flush_rows = max(1, int(round(1.0 / m.dt)))
+            rec.flush_rows = rows_per_second(m.dt)
         cs = self._cosim_blocks
         stop = None
         try:
@@ -416,7 +414,7 @@ class Simulator:
         k = 0
         try:
             while k < n:
-                c = min(chunk, n - k, rec.flush_rows if rec.writer is not None else n)
+                c = chunk_length(k, n, chunk, rec.flush_rows if rec.writer is not None else None)
                 x_new, z_new, bad, finite = self._run_chunk(k, c, times, x, z, p, u_free, y_idx,
                                                             rec.data[rec.n:rec.n + c])
                 if finite and rec.checked == rec.n:  # checked in C while written: no second pass
@@ -673,24 +671,6 @@ def simulate(graph: Graph | Block, t_end: float, dt: float = 1e-3, inputs: Mappi
     progress = kw.pop("progress", False)
     x0 = kw.pop("x0", None)
     return Simulator(graph, dt=dt, params=params, **kw).run(t_end, inputs=inputs, x0=x0, progress=progress)
-
-
-def horizon_steps(t0: float, t_end: float, dt: float) -> int:
-    """The number of macro steps from ``t0`` to ``t_end``; refuses a horizon that is not a whole number of
-    steps of ``dt`` (relative tolerance 1e-9), an empty one, or one over :data:`MAX_STEPS`."""
-    if not (math.isfinite(t_end) and math.isfinite(t0) and t_end > t0):
-        raise ModelError(f"t_end must be a finite time after t0={t0:g}, got {t_end!r}")
-    if not (math.isfinite(dt) and dt > 0):
-        raise ModelError(f"the macro step dt must be a positive finite number, got {dt!r}")
-    steps = (t_end - t0) / dt
-    if not math.isfinite(steps) or steps > MAX_STEPS:
-        raise ModelError(f"horizon {t_end - t0:g} s at dt={dt:g} s is {steps:.3g} steps, more than the limit "
-                         f"of {MAX_STEPS} (use a larger --dt or a shorter --t-end)")
-    n = int(round(steps))
-    if n < 1 or abs(steps - n) > 1e-9 * max(1.0, steps):
-        raise ModelError(f"t_end={t_end:g} s is not a whole number of macro steps dt={dt:g} s from t0={t0:g} s "
-                         f"({steps:.6g} steps): choose t_end = t0 + k*dt")
-    return n
 
 
 def port_columns(columns: Sequence[str], port: str) -> list[tuple[int, int]]:

@@ -117,7 +117,19 @@ def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path,
     trial = cells["stiff"]["trials"][0]
     assert cells["stiff"]["crashed"] == 1 and trial["status"] == "failed" and "diverged" in trial["error"]
     assert trial["dir"].endswith("trials/yu/stiff/seed0")
-    # the same suite on Dask gives the same outcome for the cell that ran
+
+
+@pytest.mark.slow  # a Dask cluster (its start is most of this test's time); the batch's trials equal single runs
+def test_bench_on_dask_gives_the_batch_outcome(tmp_path, monkeypatch):
+    # quick-tier cover: test_batch_results_are_bit_identical_to_single_runs (a batch trial = a single run)
+    monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
+    from cpgsim.harness.experiments.bench import run_bench
+
+    suite = tmp_path / "tiny.toml"
+    suite.write_text('name = "tiny"\nseeds = 1\nt_end = 0.3\n[controllers.yu]\nscenario = "flat"\n[terrains.flat]\n')
+    doc = run_bench(suite, tmp_path / "b", progress=False, sets={"robot.engine": "mujoco"})
+    cells = {c["terrain"]: c for c in doc["cells"]}
+    assert doc["executor"].startswith("MuJoCo batch")
     dask = run_bench(suite, tmp_path / "d", progress=False, sets={"robot.engine": "mujoco"}, batch=False,
                      terrains=["flat"])
     assert dask["executor"].startswith("dask")

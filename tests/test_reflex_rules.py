@@ -38,7 +38,7 @@ def run(samples: list[dict], **params) -> dict[str, np.ndarray]:
     n = len(samples)
     series = {k: np.array([[s.get(k, d) for s in samples]]) for k, d in DEFAULTS.items()}
     blk = YuReflexLogic("r", **{"omega1": 1.0, **params})
-    res = simulate(blk, t_end=(n - 1) * DT, dt=DT, inputs=series)
+    res = simulate(blk, t_end=(n - 1) * DT, dt=DT, inputs=series, backend="casadi")
     return {o: res[f"r.{o}"] for o in OUTS}
 
 
@@ -293,3 +293,117 @@ def test_a_foothold_while_held_ends_the_return():
     assert list(r["mode"][5:]) == [4, 4, 0] and r["n_found"][-1] == 1 and r["n_withdraw"][-1] == 0
     r = _search(GIVE_UP + [S(0.9, -0.2), S(0.9, -0.2, td=1, sup=0.0)], withdraw=1.0, T_return=1.0)
     assert list(r["mode"][5:]) == [4, 4, 4]  # a contact that does not support is no foothold
+
+
+# -- the commands to the network and the converter at the sample of each event ----------------------------
+
+SETS = {"x1_peak": 1.1, "x2_aep": 0.3, "y2_aep": -0.7, "x2_apex": 0.9}  # chosen values (not Table 1's)
+COMMANDS = ("y1_reset", "set1", "x1_set", "y1_set", "set23", "x23_set", "y23_set", "mode_cmd", "capture", "swing",
+            "n_ert")
+
+
+def commands(samples: list[dict], **params) -> list[dict[str, float]]:
+    """What the rest of the network reads from the block at each sample: its outputs with the inputs of that
+    sample and the states before its update (the compile resolves every signal inside the sampled update
+    from the states before it: module docstring, "reset requests ... are evaluated with this sample's
+    events"), sample by sample."""
+    from cpgsim.harness.compile import compile_graph
+
+    m = compile_graph(YuReflexLogic("r", **{"omega1": 1.0, **SETS, **params}), dt=DT)
+    x, z, p = m.x0.copy(), m.z0.copy(), m.p0.copy()
+    out = []
+    for k, s in enumerate(samples):
+        u = np.zeros(m.inputs.size)
+        for name, d in DEFAULTS.items():
+            u[m.inputs.index("$" + name).slice] = s.get(name, d)
+        y = np.asarray(m.signals(k * DT, x, z, u, p)).ravel()
+        out.append({c: float(y[m.signals_layout.index(f"r.{c}").slice][0]) for c in COMMANDS})
+        x, z = (np.asarray(a).ravel() for a in m.discrete(k * DT, x, z, u, p))
+    return out
+
+
+def test_the_elevator_trigger_reverses_the_leader_and_nothing_else():
+    """ERT -> Y10: leader reset y1 = -1 keeping x1 (``y1_reset``), no state set; converter mode 1."""
+    c = commands([SWING, SWING, S(0.2, 1.0, ob=1)])
+    assert c[2]["y1_reset"] == 1 and c[2]["set1"] == 0 and c[2]["set23"] == 0 and c[2]["mode_cmd"] == 1
+    assert c[2]["swing"] == 1 and c[2]["capture"] == 0
+    assert all(c[k]["y1_reset"] == 0 and c[k]["set1"] == 0 and c[k]["set23"] == 0 for k in (0, 1))
+    assert c[0]["mode_cmd"] == 0 and c[0]["swing"] == 1
+    assert [c[k]["n_ert"] for k in range(3)] == [0, 0, 1]  # "events so far": this sample's trigger included
+
+
+def test_the_forward_stroke_sets_the_followers_to_their_maximum_and_its_end_to_the_aep_state():
+    """E1 end: followers set to their maximum (m, 0) = (x2_apex, 0), converter mode 2; E2 end: the whole network
+    set to the AEP state (x1_peak, 0; x2_aep, y2_aep), converter mode 0 (touchdown) or 3 (SRT)."""
+    for td, mode in ((1, 0), (0, 3)):
+        c = commands([SWING, S(0.2, 1.0, ob=1), S(0.1, -1.0), S(0.2, 1.0, td=td), S(0.9, 0.0, td=td)])
+        e1, e2 = c[3], c[4]
+        assert (e1["set23"], e1["x23_set"], e1["y23_set"], e1["set1"], e1["mode_cmd"]) == (1, 0.9, 0.0, 0, 2)
+        assert (e2["set1"], e2["x1_set"], e2["y1_set"]) == (1, 1.1, 0.0)
+        assert (e2["set23"], e2["x23_set"], e2["y23_set"]) == (1, 0.3, -0.7) and e2["mode_cmd"] == mode
+        assert c[2]["set23"] == 0 and c[2]["set1"] == 0 and c[2]["mode_cmd"] == 1  # retracting: no set
+
+
+def test_an_early_touchdown_sets_the_aep_state_captures_and_ends_the_swing_at_once():
+    c = commands([SWING, SWING, S(0.2, 1.0, td=1, foot=HIGH)])
+    e = c[2]
+    assert (e["set1"], e["set23"], e["capture"], e["swing"], e["mode_cmd"]) == (1, 1, 1, 0, 0)
+    assert (e["x1_set"], e["x23_set"], e["y23_set"]) == (1.1, 0.3, -0.7)
+    assert c[1]["capture"] == 0 and c[1]["swing"] == 1
+
+
+def test_a_search_starts_without_a_set_and_ends_on_the_aep_state():
+    """SRT: converter mode 3, no set (the network searches from where it is); found: the AEP state and
+    ``capture``, mode 0; give up: the AEP state without capture, mode 4 (return)."""
+    c = commands([SWING, SWING, S(0.9, -0.1), S(0.8, -0.5), S(0.7, -0.5, td=1)])
+    assert c[2]["mode_cmd"] == 3 and c[2]["set1"] == 0 and c[2]["set23"] == 0 and c[2]["swing"] == 0
+    assert c[3]["mode_cmd"] == 3 and c[3]["set1"] == 0
+    assert (c[4]["set1"], c[4]["set23"], c[4]["capture"], c[4]["mode_cmd"]) == (1, 1, 1, 0)
+    c = commands([SWING, SWING, S(0.9, -0.1)] + GIVE_UP)
+    assert (c[5]["set1"], c[5]["set23"], c[5]["capture"], c[5]["mode_cmd"]) == (1, 1, 0, 4)
+    assert all(c[k]["set1"] == 0 for k in (2, 3, 4))
+
+
+def test_the_elevator_descent_rate_is_one_at_the_followers_maximum_and_faster_later():
+    """:func:`elevator_descent_rate` (module docstring, E1 end): the followers' time from their maximum to the
+    AEP over the leader's time from ``x1_apex`` to the AEP. With ``x1_apex`` where the locked orbit has the
+    followers at their maximum (``x1_at_max``, -0.035 on Table 1) both times are the same stretch of the
+    orbit: rate 1 (to the 1 ms sampling of the orbit). A later apex leaves the leader less time: faster.
+    An apex the leader never reaches in a swing (above its amplitude 1) is refused."""
+    from cpgsim.components.yu.converter import locked_orbit
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    o = locked_orbit()
+    assert elevator_descent_rate(o.x1_at_max) == pytest.approx(1.0, abs=0.01)
+    assert elevator_descent_rate(0.6) > 1.2
+    with pytest.raises(ValueError, match="not reached"):
+        elevator_descent_rate(1.5)
+
+
+def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
+    """x1/A with A = sqrt(x1^2 + (y1/omega1)^2) (omega1 = 1 here): (0.6, 0.8) is 0.6 of a unit amplitude, below an
+    apex at 0.7: the followers are held; (0.8, 0.6) is 0.8: released at rate_descent. (Over |y1| alone the
+    first would read 0.75 and be released.)"""
+    r = _elevator([S(0.6, 0.8), S(0.8, 0.6)], x1_apex=0.7, rate_descent=1.5)
+    assert list(r["mode"][3:]) == [2, 2] and list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
+
+
+def test_the_settable_neuron_sets_its_state_and_the_set_wins_over_y_reset():
+    """:class:`SettableVanDerPolNeuron` (its docstring): ``set = 1`` puts ``(x, y) = (x_set, y_set)`` at the
+    sampled update, ``set`` takes precedence over ``y_reset`` (Y10: ``y`` to ``y_reset_value``, -1). The clock
+    is frozen (rate 0), so only the resets move the state: set at sample 3, y_reset at 6, both at 8."""
+    from cpgsim.components.yu.reflexes import SettableVanDerPolNeuron
+
+    n = 10
+    flag = lambda *ks: np.array([[1.0 if k in ks else 0.0 for k in range(n)]])  # noqa: E731
+    inputs = {"rate": np.zeros((1, n)), "set": flag(3, 8), "y_reset": flag(6, 8),
+              "x_set": np.full((1, n), 0.7), "y_set": np.full((1, n), -0.2)}
+    res = simulate(SettableVanDerPolNeuron("n"), t_end=(n - 1) * DT, dt=DT, inputs=inputs, backend="casadi")
+    assert list(res["n.x"]) == pytest.approx([0.0] * 3 + [0.7] * 7)
+    assert list(res["n.y"]) == pytest.approx([0.0] * 3 + [-0.2] * 3 + [-1.0] * 2 + [-0.2] * 2)
+
+
+def test_the_retraction_ends_only_when_the_leader_turns_forward():
+    """E1 end needs y1 > 0: a leader still retracting, whatever its speed (y1 = -0.5, -0.01), stays in mode 1."""
+    r = _elevator([S(0.0, -0.5), S(-0.1, -0.01), S(-0.2, 0.3)])
+    assert list(r["mode"][3:]) == [1, 1, 2]

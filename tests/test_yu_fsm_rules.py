@@ -32,7 +32,7 @@ def run(steps: int, flags, gait: int = 1, **params):
         for n, v in flags(k).items():
             series[n][:, k] = v
     fsm = YuGaitFSM("fsm", gait=gait, **{"T_g": 5.0, "T_net": 5.0, "T_half": 1.0, **params})
-    res = simulate(fsm, t_end=steps * DT, dt=DT, inputs=series)
+    res = simulate(fsm, t_end=steps * DT, dt=DT, inputs=series, backend="casadi")
     return tuple(res[f"fsm.{o}"] for o in ("state", "rate", "slot", "n_switch", "atd", "natd", "atd_alien"))
 
 
@@ -288,3 +288,221 @@ def test_a_foot_that_lands_late_holds_the_switch_in_every_slot(gait, order, late
         assert np.all(trace[k][1] == 1.0), (k, trace[k][1])  # every foot down at the switch
         # and the switch did wait for the last foot: the sample before, some foot was still in the air
         assert np.any(trace[k - 1][1] == 0.0), k
+
+
+def test_after_an_early_stance_the_switch_comes_and_the_landed_legs_stay_in_stance():
+    """Module docstring, "Early stance after an aborted stance": a slot-0 leg in early Stance "counts as ready
+    for the switch; at the switch it simply stays in Stance". The script of the test above; from sample 9 the
+    standing legs' leaders pass their PEP (swing flag) and every foot is down: at 9 they go to StanceProlong
+    (their part done), at 10 every leg is ready (slot-0 legs in Stance, the others in StanceProlong, done), ATD,
+    no reflex, the next slot's legs see slot-0 feet down (aTD): the switch, B swings, A stays in Stance."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(12):
+        rows.append(fsm.sample(swing=legs(*A) if k < 2 else legs(*B) if k >= 9 else np.zeros(6), landed=legs(*A),
+                               active=legs(0) if 4 <= k <= 6 else np.zeros(6),
+                               lambda_td=legs(*A) if k < 9 else ALL))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    assert np.all(state[7:9][:, A] == STANCE) and np.all(state[7:9][:, B] == STANCE)  # early stance, resumed
+    assert np.all(state[9, B] == STANCE_PROLONG) and np.all(slot[:10] == 0)
+    assert slot[10] == 1 and rows[10]["n_switch"][0] == 1
+    assert np.all(state[10, B] == SWING) and np.all(state[10, A] == STANCE)
+
+
+def test_natd_needs_some_but_not_all_feet_down():
+    """Table 2: NATD = 0 < sum(lambda_td) < 6: no foot down is not NATD, one to five are, six are not."""
+    for down, expect in (((), 0), ((3,), 1), ((0, 1, 2, 3, 4), 1), ((0, 1, 2, 3, 4, 5), 0)):
+        *_, natd, _ = run(2, lambda k, down=down: {"swing": legs(*A), "lambda_td": legs(*down)})
+        assert np.all(natd == expect), down
+
+
+@pytest.mark.parametrize("late_leg", [0, 1, 2, 3, 4, 5])
+def test_the_exchange_waits_for_every_single_leg(late_leg):
+    """SWITCH needs every leg ready: the tripod exchange of test_switch_needs_every_leg_ready_atd_and_no_reflex,
+    with one leg late -- a slot-0 leg still swinging (its swing flag stays up until sample 4) or a standing leg
+    whose leader passes its PEP only at sample 4 (its flag rises then). The exchange waits for that leg: the
+    others are ready from sample 2, the switch comes at sample 5 (the sample after the late leg's part ends;
+    StanceProlong needs its part done at the sample of the switch)."""
+    def flags(k):
+        swing = legs(*A) if k < 2 else legs(*B)
+        if k < 4:
+            swing[late_leg] = 1.0 if late_leg in A else 0.0
+        else:
+            swing[late_leg] = 0.0 if late_leg in A else 1.0
+        return {"swing": swing, "lambda_td": ALL}
+    state, rate, slot, n_switch, *_ = run(8, flags)
+    assert np.all(n_switch[:5] == 0) and np.all(slot[:5] == 0)
+    assert np.all(n_switch[5:] == 1) and np.all(slot[5:] == 1)
+
+
+def test_a_stance_begun_at_a_switch_counts_its_progress_from_the_switch():
+    """tau (the network time run since the stance began) restarts when a leg goes from SwingProlong to Stance.
+    Tetrapod, T_g = T_net = 5 s, T_half = 0.8 s: swing rate 3/2, stance rate 3/4 (Y16 over omega1). Slot 0: L3
+    and R2 swing (flag up for samples 0-59: about 0.9 s of network time; their swing ends one sample before
+    the switch, so no sample in SwingProlong but that one), L1 and R3 end their part at 0.53 s (the tetrapod
+    test above), L2 and R1 (who swing next) pass their PEP at sample 60. Every foot is down: the switch to
+    slot 1 comes at sample 61. In slot 1, L3 stands with j = (1 - 0 - 1) mod 3 = 0: its part ends at
+    (1/2 - p_tol) * T_half = 0.3992 s of network time, 0.3992 / 0.75 = 53.2 samples after the switch, within two
+    samples (as above). Counted from its swing instead (0.9 > 0.3992), the part would end at once."""
+    fsm = Legs(2, T_half=0.8)
+    rows = []
+    for k in range(140):
+        swing = np.zeros(6)
+        if k < 60:
+            swing[[2, 4]] = 1.0
+        if k >= 60:
+            swing[[1, 3]] = 1.0  # L2, R1 leaders past PEP (and their swing after the switch)
+        rows.append(fsm.sample(swing=swing, lambda_td=ALL))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    ks = int(np.argmax(slot == 1))
+    assert ks == 61 and state[ks, 2] == STANCE and state[ks - 1, 2] == SWING_PROLONG
+    k_end = ks + int(np.argmax(state[ks:, 2] == STANCE_PROLONG))
+    assert 53.2 <= k_end - ks <= 53.2 + 2, k_end - ks
+    assert np.all(state[ks:k_end, 2] == STANCE)
+
+
+@pytest.mark.parametrize("down", range(6))
+def test_atd_alien_is_a_touchdown_of_any_leg_of_another_slot(down):
+    """aTD_i: some leg j with slot(j) != slot(i) touches down. One foot down (lambda_td of leg ``down`` only):
+    in the tripod every leg of the other group sees it, the legs of its own group (itself included) do not."""
+    *_, alien = run(2, lambda k: {"swing": legs(*A), "lambda_td": legs(down)})
+    own = A if down in A else B
+    expect = np.array([0.0 if i in own else 1.0 for i in range(6)])
+    assert np.all(alien == expect)
+
+
+def test_only_the_legs_that_swing_next_need_an_alien_touchdown():
+    """The mirror of test_liftoff_needs_an_alien_touchdown: the slot-0 legs touch down, the standing legs (who
+    swing next) are supported only as searches given up. ATD holds; the legs that swing next see slot-0 feet
+    down (aTD); the slot-0 legs, who stand next, see no alien touchdown and need none: the exchange happens."""
+    def flags(k):
+        return {"swing": legs(*A) if k < 2 else legs(*B), "lambda_td": legs(*A), "gaveup": legs(*B)}
+    state, _, slot, n_switch, atd, _, alien = run(6, flags)
+    assert np.all(atd == 1) and np.all(alien[:, B] == 1) and np.all(alien[:, A] == 0)
+    assert n_switch[-1] == 1 and slot[-1] == 1 and np.all(state[-1, B] == SWING)
+
+
+def test_the_gait_table_has_yu_y16_slot_counts_and_names():
+    """Y16: gamma = 2 (tripod), 3 (tetrapod), 6 (wave) slots per cycle; each slot table uses exactly gamma slots,
+    each of them at least once (the module docstring's table). Names and numbers select the same gait; an
+    unknown name or number is refused."""
+    from cpgsim.components.core import ParameterError
+    from cpgsim.components.yu.fsm import GAITS, gait_id
+
+    assert {g: (name, gamma) for g, (name, gamma, _) in GAITS.items()} == {1: ("tripod", 2), 2: ("tetrapod", 3),
+                                                                           3: ("wave", 6)}
+    for _, gamma, slots in GAITS.values():
+        assert sorted(set(slots)) == list(range(gamma)) and len(slots) == 6
+    assert [gait_id(n) for n in ("tripod", "tetrapod", "wave")] == [1, 2, 3] == [gait_id(g) for g in (1, 2, 3)]
+    for bad in ("gallop", "Tripod", 0, 4):
+        with pytest.raises(ParameterError):
+            gait_id(bad)
+
+
+def test_the_last_part_of_a_stance_ends_only_at_the_pep():
+    """Tetrapod slot 0: L2 (slot 1) stands with j = (0 - 1 - 1) mod 3 = 1, target (j + 1)/(gamma - 1) = 1: its
+    part is the stance's end, which comes when its leader passes its PEP (the swing flag), not when its network
+    time reaches T_half. With T_half = 0.8 s at the stance rate 3/4 that time passes at 1.07 s; the leg still
+    stands at 1.5 s, and goes to StanceProlong at the sample its flag rises (1.5 s)."""
+    state, *_ = run(160, lambda k: {"swing": legs(2, 4) if k < 150 else legs(1, 2, 4)}, gait=2, T_half=0.8)
+    assert np.all(state[:150, 1] == STANCE) and np.all(state[150:, 1] == STANCE_PROLONG)
+
+
+def test_the_state_output_uses_the_documented_codes():
+    """The ``state`` port's description (module docstring, docs/blocks.md): 0 Swing, 1 Stance, 2 SwingProlong,
+    3 StanceProlong -- numbers written here, not the module's constants: a reflex on L1 while slot-0 legs swing
+    (tripod) holds the standing legs in 3; a slot-0 leg whose swing flag fell waits in 2."""
+    from cpgsim.components.yu.fsm import STATE_NAMES
+
+    assert STATE_NAMES == ("Swing", "Stance", "SwingProlong", "StanceProlong")
+    state, *_ = run(3, lambda k: {"swing": legs(0, 4) if k else legs(*A), "active": legs(0) if k else np.zeros(6)})
+    assert list(state[0]) == [0, 1, 0, 1, 0, 1]
+    assert list(state[2]) == [0, 3, 2, 3, 0, 3]
+
+
+def test_a_reflex_of_one_sample_still_counts_as_an_abort():
+    """The abort is latched "from the moment a reflex sends a Stance leg to StanceProlong" (module docstring):
+    a reflex on L1 at sample 4 only. At 4 the standing legs go to StanceProlong; at 5 no reflex runs, they
+    resume (their parts are not done) and the landed slot-0 legs start their stance at once, as after the
+    three-sample reflex above."""
+    fsm = Legs(1)
+    state = np.array([fsm.sample(swing=legs(*A) if k < 2 else np.zeros(6), landed=legs(*A), lambda_td=legs(*A),
+                                 active=legs(0) if k == 4 else np.zeros(6))["state"] for k in range(8)])
+    assert np.all(state[2:4][:, A] == SWING_PROLONG) and np.all(state[4, B] == STANCE_PROLONG)
+    assert np.all(state[5:] == STANCE)
+
+
+def test_the_stance_fraction_tolerance_ends_a_part_early():
+    """``p_tol``: a part ends when the progress reaches its fraction minus p_tol. The tetrapod test above with
+    p_tol = 0.2: L1's part (fraction 1/2) ends at (0.5 - 0.2) * 0.8 s = 0.24 s of network time, 0.24 / 0.75 =
+    0.32 s, within two samples (with p_tol added instead it would be 0.7 * 0.8 / 0.75 = 0.75 s)."""
+    state, *_ = run(100, lambda k: {"swing": legs(2, 4)}, gait=2, T_half=0.8, p_tol=0.2)
+    k = int(np.argmax(state[:, 0] == STANCE_PROLONG))
+    assert 0.32 <= k * DT <= 0.32 + 2 * DT + 1e-9, k
+
+
+def test_the_first_leg_too_needs_an_alien_touchdown_to_swing_next():
+    """Wave (one leg per slot, L1 in slot 2): every standing leg's leader is past its PEP (swing flags up: parts
+    done); L3 swings (slot 0) until sample 3, the switch to slot 1 comes at 4 (everything down), and L3's flag
+    rises again (its stance part done at once). In slot 1 L2
+    swings until sample 6; from sample 4 only L1's foot is down, the others are supported as searches given
+    up: ATD holds, but L1, who swings next, sees no touchdown of another leg, so the switch to slot 2 waits --
+    until every foot is down again at sample 10."""
+    def flags(k):
+        swing = np.ones(6)
+        if k in (3, 4):
+            swing[2] = 0.0  # L3's swing ends; in its stance from the switch its leader is past PEP at once
+        if k >= 6:
+            swing[1] = 0.0  # L2's swing ends
+        if 4 <= k < 10:
+            return {"swing": swing, "lambda_td": legs(0), "gaveup": legs(1, 2, 3, 4, 5)}
+        return {"swing": swing, "lambda_td": ALL}
+    state, _, slot, n_switch, atd, _, alien = run(14, flags, gait=3)
+    assert np.all(slot[:4] == 0) and np.all(slot[4:10] == 1) and np.all(slot[10:] == 2)
+    assert np.all(atd[4:10] == 1) and np.all(alien[4:10, 0] == 0) and state[10, 0] == SWING
+
+
+def test_a_leg_whose_early_stance_ended_before_the_switch_does_not_hold_the_gait():
+    """Module docstring: after an abort a landed slot-0 leg starts its stance early, "it ends its stance (at its
+    PEP) early and waits in StanceProlong for the next switch". Here that end comes before the switch: the
+    reflex on L1 at samples 4-6 aborts the standing legs, at 7 they resume and the landed slot-0 legs start
+    their stance; at 9 the slot-0 legs' leaders pass their PEP (swing flags up: StanceProlong); the standing
+    legs' parts end at 12 and their feet touch down then (ATD from 12). Every leg is then waiting on its part's
+    end: the switch must come at 13 (StanceProlong at 12, ready at 13), B swings."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(18):
+        swing = legs(*A) if k < 2 else np.zeros(6)
+        if k >= 9:
+            swing[A] = 1.0
+        if k >= 12:
+            swing[B] = 1.0
+        rows.append(fsm.sample(swing=swing, landed=legs(*A), lambda_td=legs(*A) if k < 12 else ALL,
+                               active=legs(0) if 4 <= k <= 6 else np.zeros(6)))
+    state = np.array([r["state"] for r in rows])
+    slot = np.array([r["slot"][0] for r in rows])
+    assert np.all(state[7:9][:, A] == STANCE) and np.all(state[9:13][:, A] == STANCE_PROLONG)
+    assert np.all(slot[:13] == 0) and np.all(slot[13:] == 1) and np.all(state[13, B] == SWING)
+
+
+@pytest.mark.parametrize("r3_done_at, early", [(8, False), (12, True)])
+def test_the_early_stance_waits_for_a_standing_leg_still_to_resume(r3_done_at, early):
+    """Module docstring: after an abort a landed slot-0 leg starts its stance early only when it "sees the
+    standing legs resume (no reflex runs and some leg of another slot has its stance part still to do)". A
+    one-sample reflex on L1 at 4; the slot-0 feet land only at 10; L2 and R1 end their parts at 8, R3 at
+    ``r3_done_at``; the standing feet never touch down (no ATD, no switch). With R3 still standing at 10 the
+    slot-0 legs start their stance then; with every standing part done they wait in SwingProlong."""
+    fsm = Legs(1)
+    rows = []
+    for k in range(14):
+        swing = legs(*A) if k < 2 else np.zeros(6)
+        swing[[1, 3]] = 1.0 if k >= 8 else 0.0
+        swing[5] = 1.0 if k >= r3_done_at else 0.0
+        down = legs(*A) if k >= 10 else np.zeros(6)
+        rows.append(fsm.sample(swing=swing, landed=down, lambda_td=down,
+                               active=legs(0) if k == 4 else np.zeros(6)))
+    state = np.array([r["state"] for r in rows])
+    assert np.all(state[2:10][:, A] == SWING_PROLONG) and rows[-1]["n_switch"][0] == 0
+    assert np.all(state[10:12][:, A] == (STANCE if early else SWING_PROLONG))

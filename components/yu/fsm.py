@@ -86,10 +86,10 @@ StanceProlong        SWITCH, otherwise                                  Stance
 ==================== ================================================== ==================
 
 ``SWITCH`` (then ``k -> k + 1 mod gamma``) = every leg is in its Prolong state with its part of
-the slot done (swing ended / stance fraction reached; a swinging-slot leg in early stance counts
-as done), no reflex runs, ATD, and aTD for the legs that swing next. So swing/stance changes
-happen at ATD; legs finishing early hold; a reflex delays the whole gait and all legs
-resynchronize when it ends. For the tripod this is Yu's
+the slot done (swing ended / stance fraction reached; a swinging-slot leg in early stance, or
+waiting in StanceProlong after it, counts as done), no reflex runs, ATD, and aTD for the legs that
+swing next. So swing/stance changes happen at ATD; legs finishing early hold; a reflex delays the
+whole gait and all legs resynchronize when it ends. For the tripod this is Yu's
 FSM: a swing that ends holds in SwingProlong, a stance that ends holds in StanceProlong, and the
 groups exchange at ATD.
 
@@ -209,7 +209,9 @@ class YuGaitFSM(Block):
             role_sw.append(sw)
             done.append(dn)
             s_eff.append(s)
-            ready.append(ca.if_else(sw, ca.logic_or(ca.fabs(s - SWING_PROLONG) < 0.5, ca.fabs(s - STANCE) < 0.5),
+            # a leg of this slot is ready once its swing is over: SwingProlong, an early stance (Stance), or an
+            # early stance already ended at its PEP (StanceProlong: it waits there for the switch)
+            ready.append(ca.if_else(sw, ca.fabs(s - SWING) > 0.5,
                                     ca.logic_and(ca.fabs(s - STANCE_PROLONG) < 0.5, dn)))
         all_ready = ready[0]
         next_ok = ca.logic_or(ca.fabs(slot_of[0] - k_next) > 0.5, a_td[0])

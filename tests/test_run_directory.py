@@ -81,13 +81,16 @@ KILLED = textwrap.dedent("""
 """)
 
 
-def test_killed_reruns_never_lose_the_previous_complete_run(tmp_path):
+@pytest.mark.parametrize("kills", [pytest.param(1, id="one-kill"),
+                                   pytest.param(5, id="five-kills", marks=pytest.mark.slow)])
+def test_killed_reruns_never_lose_the_previous_complete_run(tmp_path, kills):
+    """The quick tier kills one rerun at a random moment, the full run five (about 1 s each: sleeps)."""
     run = tmp_path / "run"
     make_run(run, {"summary.json": "first", "results.csv": "0\n"})
     script = tmp_path / "w.py"
     script.write_text(KILLED)
     rng = random.Random(27)
-    for i in range(5):
+    for i in range(kills):
         proc = subprocess.Popen([sys.executable, str(script), str(run), f"run{i}"])
         time.sleep(rng.uniform(0.3, 1.5))
         proc.send_signal(rng.choice([signal.SIGKILL, signal.SIGTERM]))

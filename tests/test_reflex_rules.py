@@ -380,6 +380,21 @@ def test_the_elevator_descent_rate_is_one_at_the_followers_maximum_and_faster_la
         elevator_descent_rate(1.5)
 
 
+
+def test_the_elevator_descent_rate_defaults_are_yu_table_1():
+    """The defaults are Yu 2019 Table 1's network (eps 0.1, b 4, omega (0.4, 0.8, 0.8) pi, k 0.1), typed
+    here from the paper; k and b both change the locked orbit's timing, so a wrong default shows (b = 5
+    instead of 4 does not, below the 1 ms sampling of the orbit the rate is read on: b = 9 does)."""
+    import math
+
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    table1 = {"eps": 0.1, "b": 4.0, "omega": (0.4 * math.pi, 0.8 * math.pi, 0.8 * math.pi), "k": 0.1}
+    rate = elevator_descent_rate(0.6)
+    assert rate == elevator_descent_rate(0.6, **table1)
+    assert abs(elevator_descent_rate(0.6, **{**table1, "k": 0.2}) - rate) > 1e-3
+    assert abs(elevator_descent_rate(0.6, **{**table1, "b": 9.0}) - rate) > 1e-3
+
 def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
     """x1/A with A = sqrt(x1^2 + (y1/omega1)^2) (omega1 = 1 here): (0.6, 0.8) is 0.6 of a unit amplitude, below an
     apex at 0.7: the followers are held; (0.8, 0.6) is 0.8: released at rate_descent. (Over |y1| alone the

@@ -506,3 +506,21 @@ def test_the_early_stance_waits_for_a_standing_leg_still_to_resume(r3_done_at, e
     state = np.array([r["state"] for r in rows])
     assert np.all(state[2:10][:, A] == SWING_PROLONG) and rows[-1]["n_switch"][0] == 0
     assert np.all(state[10:12][:, A] == (STANCE if early else SWING_PROLONG))
+
+
+def test_the_abort_latch_holds_for_its_slot_only():
+    """The ``aborted`` state is "a reflex aborted a stance in this slot" (its description; module docstring,
+    early stance after an aborted stance): set by the sample-4 reflex on L1 of the test above, held while
+    slot 0 lasts, cleared by the switch to slot 1 (sample 9, when every leader is past its PEP with all feet
+    down), so a later slot does not resume as if its stance had been aborted."""
+    fsm = Legs(1)
+    latch = fsm.m.dstates.index("fsm.aborted").slice
+    aborted, slot = [], []
+    for k in range(14):
+        swing = legs(*A) if k < 2 else (np.zeros(6) if k < 8 else ALL)
+        down = legs(*A) if k < 8 else ALL
+        out = fsm.sample(swing=swing, landed=down, lambda_td=down, active=legs(0) if k == 4 else np.zeros(6))
+        aborted.append(float(fsm.z[latch][0]))
+        slot.append(int(out["slot"][0]))
+    assert aborted[:4] == [0.0] * 4 and aborted[4:9] == [1.0] * 5
+    assert slot[8] == 0 and slot[9] == 1 and aborted[9:] == [0.0] * 5

@@ -524,3 +524,23 @@ def test_the_abort_latch_holds_for_its_slot_only():
         slot.append(int(out["slot"][0]))
     assert aborted[:4] == [0.0] * 4 and aborted[4:9] == [1.0] * 5
     assert slot[8] == 0 and slot[9] == 1 and aborted[9:] == [0.0] * 5
+
+
+def test_a_reflex_with_one_leg_in_stance_still_latches_the_abort():
+    """The abort is latched when a reflex sends *a* Stance leg to StanceProlong (module docstring), so one leg
+    is enough: wave gait, slot 0 (L3 swings); L1's part of the stance is not done (its swing flag down),
+    the other four are done and hold in StanceProlong. A reflex on L3 at sample 3 sends L1 to StanceProlong
+    and latches the abort; L1 resumes its stance at sample 4 (its part is still not done)."""
+    fsm = Legs(3)
+    latch = fsm.m.dstates.index("fsm.aborted").slice
+    swing, down = ALL.copy(), ALL.copy()
+    swing[0], down[2] = 0.0, 0.0
+    states, aborted = [], []
+    for k in range(6):
+        out = fsm.sample(swing=swing, landed=down, lambda_td=down, active=legs(2) if k == 3 else np.zeros(6))
+        states.append(out["state"].astype(int).tolist())
+        aborted.append(float(fsm.z[latch][0]))
+    held = [STANCE_PROLONG] * 3
+    assert states[2] == [STANCE, STANCE_PROLONG, SWING, *held]  # exactly one leg in Stance before the reflex
+    assert states[3] == [STANCE_PROLONG, STANCE_PROLONG, SWING, *held] and aborted[:3] == [0.0] * 3
+    assert aborted[3:] == [1.0] * 3 and states[4][0] == STANCE

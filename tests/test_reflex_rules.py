@@ -403,6 +403,16 @@ def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
     assert list(r["mode"][3:]) == [2, 2] and list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
 
 
+
+def test_the_apex_gate_divides_y1_by_omega1_and_x1_by_the_amplitude():
+    """The same gate with omega1 = 2 rad/s and a leader of amplitude 2 (Y10 changes the amplitude):
+    A = sqrt(x1^2 + (y1/omega1)^2) = sqrt(1.2^2 + 1.6^2) = 2 at (1.2, 3.2), so x1/A = 0.6 < 0.7: held; at
+    (1.6, 2.4) A = sqrt(1.6^2 + 1.2^2) = 2 again and x1/A = 0.8: released at rate_descent. (With y1 * omega1
+    the second reads 0.32 and stays held; with x1 * A the first reads 2.4 and is released.)"""
+    r = _elevator([S(1.2, 3.2), S(1.6, 2.4)], x1_apex=0.7, rate_descent=1.5, omega1=2.0)
+    assert list(r["mode"]) == [0, 1, 1, 2, 2]
+    assert list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
+
 def test_the_settable_neuron_sets_its_state_and_the_set_wins_over_y_reset():
     """:class:`SettableVanDerPolNeuron` (its docstring): ``set = 1`` puts ``(x, y) = (x_set, y_set)`` at the
     sampled update, ``set`` takes precedence over ``y_reset`` (Y10: ``y`` to ``y_reset_value``, -1). The clock

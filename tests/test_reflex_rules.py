@@ -395,6 +395,22 @@ def test_the_elevator_descent_rate_defaults_are_yu_table_1():
     assert abs(elevator_descent_rate(0.6, **{**table1, "k": 0.2}) - rate) > 1e-3
     assert abs(elevator_descent_rate(0.6, **{**table1, "b": 9.0}) - rate) > 1e-3
 
+
+def test_the_elevator_descent_rate_scales_with_the_leaders_time_left_to_the_aep():
+    """The rate is (followers' time, fixed) / (leader's time from x1_apex to the AEP), so two apexes' rates
+    stand in the inverse ratio of the leader's times. For a Van der Pol leader with eps = 0.1 the orbit is
+    nearly harmonic, x1 = peak cos(phase), so that time is arccos(x1_apex) / omega (error O(eps)): rate(0.9) /
+    rate(0.6) = arccos(0.6) / arccos(0.9) = 2.056 and rate(0.99) / rate(0.6) = 6.55 (a late apex: the leader
+    has 0.14 / 0.4 pi = 0.11 s left), to 3 %."""
+    import math
+
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    base = elevator_descent_rate(0.6)
+    for apex in (0.9, 0.99):
+        expected = math.acos(0.6) / math.acos(apex)
+        assert elevator_descent_rate(apex) / base == pytest.approx(expected, rel=0.03), apex
+
 def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
     """x1/A with A = sqrt(x1^2 + (y1/omega1)^2) (omega1 = 1 here): (0.6, 0.8) is 0.6 of a unit amplitude, below an
     apex at 0.7: the followers are held; (0.8, 0.6) is 0.8: released at rate_descent. (Over |y1| alone the

@@ -46,6 +46,21 @@ def fused_runner(plan: Any, cs: dict, step: Any, u: np.ndarray, y: np.ndarray, n
     return make(commit_fn, step._ctx, nx, nz, u, y, u_map, inputs, plan.yi, dt)
 
 
+class TimeGrid:
+    """A run's time grid as a C ``double *`` for the fused loops, converted once per grid (the master hands
+    every chunk the same ``times`` array)."""
+
+    def __init__(self) -> None:
+        self.values = np.zeros(0)
+        self._source: np.ndarray | None = None
+
+    def pointer(self, times: np.ndarray) -> Any:
+        if self._source is not times:
+            self.values = np.ascontiguousarray(times, dtype=np.float64)
+            self._source = times
+        return self.values.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
 def column_runs(columns: np.ndarray) -> list[tuple[slice, slice]]:
     """``(columns slice, positions slice)`` for each run of consecutive column numbers in ``columns``.
 

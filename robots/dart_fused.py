@@ -20,6 +20,7 @@ import ctypes
 
 import numpy as np
 
+from cpgsim.harness.fused import TimeGrid
 from cpgsim.robots.dart_native import NativeDartStep
 
 
@@ -47,16 +48,12 @@ class FusedLoop:
                       y.ctypes.data_as(dp), len(u_idx), u_i, o_i, plant._readout_out.ctypes.data_as(dp),
                       plant._readout_out.size, q_i, self.q_target.ctypes.data_as(dp), ctypes.byref(self._changed),
                       ctypes.byref(self._updated), float(plant.values["kp"]), len(yi), y_i)
-        self._times = np.zeros(0)
-        self._times_keep: np.ndarray | None = None
+        self._grid = TimeGrid()
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         """Macro steps ``k0 .. k1-1`` (at most a chunk); see the module docstring."""
         k1 = min(k1, k0 + self.chunk)
-        if self._times_keep is not times:
-            self._times = np.ascontiguousarray(times, dtype=np.float64)
-            self._times_keep = times
-        times_p = self._times.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        times_p = self._grid.pointer(times)
         plant, k, status = self.plant, k0, 0
         while k < k1:
             if plant._native is not self.native:
@@ -91,4 +88,4 @@ class FusedLoop:
     def _sync(self, k: int) -> None:
         """The plant's Python state once the C loop has stepped it to ``times[k]``."""
         updated, self._updated.value = self._updated.value, 0
-        self.plant._after_fused(float(self._times[k]), self.q_target, bool(self._changed.value), updated > 0)
+        self.plant._after_fused(float(self._grid.values[k]), self.q_target, bool(self._changed.value), updated > 0)

@@ -23,6 +23,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from cpgsim.harness.fused import TimeGrid
 from cpgsim.harness.native import NativeUnavailable, compile_source, optimization_flags
 
 BATCH = threading.local()
@@ -307,7 +308,7 @@ class FusedLoop:
                       plant._vel.ctypes.data_as(dp), plant._contact.ctypes.data_as(dp),
                       plant._readout_out.ctypes.data_as(dp), plant._readout_out.size, q_i, len(yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
-        self._times_keep = None
+        self._grid = TimeGrid()
         self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco_batch
         self.trial = None
         if self.batch is not None:
@@ -323,10 +324,7 @@ class FusedLoop:
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
         k1 = min(k1, k0 + self.chunk)
-        if self._times_keep is not times:
-            self._times = np.ascontiguousarray(times, dtype=np.float64)
-            self._times_keep = times
-        times_p = self._times.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        times_p = self._grid.pointer(times)
         if self.batch is not None:  # advanced with the other trials of the batch, in one C call
             rows, status = self.batch.advance(self, k0, k1, times_p, last=k1 >= len(times) - 1)
         else:

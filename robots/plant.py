@@ -440,7 +440,7 @@ class DartHexapod(PlantCommon, CoSimBlock):
                 self.world, self._skel, self._forces, self._force_world, self._link_contact, self._pos, self._vel,
                 self._contact, readout)
         except NativeUnavailable as exc:
-            warnings.warn(f"{self.name}: DART's step stays in Python ({exc})", RuntimeWarning, stacklevel=3)
+            self._drop_native(exc, stacklevel=4)
         if self._native is not None and readout is None:
             step = self._native.step
 
@@ -462,10 +462,14 @@ class DartHexapod(PlantCommon, CoSimBlock):
         self._update_outputs()
         if c_values != (self._force_world.tobytes(), self._link_contact.tobytes(), self._body_contact,
                         self._pos.tobytes(), self._vel.tobytes()):
-            warnings.warn(f"{self.name}: the C step's contact readout differs from the bindings'; "
-                          "DART's step stays in Python", RuntimeWarning, stacklevel=3)
-            native.close()
-            self._native = None
+            self._drop_native("the C step's contact readout differs from the bindings'", stacklevel=4)
+
+    def _drop_native(self, reason: object, stacklevel: int) -> None:
+        """Step DART in Python from now on (the C step is closed), saying why."""
+        warnings.warn(f"{self.name}: DART's step stays in Python ({reason})", RuntimeWarning, stacklevel=stacklevel)
+        if self._native is not None:
+            self._native.close()
+        self._native = None
 
     def _native_step(self) -> None:
         """One world step through the C step: ``setForces``, ``world.step()``, contact sums, outputs."""
@@ -590,9 +594,7 @@ class DartHexapod(PlantCommon, CoSimBlock):
             try:
                 self._native.register(obj, code)
             except NativeUnavailable as exc:
-                warnings.warn(f"{self.name}: DART's step stays in Python ({exc})", RuntimeWarning, stacklevel=2)
-                self._native.close()
-                self._native = None
+                self._drop_native(exc, stacklevel=3)
         return code
 
     def _read_contacts(self) -> None:

@@ -8,7 +8,7 @@ microseconds per step and their ratio to the default.
 
 - ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
   the signal rows derivatives read that move within the step, the sampled update merged into its signal
-  pass, common subexpressions shared (``harness/grouped.py``), gcc flags of
+  pass, common subexpressions shared (``harness/compiler/c_form.py``), gcc flags of
   ``harness/native.optimization_flags`` (-O1 for this 200 kB file);
 - ``grouped -O3``: the same C at -O3 (what a smaller file gets; 2 s more of gcc on a cold start);
 - ``flat``: every instance inlined into one CasADi expression, CasADi's own C (``grouping="flat"``).

@@ -1,7 +1,7 @@
 """Compiled models cached by content hash, so a graph compiled once starts in well under a second.
 
 The key is a SHA-256 of everything the compiled functions depend on: each equation block's class
-and configuration (:func:`cpgsim.harness.grouped.leaf_signature`: declarations, attributes, which inputs
+and configuration (:func:`cpgsim.harness.compiler.kinds.leaf_signature`: declarations, attributes, which inputs
 are wired), the source files of the block classes' modules, the wiring, the graph's inputs and
 co-simulation ports, ``dt``, ``substeps``, the grouping, the compiler's own source and the CasADi
 version. Parameter values and start values are not part of it: they are data (the parameter
@@ -48,7 +48,7 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatur
               code_files: list[str]) -> str:
     """Content hash of a flattened graph's compiled form (see module docstring).
 
-    ``signatures``: each equation block's :func:`cpgsim.harness.grouped.leaf_signature` by path; ``code_files``
+    ``signatures``: each equation block's :func:`cpgsim.harness.compiler.kinds.leaf_signature` by path; ``code_files``
     are the compiler's own sources.
     """
     h = hashlib.sha256()

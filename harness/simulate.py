@@ -35,7 +35,7 @@ from cpgsim.harness.steps import MAX_STEPS, chunk_length, horizon_steps, rows_pe
 NATIVE_AUTO_MAX_INSTRUCTIONS = 5_000
 """Above this many CasADi instructions per step, ``backend="auto"`` keeps the CasADi VM for an
 equation-only horizon (a flat six-leg Yu controller step is ~15k instructions: its C took gcc 13-16 s).
-Since the grouped compile (:mod:`cpgsim.harness.grouped`) this only concerns graphs of fewer than 64 blocks
+Since the grouped compile (:mod:`cpgsim.harness.compiler`) this only concerns graphs of fewer than 64 blocks
 with very large blocks: large graphs are grouped, their step is a few hundred MX instructions and
 their C (independent of the number of instances) builds in about a second, so they run natively."""
 

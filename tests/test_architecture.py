@@ -201,3 +201,17 @@ def _absolute_imports(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
             out.add(node.module)
     return out
+
+
+def test_the_compiler_imports_point_one_way():
+    """``harness/compiler`` is one pipeline: layout <- wiring <- kinds <- schedule <- the two emitters; none
+    of its modules imports a later stage or the entry point ``harness/compile.py`` that uses them."""
+    order = ["layout", "wiring", "kinds", "schedule", "casadi_form", "c_form"]
+    graph = import_graph()
+    wrong = []
+    for i, stage in enumerate(order):
+        deps = graph[f"cpgsim.harness.compiler.{stage}"]
+        later = {f"cpgsim.harness.compiler.{s}" for s in order[i + 1:]} | {"cpgsim.harness.compile"}
+        wrong += [f"{stage} -> {d}" for d in deps & later]
+    assert not wrong, wrong
+    assert set(order) == {p.stem for p in (ROOT / "harness" / "compiler").glob("*.py")} - {"__init__"}

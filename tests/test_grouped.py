@@ -84,6 +84,29 @@ def test_grouped_casadi_functions_equal_flat():
             assert np.array_equal(np.asarray(va), np.asarray(vb)), name
 
 
+def test_one_schedule_in_both_forms_gives_the_flat_numbers():
+    """One compiler: the grouped schedule (nested-graph kinds, whose equations are the straight-line form of
+    one instance's own schedule) evaluated in straight-line form is the flat compile bit for bit, and so is
+    its mapped form; the flat compile is a schedule of leaf kinds only (one per block configuration)."""
+    from cpgsim.harness.compiler.casadi_form import straight_line_functions
+
+    flat, kinds = compile_graph(mixed_graph(), grouping="flat"), compile_graph(mixed_graph(), grouping="kinds")
+    assert not any(k.label.startswith("graph_") for k in flat.schedule.kinds)
+    assert sum(len(k.members) for k in flat.schedule.kinds) == len(flat.flat.equation_blocks())
+    assert any(k.label.startswith("graph_") for k in kinds.schedule.kinds)
+    inlined = straight_line_functions(kinds.schedule, kinds.dt, kinds.substeps)
+    rng = np.random.default_rng(3)
+    x = flat.x0 + 0.3 * rng.standard_normal(flat.x0.size)
+    u = rng.standard_normal(flat.inputs.size)
+    args = [0.7, x, flat.z0, u, flat.p0]
+    for name in ("ode", "signals", "discrete", "step"):
+        want = [np.asarray(v) for v in getattr(flat, name).call(args)]
+        for fn in (inlined[name], getattr(kinds, name)):
+            got = [np.asarray(v) for v in fn.call(args)]
+            assert all(np.array_equal(a, b) for a, b in zip(want, got, strict=True)), name
+        assert np.ptp(want[0]) > 0.1  # something that moves, not zeros compared with zeros
+
+
 def test_kinds_found():
     model = compile_graph(mixed_graph(), grouping="kinds")
     s = model.schedule

@@ -1,0 +1,359 @@
+"""The schedule's looped C step for the native backend (the grouped compile).
+
+One loop per group calls the kind's CasADi-generated C function on pointers into the flat state,
+parameter and signal vectors (states, parameters and outputs of a block are contiguous in the model's
+layouts, so only inputs are gathered), then RK4 over the whole state vector. The first stage computes
+every signal (the recorded ``y``); the inner stages only the signal *rows* that derivatives read,
+directly or through other signals, and of those only the ones that depend on ``t`` or ``x`` (the rest are
+fixed for the step once the sampled update has run, and keep the first stage's values); the pass before
+the sampled update only the rows the update reads, and a kind's update is merged into the last of those
+passes of its kind where the order allows (:func:`_sampled_pass`). Each pruned or merged pass is its own
+CasADi function of the kind (same expressions, so the same numbers), and each kind's functions are
+generated with common subexpression elimination (a leg's kinematics appear in several of its blocks and
+again in its update). Kinds without inputs compute signals and derivatives in one pass in the first
+stage. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every driver of
+:mod:`cpgsim.harness.native` runs it unchanged.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from cpgsim.harness.compiler.schedule import Group, Schedule, group_rows
+
+
+def _derived(g: Group, outs: list[ca.SX], tag: str) -> ca.Function:
+    """A function of ``g``'s kind computing ``outs``, named after ``g``'s function with ``_tag`` appended."""
+    return g.kind.function(f"{g.fn.name()[len(g.kind.name) + 1:]}_{tag}", outs)
+
+
+def _group_outputs(g: Group) -> list[ca.SX]:
+    """The expression of every output of ``g`` in its kind's generic symbols."""
+    return g.fn.call(g.kind.args)
+
+
+def _stage_variant(s: Schedule) -> np.ndarray:
+    """Pool mask of the signals that can change between the RK4 stages of one step.
+
+    A signal row is variant when its expression depends on ``t`` or ``x``, or reads a variant input
+    (for any instance of its group); the rest depend only on parameters, discrete states and external
+    inputs, which are fixed for the whole step once the sampled update has run.
+    """
+    variant = np.zeros(s.pool_size, dtype=bool)
+    for level in s.signal_levels:
+        for g in level:
+            t, x, _z, u, _p = g.kind.args
+            cols = np.flatnonzero(variant[g.u_idx].any(axis=0)) if g.u_idx.size else np.zeros(0, dtype=int)
+            moving = ca.vertcat(t, x, u[cols.tolist()]) if cols.size else ca.vertcat(t, x)
+            for k, expr in enumerate(_group_outputs(g)):
+                rows = sorted(set(ca.jacobian_sparsity(expr, moving).get_triplet()[0]))
+                if rows:
+                    variant[group_rows(g, k).reshape(g.n, -1)[:, rows]] = True
+    return variant
+
+
+def _pruned_group(g: Group, keep: list[np.ndarray], tag: str) -> tuple[Group | None, list[int]]:
+    """``g`` computing only the rows ``keep[k]`` (a mask per output) of each output; and the input
+    columns those rows read. Kept rows are cut into contiguous runs, one output each."""
+    exprs, offs, targets = [], [], []
+    for k, (expr, mask) in enumerate(zip(_group_outputs(g), keep, strict=True)):
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            continue
+        for run in np.split(idx, np.flatnonzero(np.diff(idx) != 1) + 1):
+            a, b = int(run[0]), int(run[-1]) + 1
+            exprs.append(expr if (a, b) == (0, expr.numel()) else expr[a:b])
+            offs.append(g.out_off[k] + a)
+            targets.append(g.out_target[k])
+    if not exprs:
+        return None, []
+    u = g.kind.args[3]
+    cols = sorted(set(ca.jacobian_sparsity(ca.vertcat(*exprs), u).get_triplet()[1])) if u.numel() else []
+    return Group(g.kind, _derived(g, exprs, tag), g.x_off, g.z_off, g.p_off, g.u_idx, offs, targets), cols
+
+
+def _pruned_levels(s: Schedule, needed: np.ndarray, present: np.ndarray | None,
+                   tag: str) -> tuple[list[Group], np.ndarray]:
+    """The signal groups, in evaluation order, cut down to the rows pool mask ``needed`` asks for,
+    directly or through the inputs of those rows.
+
+    Rows in pool mask ``present`` are not computed (their values are already in the pool); the second
+    result is the mask of those that were needed (they must be valid in the pool the pruned groups use).
+    """
+    needed = needed.copy()
+    reused = np.zeros(s.pool_size, dtype=bool)
+    out: list[Group] = []
+    for level in reversed(s.signal_levels):
+        for g in reversed(level):
+            keep = []
+            for k in range(len(g.out_off)):
+                rows = group_rows(g, k).reshape(g.n, -1)
+                want = needed[rows]
+                if present is not None:
+                    reused[rows[want & present[rows]]] = True
+                    want = want & ~present[rows]
+                keep.append(want.any(axis=0))
+            pruned, cols = _pruned_group(g, keep, tag)
+            if pruned is None:
+                continue
+            needed[g.u_idx[:, cols].ravel()] = True
+            out.append(pruned)
+    out.reverse()
+    return out, reused
+
+
+def _sampled_pass(pre: list[Group], discrete: list[Group]) -> list[Group]:
+    """The groups of the sampled update in call order: the signal groups ``pre`` (pruned to what the update
+    reads), then the discrete groups.
+
+    A kind's discrete group is merged into the last of its signal groups in ``pre`` (one function of both,
+    with common subexpressions shared: a leg's update recomputes the kinematics its signals hold) when it
+    reads no signal written at or after that group; otherwise it runs after all of them.
+    """
+    seq = list(pre)
+    rest: list[Group] = []
+    for d in discrete:
+        at = [i for i, g in enumerate(seq) if g.kind is d.kind and np.array_equal(g.x_off, d.x_off)
+              and all(t == "pool" for t in g.out_target)]
+        if not at:
+            rest.append(d)
+            continue
+        i = at[-1]
+        later = np.concatenate([group_rows(g, k) for g in seq[i:] for k in range(len(g.out_off))])
+        if np.isin(d.u_idx, later).any():
+            rest.append(d)
+            continue
+        g = seq[i]
+        fn = _derived(g, _group_outputs(g) + _group_outputs(d), "sampled")
+        seq[i] = Group(g.kind, fn, g.x_off, g.z_off, g.p_off, d.u_idx, [*g.out_off, *d.out_off],
+                       [*g.out_target, *d.out_target])
+    return seq + rest
+
+
+def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
+    """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc)."""
+    from cpgsim.harness.native import casadi_c_source
+
+    fused = _fused_first_stage(s)
+    inner, reused = _pruned_levels(s, s.reads(s.derivative_groups), ~_stage_variant(s), "stage")
+    pre = _pruned_levels(s, s.reads(s.discrete_groups), None, "pre")[0] if s.has_discrete else []
+    sample = _sampled_pass(pre, s.discrete_groups)
+    reused_rows = np.flatnonzero(reused[:s.n_sig])
+    groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + list(fused.values())
+              + inner + sample)
+    source = casadi_c_source([g.fn for g in groups], "cpgsim_kinds")
+    parts = [source, "\n/* ---- grouped step (harness/compiler/c_form.py) ---- */\n"]
+    names: dict[int, str] = {}
+    for gi, g in enumerate(groups):
+        names[id(g)] = f"cg{gi}"
+        parts.append(_c_tables(f"cg{gi}", g, s.n_sig))
+        parts.append(_c_group_loop(f"cg{gi}", g, s.n_sig))
+    def calls(gs) -> str:
+        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
+
+    fused_kinds = {id(g.kind) for g in fused.values()}
+    sample_calls = calls(sample)
+    first_calls = calls(fused.get(id(g), g) for lv in s.signal_levels for g in lv)
+    first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
+    inner_calls = calls(inner)
+    if reused_rows.size:
+        parts.append(_c_array("cpgsim_reused", reused_rows))
+        keep_reused = (f"if (S != Sw) for (i = 0; i < {reused_rows.size}; ++i) "
+                       "Sw[cpgsim_reused[i]] = S[cpgsim_reused[i]];")
+    else:
+        keep_reused = ""
+    deriv_calls = calls(s.derivative_groups)
+    h = dt / substeps
+    nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
+    if s.has_discrete:
+        start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
+                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb);\n"
+                 "  xp = xa; zp = zb;")
+    else:
+        start = "xp = x; zp = z;"
+    parts.append(f"""
+/* S: the signals (model signal order); E: external inputs, then one zero (see the group tables) */
+
+/* the sampled update: the signals it reads, directly or through other signals (before the update), then
+   the resets and updates into x_out, z_out (a kind's update merged into its last signal pass there) */
+static void cpgsim_sample(double t, const double *x, const double *z, const double *p, double *S,
+                          const double *E, double *x_out, double *z_out) {{
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
+{sample_calls}
+}}
+
+/* inner RK4 stages: only the signal rows that derivatives read, directly or through other signals, and
+   of those only the rows that depend on t or x (the others keep the first stage's values) */
+static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *S,
+                                const double *E) {{
+  double *x_out = 0, *z_out = 0;
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
+{inner_calls}
+}}
+
+static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, double *S, const double *E,
+                        double *x_out) {{
+  double *z_out = 0;
+  (void)z_out;
+{deriv_calls}
+}}
+
+/* first RK4 stage: every signal and the derivatives; kinds without inputs do both in one call */
+static void cpgsim_first_stage(double t, const double *x, const double *z, const double *p, double *S,
+                               const double *E, double *x_out) {{
+  double *z_out = 0;
+  (void)z_out;
+{first_calls}
+{first_deriv_calls}
+}}
+
+
+#define CPGSIM_NX {max(nx, 1)}
+#define CPGSIM_NZ {max(nz, 1)}
+#define CPGSIM_NSIG {max(nsig, 1)}
+#define CPGSIM_NE {nu + 1}
+
+int cpgsim_step_impl_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {{
+  *sz_arg = 5; *sz_res = 3; *sz_iw = 0;
+  *sz_w = CPGSIM_NSIG + CPGSIM_NE + 7 * CPGSIM_NX + CPGSIM_NZ;
+  return 0;
+}}
+
+/* One macro step (Yu/Fukuhara blocks or any other): sampled update, then {substeps} RK4 substep(s);
+   y = the signals after the update at t0. Same arithmetic, in the same order, as the flat compile. */
+int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {{
+  const double t0 = arg[0] ? arg[0][0] : 0.0;
+  const double *x = arg[1], *z = arg[2], *u = arg[3], *p = arg[4];
+  double *Sw = w, *E = Sw + CPGSIM_NSIG, *xa = E + CPGSIM_NE, *xb = xa + CPGSIM_NX, *k1 = xb + CPGSIM_NX;
+  double *k2 = k1 + CPGSIM_NX, *k3 = k2 + CPGSIM_NX, *k4 = k3 + CPGSIM_NX, *xs = k4 + CPGSIM_NX, *zb = xs + CPGSIM_NX;
+  double *S = res[2] ? res[2] : Sw, *xn;
+  const double *xp, *zp;
+  long i;
+  int s;
+  (void)iw; (void)mem; (void)xb; (void)zb;
+  for (i = 0; i < {nu}; ++i) E[i] = u[i];
+  E[{nu}] = 0.0;
+  {start}
+  for (s = 0; s < {substeps}; ++s) {{
+    const double ti = t0 + s * {h!r};
+    xn = (s == {substeps - 1} && res[0]) ? res[0] : (s % 2 ? xa : xb);
+    if (s == 0) {{ cpgsim_first_stage(ti, xp, zp, p, S, E, k1); {keep_reused} }}
+    else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1); }}
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k2);
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k2[i];
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k3);
+    for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h!r} * k3[i];
+    cpgsim_signals_read(ti + {h!r}, xs, zp, p, Sw, E);
+    cpgsim_xdot(ti + {h!r}, xs, zp, p, Sw, E, k4);
+    for (i = 0; i < {nx}; ++i) xn[i] = xp[i] + {h / 6!r} * (((k1[i] + 2. * k2[i]) + 2. * k3[i]) + k4[i]);
+    xp = xn;
+  }}
+  if (res[0] && xp != res[0]) for (i = 0; i < {nx}; ++i) res[0][i] = xp[i];
+  if (res[1]) for (i = 0; i < {nz}; ++i) res[1][i] = zp[i];
+  return 0;
+}}
+""")
+    return "".join(parts)
+
+
+def _fused_first_stage(s: Schedule) -> dict[int, Group]:
+    """Signal group id -> one group computing the kind's signals and derivatives together.
+
+    For kinds without inputs whose signals are one group over all instances (an autonomous CPG
+    network): its derivatives need nothing from other kinds, so the first RK4 stage computes both in
+    one pass over the instances (one read of their states and parameters, shared subexpressions).
+    """
+    deriv = {id(g.kind): g for g in s.derivative_groups}
+    out: dict[int, Group] = {}
+    for level in s.signal_levels:
+        for g in level:
+            kind = g.kind
+            if kind.sizes[2] or id(kind) not in deriv or g.n != len(kind.members):
+                continue
+            if sum(int(g.fn.size1_out(k)) for k in range(g.fn.n_out())) != sum(
+                    int(e.numel()) for e in kind.outputs.values()):
+                continue  # the kind's signals are split over levels: not one group
+            outs = [g.fn.call(kind.args)[k] for k in range(g.fn.n_out())] + [kind.xdot]
+            fn = kind.function("first_stage", outs)
+            out[id(g)] = Group(kind, fn, g.x_off, g.z_off, g.p_off, g.u_idx, [*g.out_off, g.x_off],
+                               [*g.out_target, "x"])
+    return out
+
+
+def _c_array(name: str, values: np.ndarray) -> str:
+    vals = ",".join(str(int(v)) for v in np.asarray(values).ravel()) or "0"
+    return f"static const long long {name}[] = {{{vals}}};\n"
+
+
+def _input_columns(g: Group, n_sig: int) -> tuple[np.ndarray, list[str]]:
+    """Per input column: where it reads ("S" signals, "E" external, "SE" mixed) and the table to read it with."""
+    ui = g.u_idx.copy()
+    modes = []
+    for j in range(ui.shape[1]):
+        col = g.u_idx[:, j]
+        if np.all(col < n_sig):
+            modes.append("S")
+        elif np.all(col >= n_sig):
+            modes.append("E")
+            ui[:, j] = col - n_sig
+        else:
+            modes.append("SE")
+    return ui, modes
+
+
+def _c_tables(tag: str, g: Group, n_sig: int) -> str:
+    ui, _ = _input_columns(g, n_sig)
+    out = [_c_array(f"{tag}_xo", g.x_off), _c_array(f"{tag}_zo", g.z_off), _c_array(f"{tag}_po", g.p_off),
+           _c_array(f"{tag}_ui", ui)]
+    for k, off in enumerate(g.out_off):
+        if g.out_target[k] == "pool":
+            out.append(_c_array(f"{tag}_o{k}", off))
+    return "".join(out)
+
+
+def _c_group_loop(tag: str, g: Group, n_sig: int) -> str:
+    nu = g.u_idx.shape[1]
+    _, modes = _input_columns(g, n_sig)
+    fname = g.fn.name()
+    res_lines = []
+    for k, what in enumerate(g.out_target):
+        if what == "pool":
+            res_lines.append(f"    res[{k}] = S + {tag}_o{k}[i];")
+        elif what == "x":
+            res_lines.append(f"    res[{k}] = x_out + {tag}_xo[i];")
+        else:
+            res_lines.append(f"    res[{k}] = z_out + {tag}_zo[i];")
+    gathers = []
+    for j, mode in enumerate(modes):
+        ref = f"{tag}_ui[i * {nu} + {j}]"
+        if mode == "S":
+            gathers.append(f"    ub[{j}] = S[{ref}];")
+        elif mode == "E":
+            gathers.append(f"    ub[{j}] = E[{ref}];")
+        else:
+            gathers.append(f"    {{ long long k = {ref}; ub[{j}] = k < {n_sig} ? S[k] : E[k - {n_sig}]; }}")
+    n_res = max(1, len(g.out_target))
+    nl = "\n"
+    return f"""
+static void {tag}_run(double t, const double *x, const double *z, const double *p, double *S, const double *E,
+                     double *x_out, double *z_out) {{
+  long i;
+  double ub[{max(nu, 1)}];
+  const double *arg[5];
+  double *res[{n_res}];
+  double w[{max(1, g.fn.sz_w())}];
+  long long iw[{max(1, g.fn.sz_iw())}];
+  (void)x_out; (void)z_out; (void)S; (void)E;
+  arg[0] = &t; arg[3] = ub;
+  for (i = 0; i < {g.n}; ++i) {{
+{nl.join(gathers)}
+    arg[1] = x + {tag}_xo[i]; arg[2] = z + {tag}_zo[i]; arg[4] = p + {tag}_po[i];
+{nl.join(res_lines)}
+    {fname}(arg, res, iw, w, 0);
+  }}
+}}
+"""

@@ -1,7 +1,7 @@
 """The hexapod controller's compiled step alone: what one 1 ms macro step of Yu's six-leg controller costs.
 
 The controller's step is, with the physics engine's own step, what a robot run pays per control step
-(in the MuJoCo loop nothing else is left). Three builds of the same step, interleaved ``--repeat`` times
+(in the MuJoCo loop nothing else is left). Four builds of the same step, interleaved ``--repeat`` times
 in one process (load from other processes hits each alike), each run for ``--steps`` steps in one C call
 (the horizon driver of ``harness/native.py``; inputs held at zero, the model's start state): medians in
 microseconds per step and their ratio to the default.
@@ -11,6 +11,9 @@ microseconds per step and their ratio to the default.
   pass, common subexpressions shared (``harness/compiler/c_form.py``), gcc flags of
   ``harness/native.optimization_flags`` (-O1 for this 200 kB file);
 - ``grouped -O3``: the same C at -O3 (what a smaller file gets; 2 s more of gcc on a cold start);
+- ``grouped, nothing carried``: the default without carrying costly subexpressions between passes
+  (``harness/compiler/carry.py``: each signal pass computes its own ``sin``/``atan2``, as before
+  2026-12-03);
 - ``flat``: every instance inlined into one CasADi expression, CasADi's own C (``grouping="flat"``).
 
 Run: ``python benchmarks/bench_controller.py [--steps 5000] [--repeat 7]``.
@@ -30,6 +33,7 @@ os.environ.setdefault("CPGSIM_COMPILE_CACHE", "0")  # the grouped schedule is no
 from cpgsim.components.yu.leg import hexapod_controller  # noqa: E402
 from cpgsim.harness import native  # noqa: E402
 from cpgsim.harness.compile import compile_graph  # noqa: E402
+from cpgsim.harness.compiler.c_form import c_step_source  # noqa: E402
 
 
 def horizon(model, source: str | None, flags: tuple[str, ...] | None) -> native.NativeHorizon:
@@ -54,6 +58,8 @@ def main() -> None:
     builds = {
         f"grouped {' '.join(native.optimization_flags(source))} (default)": (kinds, horizon(kinds, source, None)),
         "grouped -O3": (kinds, horizon(kinds, source, ("-O3",))),
+        "grouped, nothing carried": (kinds, horizon(kinds, c_step_source(kinds.schedule, kinds.dt, kinds.substeps,
+                                                                          carry_costly=False), None)),
         f"flat {' '.join(native.optimization_flags(native.casadi_c_source([flat.step], 'x')))}":
             (flat, horizon(flat, None, None)),
     }

@@ -237,3 +237,66 @@ def test_signals_fixed_within_a_step_use_the_updated_value():
     assert a.columns == b.columns
     assert np.ptp(a["i0.y"]) > 1.0  # the counter drives the integrator
     assert np.array_equal(a.data, b.data)
+
+
+class _SinePlus(Block):
+    """``y = sin(a) + b`` (``b`` optional: 0 when unconnected)."""
+
+    def declare(self) -> None:
+        self.add_input("a", 1, "1")
+        self.add_input("b", 1, "1", default=0.0)
+        self.add_output("y", 1, "1")
+
+    def define(self, v: Symbols) -> Equations:
+        import casadi as ca
+
+        return Equations(outputs={"y": ca.sin(v.u["a"]) + v.u["b"]})
+
+
+def echo_graph(n: int = 4) -> Graph:
+    """``n`` identical nested graphs: an angle ``q`` (``dq/dt = 1``, ``q(0) = 0.2``), ``first.y = sin(q)`` at
+    level 0, an outside gain on it (level 1) fed back into ``second.y = sin(q) + gain`` (level 2).
+
+    Worked by hand: the looped step's first stage evaluates the nested kind at level 0 and again at level
+    2, so ``sin(q)`` is needed twice per instance and step; carried, once (the second pass reads it)."""
+    g = Graph("echo")
+    for i in range(n):
+        leg = Graph(f"leg{i}")
+        leg.add(Integrator("q", x0=0.2))
+        leg.add(Constant("rate", value=1.0, unit="1/s"))
+        leg.connect("rate.y", "q.u")
+        leg.add(_SinePlus("first"))
+        leg.add(_SinePlus("second"))
+        leg.connect("q.y", "first.a")
+        leg.connect("q.y", "second.a")
+        leg.expose_input("back", "second.b", unit="1")
+        leg.expose_output("first", "first.y")
+        g.add(leg)
+        g.add(Gain(f"gain{i}", k=0.5 + i))
+        g.connect(f"leg{i}.first", f"gain{i}.u")
+        g.connect(f"gain{i}.y", f"leg{i}.back")
+    return g
+
+
+def test_a_costly_subexpression_repeated_between_passes_is_computed_once():
+    from cpgsim.harness.compiler.c_form import c_step_source
+    from cpgsim.harness.native import NativeHorizon
+
+    model = compile_graph(echo_graph(), grouping="kinds")
+    assert any(k.label == "graph_leg0" and len(k.members) == 4 for k in model.schedule.kinds)
+    carried = c_step_source(model.schedule, model.dt, model.substeps)
+    plain = c_step_source(model.schedule, model.dt, model.substeps, carry_costly=False)
+    assert len(re.findall(r"\bsin\(", plain)) == 2 and len(re.findall(r"\bsin\(", carried)) == 1
+    flat = compile_graph(echo_graph(), grouping="flat")
+    n = 500
+    U = np.zeros((n, 0))
+    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
+            for src in (carried, plain)]
+    x_ref, y_ref = flat.x0.copy(), []
+    for k in range(n):
+        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
+        y_ref.append(y)
+    for x_end, _, rows, bad in runs:
+        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+    second = model.signals_layout.index("leg3.second.y").start  # sin(q) + (0.5 + 3) sin(q), q = 0.2 + t
+    assert rows[-1, second] == pytest.approx(4.5 * np.sin(0.2 + (n - 1) * model.dt), rel=1e-12)

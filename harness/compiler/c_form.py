@@ -11,8 +11,9 @@ passes of its kind where the order allows (:func:`_sampled_pass`). Each pruned o
 CasADi function of the kind (same expressions, so the same numbers), and each kind's functions are
 generated with common subexpression elimination (a leg's kinematics appear in several of its blocks and
 again in its update). Kinds without inputs compute signals and derivatives in one pass in the first
-stage. It defines ``cpgsim_step_impl`` with CasADi's calling convention, so every driver of
-:mod:`cpgsim.harness.native` runs it unchanged.
+stage. Costly subexpressions that a later pass of the same members would compute again are carried in a
+per-member buffer instead (:mod:`cpgsim.harness.compiler.carry`). It defines ``cpgsim_step_impl`` with
+CasADi's calling convention, so every driver of :mod:`cpgsim.harness.native` runs it unchanged.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from cpgsim.harness.compiler.carry import carry
 from cpgsim.harness.compiler.schedule import Group, Schedule, group_rows
 
 
@@ -131,30 +133,36 @@ def _sampled_pass(pre: list[Group], discrete: list[Group]) -> list[Group]:
     return seq + rest
 
 
-def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
-    """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc)."""
+def c_step_source(s: Schedule, dt: float, substeps: int, carry_costly: bool = True) -> str:
+    """C source defining ``cpgsim_step_impl`` / ``cpgsim_step_impl_work`` for schedule ``s`` (see module doc).
+
+    ``carry_costly``: costly subexpressions repeated between the sampled update's pass and the first
+    stage's signal passes are computed once (:mod:`cpgsim.harness.compiler.carry`)."""
     from cpgsim.harness.native import casadi_c_source
 
     fused = _fused_first_stage(s)
     inner, reused = _pruned_levels(s, s.reads(s.derivative_groups), ~_stage_variant(s), "stage")
     pre = _pruned_levels(s, s.reads(s.discrete_groups), None, "pre")[0] if s.has_discrete else []
     sample = _sampled_pass(pre, s.discrete_groups)
+    first = [fused.get(id(g), g) for lv in s.signal_levels for g in lv]
+    n_carry = 0
+    if carry_costly:
+        (sample, first), n_carry = carry(s, [sample, first])
     reused_rows = np.flatnonzero(reused[:s.n_sig])
-    groups = ([g for level in s.signal_levels for g in level] + s.derivative_groups + list(fused.values())
-              + inner + sample)
+    groups = list({id(g): g for g in first + s.derivative_groups + inner + sample}.values())
     source = casadi_c_source([g.fn for g in groups], "cpgsim_kinds")
     parts = [source, "\n/* ---- grouped step (harness/compiler/c_form.py) ---- */\n"]
     names: dict[int, str] = {}
     for gi, g in enumerate(groups):
         names[id(g)] = f"cg{gi}"
-        parts.append(_c_tables(f"cg{gi}", g, s.n_sig))
-        parts.append(_c_group_loop(f"cg{gi}", g, s.n_sig))
+        parts.append(_c_tables(f"cg{gi}", g, s.n_sig, s.pool_size))
+        parts.append(_c_group_loop(f"cg{gi}", g, s.n_sig, s.pool_size))
     def calls(gs) -> str:
-        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out);" for g in gs)
+        return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out, C);" for g in gs)
 
     fused_kinds = {id(g.kind) for g in fused.values()}
     sample_calls = calls(sample)
-    first_calls = calls(fused.get(id(g), g) for lv in s.signal_levels for g in lv)
+    first_calls = calls(first)
     first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
     inner_calls = calls(inner)
     if reused_rows.size:
@@ -168,7 +176,7 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
     nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
     if s.has_discrete:
         start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
-                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb);\n"
+                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb, C);\n"
                  "  xp = xa; zp = zb;")
     else:
         start = "xp = x; zp = z;"
@@ -178,32 +186,32 @@ def c_step_source(s: Schedule, dt: float, substeps: int) -> str:
 /* the sampled update: the signals it reads, directly or through other signals (before the update), then
    the resets and updates into x_out, z_out (a kind's update merged into its last signal pass there) */
 static void cpgsim_sample(double t, const double *x, const double *z, const double *p, double *S,
-                          const double *E, double *x_out, double *z_out) {{
-  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
+                          const double *E, double *x_out, double *z_out, double *C) {{
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out; (void)C;
 {sample_calls}
 }}
 
 /* inner RK4 stages: only the signal rows that derivatives read, directly or through other signals, and
    of those only the rows that depend on t or x (the others keep the first stage's values) */
 static void cpgsim_signals_read(double t, const double *x, const double *z, const double *p, double *S,
-                                const double *E) {{
+                                const double *E, double *C) {{
   double *x_out = 0, *z_out = 0;
-  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out;
+  (void)t; (void)x; (void)z; (void)p; (void)S; (void)E; (void)x_out; (void)z_out; (void)C;
 {inner_calls}
 }}
 
 static void cpgsim_xdot(double t, const double *x, const double *z, const double *p, double *S, const double *E,
-                        double *x_out) {{
+                        double *x_out, double *C) {{
   double *z_out = 0;
-  (void)z_out;
+  (void)z_out; (void)C;
 {deriv_calls}
 }}
 
 /* first RK4 stage: every signal and the derivatives; kinds without inputs do both in one call */
 static void cpgsim_first_stage(double t, const double *x, const double *z, const double *p, double *S,
-                               const double *E, double *x_out) {{
+                               const double *E, double *x_out, double *C) {{
   double *z_out = 0;
-  (void)z_out;
+  (void)z_out; (void)C;
 {first_calls}
 {first_deriv_calls}
 }}
@@ -213,10 +221,11 @@ static void cpgsim_first_stage(double t, const double *x, const double *z, const
 #define CPGSIM_NZ {max(nz, 1)}
 #define CPGSIM_NSIG {max(nsig, 1)}
 #define CPGSIM_NE {nu + 1}
+#define CPGSIM_NC {max(n_carry, 1)}
 
 int cpgsim_step_impl_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {{
   *sz_arg = 5; *sz_res = 3; *sz_iw = 0;
-  *sz_w = CPGSIM_NSIG + CPGSIM_NE + 7 * CPGSIM_NX + CPGSIM_NZ;
+  *sz_w = CPGSIM_NSIG + CPGSIM_NE + 7 * CPGSIM_NX + CPGSIM_NZ + CPGSIM_NC;
   return 0;
 }}
 
@@ -227,28 +236,29 @@ int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   const double *x = arg[1], *z = arg[2], *u = arg[3], *p = arg[4];
   double *Sw = w, *E = Sw + CPGSIM_NSIG, *xa = E + CPGSIM_NE, *xb = xa + CPGSIM_NX, *k1 = xb + CPGSIM_NX;
   double *k2 = k1 + CPGSIM_NX, *k3 = k2 + CPGSIM_NX, *k4 = k3 + CPGSIM_NX, *xs = k4 + CPGSIM_NX, *zb = xs + CPGSIM_NX;
+  double *C = zb + CPGSIM_NZ;  /* the carry buffer (harness/compiler/carry.py) */
   double *S = res[2] ? res[2] : Sw, *xn;
   const double *xp, *zp;
   long i;
   int s;
-  (void)iw; (void)mem; (void)xb; (void)zb;
+  (void)iw; (void)mem; (void)xb; (void)zb; (void)C;
   for (i = 0; i < {nu}; ++i) E[i] = u[i];
   E[{nu}] = 0.0;
   {start}
   for (s = 0; s < {substeps}; ++s) {{
     const double ti = t0 + s * {h!r};
     xn = (s == {substeps - 1} && res[0]) ? res[0] : (s % 2 ? xa : xb);
-    if (s == 0) {{ cpgsim_first_stage(ti, xp, zp, p, S, E, k1); {keep_reused} }}
-    else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1); }}
+    if (s == 0) {{ cpgsim_first_stage(ti, xp, zp, p, S, E, k1, C); {keep_reused} }}
+    else {{ cpgsim_signals_read(ti, xp, zp, p, Sw, E, C); cpgsim_xdot(ti, xp, zp, p, Sw, E, k1, C); }}
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k1[i];
-    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
-    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k2);
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E, C);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k2, C);
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h / 2!r} * k2[i];
-    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E);
-    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k3);
+    cpgsim_signals_read(ti + {h / 2!r}, xs, zp, p, Sw, E, C);
+    cpgsim_xdot(ti + {h / 2!r}, xs, zp, p, Sw, E, k3, C);
     for (i = 0; i < {nx}; ++i) xs[i] = xp[i] + {h!r} * k3[i];
-    cpgsim_signals_read(ti + {h!r}, xs, zp, p, Sw, E);
-    cpgsim_xdot(ti + {h!r}, xs, zp, p, Sw, E, k4);
+    cpgsim_signals_read(ti + {h!r}, xs, zp, p, Sw, E, C);
+    cpgsim_xdot(ti + {h!r}, xs, zp, p, Sw, E, k4, C);
     for (i = 0; i < {nx}; ++i) xn[i] = xp[i] + {h / 6!r} * (((k1[i] + 2. * k2[i]) + 2. * k3[i]) + k4[i]);
     xp = xn;
   }}
@@ -289,13 +299,17 @@ def _c_array(name: str, values: np.ndarray) -> str:
     return f"static const long long {name}[] = {{{vals}}};\n"
 
 
-def _input_columns(g: Group, n_sig: int) -> tuple[np.ndarray, list[str]]:
-    """Per input column: where it reads ("S" signals, "E" external, "SE" mixed) and the table to read it with."""
+def _input_columns(g: Group, n_sig: int, pool_size: int) -> tuple[np.ndarray, list[str]]:
+    """Per input column: where it reads ("S" signals, "E" external, "SE" mixed, "C" the carry buffer) and
+    the table to read it with."""
     ui = g.u_idx.copy()
     modes = []
     for j in range(ui.shape[1]):
         col = g.u_idx[:, j]
-        if np.all(col < n_sig):
+        if np.all(col >= pool_size):
+            modes.append("C")
+            ui[:, j] = col - pool_size
+        elif np.all(col < n_sig):
             modes.append("S")
         elif np.all(col >= n_sig):
             modes.append("E")
@@ -305,24 +319,26 @@ def _input_columns(g: Group, n_sig: int) -> tuple[np.ndarray, list[str]]:
     return ui, modes
 
 
-def _c_tables(tag: str, g: Group, n_sig: int) -> str:
-    ui, _ = _input_columns(g, n_sig)
+def _c_tables(tag: str, g: Group, n_sig: int, pool_size: int) -> str:
+    ui, _ = _input_columns(g, n_sig, pool_size)
     out = [_c_array(f"{tag}_xo", g.x_off), _c_array(f"{tag}_zo", g.z_off), _c_array(f"{tag}_po", g.p_off),
            _c_array(f"{tag}_ui", ui)]
     for k, off in enumerate(g.out_off):
-        if g.out_target[k] == "pool":
+        if g.out_target[k] in ("pool", "carry"):
             out.append(_c_array(f"{tag}_o{k}", off))
     return "".join(out)
 
 
-def _c_group_loop(tag: str, g: Group, n_sig: int) -> str:
+def _c_group_loop(tag: str, g: Group, n_sig: int, pool_size: int) -> str:
     nu = g.u_idx.shape[1]
-    _, modes = _input_columns(g, n_sig)
+    _, modes = _input_columns(g, n_sig, pool_size)
     fname = g.fn.name()
     res_lines = []
     for k, what in enumerate(g.out_target):
         if what == "pool":
             res_lines.append(f"    res[{k}] = S + {tag}_o{k}[i];")
+        elif what == "carry":
+            res_lines.append(f"    res[{k}] = C + {tag}_o{k}[i];")
         elif what == "x":
             res_lines.append(f"    res[{k}] = x_out + {tag}_xo[i];")
         else:
@@ -334,20 +350,22 @@ def _c_group_loop(tag: str, g: Group, n_sig: int) -> str:
             gathers.append(f"    ub[{j}] = S[{ref}];")
         elif mode == "E":
             gathers.append(f"    ub[{j}] = E[{ref}];")
+        elif mode == "C":
+            gathers.append(f"    ub[{j}] = C[{ref}];")
         else:
             gathers.append(f"    {{ long long k = {ref}; ub[{j}] = k < {n_sig} ? S[k] : E[k - {n_sig}]; }}")
     n_res = max(1, len(g.out_target))
     nl = "\n"
     return f"""
 static void {tag}_run(double t, const double *x, const double *z, const double *p, double *S, const double *E,
-                     double *x_out, double *z_out) {{
+                     double *x_out, double *z_out, double *C) {{
   long i;
   double ub[{max(nu, 1)}];
   const double *arg[5];
   double *res[{n_res}];
   double w[{max(1, g.fn.sz_w())}];
   long long iw[{max(1, g.fn.sz_iw())}];
-  (void)x_out; (void)z_out; (void)S; (void)E;
+  (void)x_out; (void)z_out; (void)S; (void)E; (void)C;
   arg[0] = &t; arg[3] = ub;
   for (i = 0; i < {g.n}; ++i) {{
 {nl.join(gathers)}

@@ -171,7 +171,8 @@ def build_schedule(w: Wiring, nested: bool = True) -> Schedule:
     derivative_groups, discrete_groups = [], []
     for kind in kinds:
         if kind.xdot.numel():
-            derivative_groups.append(group(kind, kind.members, kind.function("xdot", [kind.xdot]), [("x", "")], None))
+            fn = kind.function("xdot", [kind.xdot])
+            derivative_groups.append(group(kind, kind.members, fn, [("x", "")], _reads(w, kind, kind.xdot)))
         outs, exprs = [], []
         if kind.has_reset:
             outs.append(("x", ""))
@@ -183,6 +184,22 @@ def build_schedule(w: Wiring, nested: bool = True) -> Schedule:
             discrete_groups.append(group(kind, kind.members, kind.function("discrete", exprs), outs, None))
     return Schedule(n_sig, n_u, w.states.size, w.dstates.size, w.params.size, kinds,
                     [by_level[k] for k in sorted(by_level)], derivative_groups, discrete_groups, leaf_feed)
+
+
+def _reads(w: Wiring, kind: Kind, expr: ca.SX) -> set[int]:
+    """The inputs of ``kind`` (indices into a member's ``ext``) that ``expr`` depends on: the others are read
+    as the pool's zero, so that passes computing signals only for a derivative compute none it ignores."""
+    u = kind.args[3]
+    if not u.numel() or not kind.members:
+        return set()
+    cols = set(ca.jacobian_sparsity(expr, u).get_triplet()[1])
+    out, start = set(), 0
+    for k, src in enumerate(kind.members[0].ext):
+        size = w.source_port(src).size
+        if cols.intersection(range(start, start + size)):
+            out.add(k)
+        start += size
+    return out
 
 
 def group_rows(g: Group, k: int) -> np.ndarray:

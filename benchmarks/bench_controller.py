@@ -9,8 +9,8 @@ microseconds per step and their ratio to the default.
 - ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
   the signal rows derivatives read that move within the step, the sampled update merged into its signal
   pass, common subexpressions shared (``harness/compiler/c_form.py``), gcc flags of
-  ``harness/native.optimization_flags`` (-O1 for this 200 kB file);
-- ``grouped -O3``: the same C at -O3 (what a smaller file gets; 2 s more of gcc on a cold start);
+  ``harness/native.optimization_flags`` (-O3 for this 197 kB file since 2026-12-03; -O1 before);
+- ``grouped -O1``: the same C at -O1 (the default for this step until 2026-12-03; 0.9 s less of gcc);
 - ``grouped, nothing carried``: the default without carrying costly subexpressions between passes
   (``harness/compiler/carry.py``: each signal pass computes its own ``sin``/``atan2``, as before
   2026-12-03);
@@ -57,7 +57,7 @@ def main() -> None:
     source = kinds.c_step_source()
     builds = {
         f"grouped {' '.join(native.optimization_flags(source))} (default)": (kinds, horizon(kinds, source, None)),
-        "grouped -O3": (kinds, horizon(kinds, source, ("-O3",))),
+        "grouped -O1": (kinds, horizon(kinds, source, ("-O1",))),
         "grouped, nothing carried": (kinds, horizon(kinds, c_step_source(kinds.schedule, kinds.dt, kinds.substeps,
                                                                           carry_costly=False), None)),
         f"flat {' '.join(native.optimization_flags(native.casadi_c_source([flat.step], 'x')))}":

@@ -17,7 +17,7 @@ The harness time is split into the plant block's own Python around ``world.step(
 ("master+ctl": the master loop, waiting for the controller step, recording). ``--profile`` adds a
 cProfile breakdown of one more run.
 
-``--grouping`` instead compares the controller compiled grouped (the default, :mod:`cpgsim.harness.grouped`)
+``--grouping`` instead compares the controller compiled grouped (the default, :mod:`cpgsim.harness.compiler`)
 and flat, both on the master thread. ``--native`` instead compares, interleaved on the master thread, the
 controller + DART loop in C (the default: :mod:`cpgsim.robots.dart_fused`), the plant's C step under the
 master's Python loop (:mod:`cpgsim.robots.dart_native`, the fast path refused) and everything in Python

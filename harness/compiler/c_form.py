@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from cpgsim.harness.compiler.carry import carry
-from cpgsim.harness.compiler.schedule import Group, Schedule, group_rows
+from cpgsim.harness.compiler.schedule import Group, Schedule, group_rows, signals_depending_on
 
 
 def _derived(g: Group, outs: list[ca.SX], tag: str) -> ca.Function:
@@ -42,17 +42,7 @@ def _stage_variant(s: Schedule) -> np.ndarray:
     (for any instance of its group); the rest depend only on parameters, discrete states and external
     inputs, which are fixed for the whole step once the sampled update has run.
     """
-    variant = np.zeros(s.pool_size, dtype=bool)
-    for level in s.signal_levels:
-        for g in level:
-            t, x, _z, u, _p = g.kind.args
-            cols = np.flatnonzero(variant[g.u_idx].any(axis=0)) if g.u_idx.size else np.zeros(0, dtype=int)
-            moving = ca.vertcat(t, x, u[cols.tolist()]) if cols.size else ca.vertcat(t, x)
-            for k, expr in enumerate(_group_outputs(g)):
-                rows = sorted(set(ca.jacobian_sparsity(expr, moving).get_triplet()[0]))
-                if rows:
-                    variant[group_rows(g, k).reshape(g.n, -1)[:, rows]] = True
-    return variant
+    return signals_depending_on(s, lambda t, x, z: (t, x))
 
 
 def _pruned_group(g: Group, keep: list[np.ndarray], tag: str) -> tuple[Group | None, list[int]]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from cpgsim.harness.compiler.schedule import Group, Schedule, group_rows
+from cpgsim.harness.compiler.schedule import Group, Schedule, signals_depending_on
 
 COSTLY = {getattr(ca, f"OP_{name}") for name in (
     "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "ATAN2", "EXP", "LOG", "POW", "CONSTPOW", "SQRT",
@@ -132,17 +132,7 @@ def _update_variant(s: Schedule) -> np.ndarray:
     """Pool mask of the signals the sampled update can change: those whose expression reads ``x`` or ``z``
     (updated or reset), directly or through another such signal; the rest read only ``t``, parameters
     and external inputs (a demultiplexed sensor vector), which the update leaves alone."""
-    variant = np.zeros(s.pool_size, dtype=bool)
-    for level in s.signal_levels:
-        for g in level:
-            _t, x, z, u, _p = g.kind.args
-            cols = np.flatnonzero(variant[g.u_idx].any(axis=0)) if g.u_idx.size else np.zeros(0, dtype=int)
-            moving = ca.vertcat(x, z, u[cols.tolist()]) if cols.size else ca.vertcat(x, z)
-            for k, expr in enumerate(g.fn.call(g.kind.args)):
-                rows = sorted(set(ca.jacobian_sparsity(expr, moving).get_triplet()[0]))
-                if rows:
-                    variant[group_rows(g, k).reshape(g.n, -1)[:, rows]] = True
-    return variant
+    return signals_depending_on(s, lambda t, x, z: (x, z))
 
 
 def _costly_nodes(outs: list[ca.SX]) -> dict[int, ca.SX]:

@@ -16,6 +16,7 @@ what the flat compile's functions and a nested graph kind's equations are.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
@@ -206,6 +207,22 @@ def group_rows(g: Group, k: int) -> np.ndarray:
     """Pool elements output ``k`` of group ``g`` writes."""
     size = g.fn.size1_out(k)
     return (g.out_off[k][:, None] + np.arange(size)[None, :]).ravel()
+
+
+def signals_depending_on(s: Schedule, seeds: Callable[[ca.SX, ca.SX, ca.SX], tuple]) -> np.ndarray:
+    """Pool mask of the signal rows whose expression depends on ``seeds(t, x, z)`` (a kind's symbols), directly
+    or through an input that does (for any instance of its group), in evaluation order."""
+    mask = np.zeros(s.pool_size, dtype=bool)
+    for level in s.signal_levels:
+        for g in level:
+            t, x, z, u, _p = g.kind.args
+            cols = np.flatnonzero(mask[g.u_idx].any(axis=0)) if g.u_idx.size else np.zeros(0, dtype=int)
+            moving = ca.vertcat(*seeds(t, x, z), u[cols.tolist()]) if cols.size else ca.vertcat(*seeds(t, x, z))
+            for k, expr in enumerate(g.fn.call(g.kind.args)):
+                rows = sorted(set(ca.jacobian_sparsity(expr, moving).get_triplet()[0]))
+                if rows:
+                    mask[group_rows(g, k).reshape(g.n, -1)[:, rows]] = True
+    return mask
 
 
 def _contiguous_keys(kind: Kind, keys: tuple[str, ...]) -> bool:

@@ -323,25 +323,16 @@ def _c_group_loop(tag: str, g: Group, n_sig: int, pool_size: int) -> str:
     nu = g.u_idx.shape[1]
     _, modes = _input_columns(g, n_sig, pool_size)
     fname = g.fn.name()
+    where = {"pool": ("S", "o{k}"), "carry": ("C", "o{k}"), "x": ("x_out", "xo"), "z": ("z_out", "zo")}
     res_lines = []
     for k, what in enumerate(g.out_target):
-        if what == "pool":
-            res_lines.append(f"    res[{k}] = S + {tag}_o{k}[i];")
-        elif what == "carry":
-            res_lines.append(f"    res[{k}] = C + {tag}_o{k}[i];")
-        elif what == "x":
-            res_lines.append(f"    res[{k}] = x_out + {tag}_xo[i];")
-        else:
-            res_lines.append(f"    res[{k}] = z_out + {tag}_zo[i];")
+        base, table = where[what]
+        res_lines.append(f"    res[{k}] = {base} + {tag}_{table.format(k=k)}[i];")
     gathers = []
     for j, mode in enumerate(modes):
         ref = f"{tag}_ui[i * {nu} + {j}]"
-        if mode == "S":
-            gathers.append(f"    ub[{j}] = S[{ref}];")
-        elif mode == "E":
-            gathers.append(f"    ub[{j}] = E[{ref}];")
-        elif mode == "C":
-            gathers.append(f"    ub[{j}] = C[{ref}];")
+        if mode in ("S", "E", "C"):  # the signal pool, the external inputs, the carry buffer
+            gathers.append(f"    ub[{j}] = {mode}[{ref}];")
         else:
             gathers.append(f"    {{ long long k = {ref}; ub[{j}] = k < {n_sig} ? S[k] : E[k - {n_sig}]; }}")
     n_res = max(1, len(g.out_target))

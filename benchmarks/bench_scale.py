@@ -141,8 +141,8 @@ def rhs(s: np.ndarray, xp=np) -> np.ndarray:
     return xp.stack([y, dy], axis=2).reshape(-1)
 
 
-def horizon_for(neurons: int) -> float:
-    return FULL_HORIZON if neurons <= LARGE_ABOVE else LARGE_HORIZON
+def horizon_for(neurons: int, large: float = LARGE_HORIZON) -> float:
+    return FULL_HORIZON if neurons <= LARGE_ABOVE else large
 
 
 # -- C reference ------------------------------------------------------------------------------------
@@ -535,6 +535,10 @@ def main() -> None:
                     help=f"above {LARGE_ABOVE} neurons, skip a peer whose full run is estimated over this many s")
     ap.add_argument("--warm-cache", action="store_true",
                     help="use cpgsim's usual build cache (default: a fresh one, so the C build is timed cold)")
+    ap.add_argument("--large-horizon", type=float, default=LARGE_HORIZON,
+                    help=f"horizon in s above {LARGE_ABOVE} neurons (default {LARGE_HORIZON:g}; 20 s at 18,000 neurons "
+                         "holds 5.8 GB of states per runner besides the C reference's copy: on a 24 GB machine "
+                         "the peers' set-up ran out of memory, 2026-12-03)")
     ap.add_argument("--json", type=Path, help="also write the numbers to this JSON file")
     args = ap.parse_args()
     sizes = sorted({int(s) for s in args.sizes.split(",") if s.strip()})
@@ -564,7 +568,7 @@ def main() -> None:
               f"{args.backend!r}; median of {args.repeat}; peers: {', '.join(c.name for c in peers) or 'none'}")
         for n in sizes:
             neurons = 3 * n
-            horizon = horizon_for(neurons)
+            horizon = horizon_for(neurons, args.large_horizon)
             steps = int(round(horizon / DT))
             print(f"\n== {n} networks = {neurons:,} neurons, horizon {horizon:g} s ({steps:,} steps) ==", flush=True)
             t_size = time.perf_counter()

@@ -40,7 +40,10 @@ def carry(s: Schedule, passes: list[list[Group]]) -> tuple[list[list[Group]], in
     by_members: dict[tuple, list[tuple[int, int]]] = {}
     for pi, groups in enumerate(passes):
         for gi, g in enumerate(groups):
-            by_members.setdefault((id(g.kind), g.x_off.tobytes(), g.p_off.tobytes()), []).append((pi, gi))
+            # the same rows of x, z and p for every member (a kind without states or parameters has all
+            # offsets 0: its nodes then read only t and inputs, which _same_value compares)
+            key = (id(g.kind), g.x_off.tobytes(), g.z_off.tobytes(), g.p_off.tobytes())
+            by_members.setdefault(key, []).append((pi, gi))
     for places in by_members.values():
         if len(places) < 2:
             continue

@@ -107,6 +107,16 @@ def test_array_starts_are_space_separated_and_one_value_fills_every_element():
         v.start_values("1 256", "UInt8", 2, "n")
 
 
+def test_a_start_of_many_elements_is_counted_by_value_not_by_identity():
+    """An array of 300 elements with its 300 start values (FMI 3: one value per element, row-major) is
+    accepted, and 299 are refused: the count check compares numbers (CPython shares int objects only up to
+    256, so two equal counts of 300 are distinct objects)."""
+    text = " ".join(str(k % 7) for k in range(300))
+    assert v.start_values(text, "Int32", 300, "n") == tuple(k % 7 for k in range(300))
+    with pytest.raises(ModelDescriptionError, match="299 start values for 300 elements"):
+        v.start_values(" ".join(["1"] * 299), "Int32", 300, "n")
+
+
 def test_port_default_is_one_number_when_uniform():
     el = Element("Real", (1,), 3)
 

@@ -107,6 +107,20 @@ def test_array_starts_are_space_separated_and_one_value_fills_every_element():
         v.start_values("1 256", "UInt8", 2, "n")
 
 
+def test_a_start_of_many_elements_is_counted_by_value_not_by_identity():
+    """An array of 300 elements with its 300 start values (FMI 3: one value per element, row-major) is
+    accepted, and 299 are refused: the count check compares numbers (CPython shares int objects only up to
+    256, so two equal counts of 300 are distinct objects)."""
+    text = " ".join(str(k % 7) for k in range(300))
+    assert v.start_values(text, "Int32", 300, "n") == tuple(k % 7 for k in range(300))
+    with pytest.raises(ModelDescriptionError, match="299 start values for 300 elements"):
+        v.start_values(" ".join(["1"] * 299), "Int32", 300, "n")
+    # one value fills every element of an array, but an array of no elements takes none (the docstring:
+    # "count values")
+    with pytest.raises(ModelDescriptionError, match="1 start values for 0 elements"):
+        v.start_values("5", "Real", 0, "x")
+
+
 def test_port_default_is_one_number_when_uniform():
     el = Element("Real", (1,), 3)
 
@@ -132,6 +146,15 @@ def test_model_description_counts():
 def test_booleans_are_on_above_one_half():
     assert v.to_fmi("Boolean", np.array([0.0, 0.5, 0.5000001, 1.0, -1.0, 2.0])) == [False, False, True, True,
                                                                                      False, True]
+
+
+def test_a_boolean_type_name_read_from_a_file_is_compared_by_value():
+    """FMI 2.0.4 Sec. 2.1.2: fmi2Boolean is fmi2False or fmi2True. The type name of a variable comes from the
+    parsed modelDescription.xml, a string built at run time (not the interned literal "Boolean"), so it
+    must be compared by value: -1 and 2 still become False and True (not the nearest integers -1 and 2)."""
+    name = "".join(["Bool", "ean"])  # equal to "Boolean", another object (as a parser makes it)
+    got = v.to_fmi(name, np.array([-1.0, 0.0, 1.0, 2.0]))
+    assert got == [False, False, True, True] and all(type(b) is bool for b in got)
 
 
 @pytest.mark.parametrize("fmi_type", ["Integer", "Int8", "Int32", "UInt16", "Enumeration"])

@@ -64,6 +64,9 @@ def test_an_obstacle_in_swing_starts_the_elevator_retraction():
     (S(0.2, 1.0, ob=1, rate=0.0), {}, "the FSM holds the leg"),
     (S(0.9, 0.3, ob=1), {}, "x1 = 0.9 is not below x1_ob_max = 0.9"),
     (S(-0.98, 0.3, ob=1), {}, "x1 = -0.98 is not above x1_ob_min = -0.98"),
+    # outside the window, not only on its edges (the parameter texts: "no trigger at liftoff / touchdown")
+    (S(-0.99, 0.3, ob=1), {}, "x1 = -0.99, below x1_ob_min = -0.98: the leg is lifting off"),
+    (S(0.95, 0.3, ob=1), {}, "x1 = 0.95, above x1_ob_max = 0.9: the leg is touching down"),
     (S(0.2, 1.0, ob=1), {"elevator": 0.0}, "the elevator is off"),
     (S(0.2, 1.0, ob=0.5), {}, "lambda_ob = 0.5 is not set (a 0/1 flag, > 0.5)"),
     (S(0.2, 1.0, ob=1, sup=1.0), {"ob_support_veto": 1.0}, "a supporting contact with the veto on"),
@@ -135,6 +138,15 @@ def test_the_stroke_ends_at_the_new_aep_in_nominal_or_searching(td, mode, n_srt)
     """E2: mode 2, y1 <= 0, x1 > 0 -> mode 0; without touchdown it is an SRT: mode 3."""
     r = _elevator([S(0.2, 1.0, td=td), S(0.9, 0.0, td=td), S(0.9, -0.2, td=td)])
     assert list(r["mode"]) == [0, 1, 1, 2, mode, mode] and r["n_srt"][-1] == n_srt
+
+
+def test_the_stroke_ends_when_y1_turns_negative_without_passing_zero_on_a_sample():
+    """E2 reads y1 <= 0 (Yu 2019 eq. 11: the stroke ends once the leader stops protracting past x1 > 0): a
+    leader sampled at y1 = 0.1 and then -0.1 (no sample exactly at 0) ends the stroke at the -0.1 sample, in
+    mode 0 with a touchdown, in mode 3 (an SRT) without one."""
+    for td, mode in ((1, 0), (0, 3)):
+        r = _elevator([S(0.2, 1.0, td=td), S(0.9, 0.1, td=td), S(0.9, -0.1, td=td)])
+        assert list(r["mode"]) == [0, 1, 1, 2, 2, mode], td
 
 
 def test_the_stroke_does_not_end_before_the_aep():
@@ -288,6 +300,17 @@ def test_withdraw_without_a_foothold_times_out_into_the_plain_return():
     assert r["n_withdraw"][-1] == 1
 
 
+def test_the_held_return_lasts_t_return_from_the_give_up_off_the_sample_grid_and_late_in_the_run():
+    """The hold lasts T_return from the give-up (module docstring: "time since the mode change"): the give-up
+    is at row 5 (0.05 s), so with T_return = 0.065 s the withdraw starts at the first sample whose time since
+    then reaches 0.065 s: row 12 (0.07 s after it; 0.06 s at row 11 is short). 0.065 s lies between samples
+    (no sample is exactly T_return after the give-up) and the wait (0.065 s) is longer than the time the
+    give-up came at (0.05 s)."""
+    r = _search(GIVE_UP + [S(0.9, -0.2)] * 8, withdraw=1.0, T_return=0.065, withdraw_timeout=1.0)
+    assert list(r["mode"][5:]) == [4] * 7 + [5] * 2  # rows 5-11 held, 12-13 withdrawing
+    assert list(r["n_withdraw"][10:]) == [0, 0, 1, 1]
+
+
 def test_a_foothold_while_held_ends_the_return():
     r = _search(GIVE_UP + [S(0.9, -0.2), S(0.9, -0.2, td=1)], withdraw=1.0, T_return=1.0)
     assert list(r["mode"][5:]) == [4, 4, 0] and r["n_found"][-1] == 1 and r["n_withdraw"][-1] == 0
@@ -411,6 +434,44 @@ def test_the_elevator_descent_rate_scales_with_the_leaders_time_left_to_the_aep(
         expected = math.acos(0.6) / math.acos(apex)
         assert elevator_descent_rate(apex) / base == pytest.approx(expected, rel=0.03), apex
 
+def test_the_elevator_descent_rate_matches_the_event_located_times_to_its_sampling():
+    """The docstring's definition computed without sampling: on the same network (Yu 2019 eq. 5, Table 1)
+    from the AEP state, the leader's swing end (y1 falls through 0), the followers' maximum (y2 falls
+    through 0) and the leader passing x1_apex * x1_peak are located as solver events (rtol 1e-12), and the
+    rate is (t_end - t_max) / (t_end - t_apex). The function reads the same instants off a 1 ms grid, whose
+    error over times of 1-2.5 s is below 0.3 % (measured: 0.09 % at 0.3, 0.11 % at 0.6); 0.5 % is allowed
+    (a 1 s maximum step, for one, is 1.5 % off at both apexes)."""
+    import math
+
+    from scipy.integrate import solve_ivp
+
+    from cpgsim.components.yu.converter import _network_rhs, locked_orbit
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    omega = (0.4 * math.pi, 0.8 * math.pi, 0.8 * math.pi)
+    o = locked_orbit(0.1, 4.0, omega, 0.1)
+    rhs = _network_rhs((0.1,) * 3, (4.0,) * 3, omega, (0.1,) * 4)
+    for apex in (0.3, 0.6):
+        def swing_end(t, s):
+            return s[1]
+
+        def followers_max(t, s):
+            return s[3]
+
+        def at_apex(t, s, apex=apex):
+            return s[0] - apex * o.x1_peak
+
+        swing_end.direction, followers_max.direction, at_apex.direction = -1, -1, 1
+        s0 = [o.x1_peak, 0.0, o.x2_switch, o.y2_switch, o.x2_switch, o.y2_switch]
+        r = solve_ivp(rhs, (0.0, 2 * o.half_period + 0.5), s0, events=(swing_end, followers_max, at_apex),
+                      rtol=1e-12, atol=1e-12)
+        t_end = min(t for t in r.t_events[0] if t > o.half_period)  # the swing is the second half period
+        t_max = max(t for t in r.t_events[1] if o.half_period < t < t_end)
+        t_apex = min(t for t in r.t_events[2] if o.half_period < t < t_end)
+        expected = (t_end - t_max) / (t_end - t_apex)
+        assert elevator_descent_rate(apex) == pytest.approx(expected, rel=5e-3), apex
+
+
 def test_the_apex_gate_reads_the_leader_over_its_whole_amplitude():
     """x1/A with A = sqrt(x1^2 + (y1/omega1)^2) (omega1 = 1 here): (0.6, 0.8) is 0.6 of a unit amplitude, below an
     apex at 0.7: the followers are held; (0.8, 0.6) is 0.8: released at rate_descent. (Over |y1| alone the
@@ -428,6 +489,30 @@ def test_the_apex_gate_divides_y1_by_omega1_and_x1_by_the_amplitude():
     r = _elevator([S(1.2, 3.2), S(1.6, 2.4)], x1_apex=0.7, rate_descent=1.5, omega1=2.0)
     assert list(r["mode"]) == [0, 1, 1, 2, 2]
     assert list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
+
+def test_the_apex_gate_divides_by_an_amplitude_below_one():
+    """A leader of amplitude 0.5 (omega1 = 1): A = sqrt(0.3^2 + 0.4^2) = 0.5 at (0.3, 0.4), x1/A = 0.6 < 0.7:
+    held; at (0.4, 0.3) A = 0.5 and x1/A = 0.8: released at rate_descent (the 1e-9 floor only keeps the
+    division finite at the origin: dividing by at least 1 would read 0.3 and 0.4 and hold both)."""
+    r = _elevator([S(0.3, 0.4), S(0.4, 0.3)], x1_apex=0.7, rate_descent=1.5)
+    assert list(r["mode"]) == [0, 1, 1, 2, 2]
+    assert list(r["rate23"][3:]) == pytest.approx([0.0, 1.5])
+
+
+def test_the_elevator_descent_rate_reads_x1_apex_as_a_fraction_of_the_leaders_amplitude():
+    """``x1_apex`` is x1/A (the parameter's text: "until x1/A passes this"): with b = 1 the Van der Pol
+    leader's amplitude is 2/sqrt(b) = 2 (x1_peak 2.00 here, 1.00 for Table 1's b = 4), and the nearly harmonic
+    orbit (eps = 0.1) gives the same ratio of the leader's times as for amplitude 1: rate(0.9) / rate(0.6) =
+    arccos(0.6) / arccos(0.9) = 2.056, to 3 % (as in the test above)."""
+    import math
+
+    from cpgsim.components.yu.converter import locked_orbit
+    from cpgsim.components.yu.reflexes import elevator_descent_rate
+
+    assert locked_orbit(b=1.0).x1_peak == pytest.approx(2.0, rel=1e-3)
+    ratio = elevator_descent_rate(0.9, b=1.0) / elevator_descent_rate(0.6, b=1.0)
+    assert ratio == pytest.approx(math.acos(0.6) / math.acos(0.9), rel=0.03)
+
 
 def test_the_settable_neuron_sets_its_state_and_the_set_wins_over_y_reset():
     """:class:`SettableVanDerPolNeuron` (its docstring): ``set = 1`` puts ``(x, y) = (x_set, y_set)`` at the

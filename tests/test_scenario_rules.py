@@ -355,6 +355,17 @@ def test_overrides_create_tables_and_refuse_unknown_paths():
         apply_override(s, "nme.x", 1)
 
 
+def test_a_long_unknown_key_is_unknown_not_a_terrain_key():
+    """The terrain rule (terrain.KEY or terrain.FEATURE.FIELD, docs/scenarios.md) is about keys under
+    terrain only: a four-part key under a top-level name that does not exist, here one that sorts after
+    "terrain", is an unknown key like any other, not a malformed terrain key."""
+    s = _doc(BASE)
+    with pytest.raises(ScenarioError, match=re.escape("--set zone.a.b.c: unknown key 'zone.a.b.c'")):
+        apply_override(s, "zone.a.b.c", 1)
+    with pytest.raises(ScenarioError, match=re.escape("--set terrain.a.b.c: terrain keys are terrain.KEY or")):
+        apply_override(s, "terrain.a.b.c", 1)
+
+
 def test_overridden_errors_say_set_and_the_feature_rules():
     with pytest.raises(ScenarioError, match=re.escape("t_end = -1.0 is out of range: must be > 0 (--set t_end, ")):
         load("flat", {"t_end": -1.0})

@@ -239,3 +239,35 @@ def test_identity_needs_both_scale_one_and_no_shift():
     kc = conversion("K", "degC")
     assert not kc.identity and kc.shift == pytest.approx(-273.15)
     assert parse_unit("m2/s").dimension() == "m2 s-1"
+
+
+def test_a_ratio_one_only_up_to_rounding_is_snapped_to_the_identity():
+    """1 kg/ms = 1e3 kg/s and 1 g/us = 1e-3 / 1e-6 = 1e3 kg/s (SI prefixes, BIPM SI brochure 9th ed.): one
+    unit. In floating point the factors' quotient is 0.9999999999999999 (1e3 / (1e-3 / 1e-6)), so only the
+    snapping to 1 makes the wire the identity (the pairs above divide to exactly 1.0 and never reach it)."""
+    c = conversion("kg/ms", "g/us")
+    assert c.scale == 1.0 and c.identity
+
+
+def test_an_offset_into_a_unit_whose_factor_is_not_one():
+    """degC -> K*mm/m (a millikelvin written as a product: factor 1e-3, no offset of its own). SI: T/K =
+    t/degC + 273.15, so 0 degC = 273.15 K = 273150 mK and a step of 1 degC is 1000 mK: scale 1000, shift
+    273150 (the shift is divided by the target's factor, not multiplied)."""
+    c = conversion("degC", "K*mm/m")
+    assert c.scale == pytest.approx(1000.0) and c.shift == pytest.approx(273150.0)
+
+
+def test_no_offset_for_a_reciprocal_or_a_product_with_a_temperature():
+    """The offset belongs only to the lone symbol to the first power (parse_unit's docstring; FMI: a derived
+    quantity carries no offset): a coefficient per degree (degC^-1 = K^-1: a difference of 1 degC is 1 K)
+    and degC*m = K*m convert as the identity, with no 273.15 shift."""
+    assert parse_unit("degC^-1").offset == 0.0 and conversion("degC^-1", "K^-1").identity
+    assert parse_unit("degC*m").offset == 0.0 and conversion("degC*m", "K*m").identity
+
+
+def test_an_unknown_unit_written_with_spaces_is_the_same_unit():
+    """parse_unit drops spaces before anything else ("m / s" is "m/s", above), so "widget / s" and "widget/s"
+    name one unit: not known, but the identity to itself (the module docstring: an unknown unit still connects
+    to the identical string, which the two spellings are after that normalisation)."""
+    assert not parse_unit("widget/s").known
+    assert conversion("widget/s", "widget / s").identity

@@ -62,7 +62,7 @@ def number_attribute(text: Any, element: str, attribute: str, fmi_type: str = "R
             value = int(token)
         except ValueError:
             raise ModelDescriptionError(f"{where} is not an integer ({fmi_type})") from None
-        lo, hi = INT_RANGES.get(fmi_type, (-2**63, 2**64 - 1))
+        lo, hi = INT_RANGES[fmi_type]  # every one of INT_TYPES has its range (a test holds the two equal)
         if not lo <= value <= hi:
             raise ModelDescriptionError(f"{where} is out of range for {fmi_type} [{lo}, {hi}]")
         return value

@@ -412,9 +412,7 @@ def apply_override(scenario: Scenario, key: str, value: Any) -> None:
     node = scenario.doc
     for part in path[:-1]:
         if part not in node:
-            if path[0] == "terrain" and len(path) == 3:
-                node[part] = {}
-            elif path[0] in SECTIONS and len(path) >= 2:
+            if path[0] in SECTIONS:  # (this loop runs only for a path of two parts or more)
                 node[part] = {}
             else:
                 raise ScenarioError(f"--set {key}: unknown key {'.'.join(path)!r}{did_you_mean(path[0], SCHEMA)} "

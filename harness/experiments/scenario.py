@@ -397,8 +397,8 @@ def resolve_key(scenario: Scenario, key: str) -> list[str]:
         if key in SCHEMA and not isinstance(SCHEMA[key], dict):
             return [key]
         key = f"controller.{key}"
-    parts = key.split(".")
-    if parts[0] == "controller" and len(parts) > 1 and parts[1] not in SCHEMA["controller"]:
+    parts = key.split(".")  # two parts at least: the key holds a dot here
+    if parts[0] == "controller" and parts[1] not in SCHEMA["controller"]:
         return ["controller", "params", ".".join(parts[1:])]
     if parts[0] == "terrain" and len(parts) > 3:
         raise ScenarioError(f"--set {key}: terrain keys are terrain.KEY or terrain.FEATURE.FIELD")

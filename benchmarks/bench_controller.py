@@ -9,11 +9,14 @@ microseconds per step and their ratio to the default.
 - ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
   the signal rows derivatives read that move within the step, the sampled update merged into its signal
   pass, common subexpressions shared (``harness/compiler/c_form.py``), gcc flags of
-  ``harness/native.optimization_flags`` (-O3 for this 197 kB file since 2026-12-03; -O1 before);
+  ``harness/native.optimization_flags`` (-O3 for this 116 kB file; -O1 before 2026-12-03, when it was 197 kB);
 - ``grouped -O1``: the same C at -O1 (the default for this step until 2026-12-03; 0.9 s less of gcc);
 - ``grouped, nothing carried``: the default without carrying costly subexpressions between passes
   (``harness/compiler/carry.py``: each signal pass computes its own ``sin``/``atan2``, as before
   2026-12-03);
+- ``grouped, CasADi's calls``: the default with each member calling CasADi's generated C function
+  through pointer arrays (before 2026-12-03 evening) instead of the kind's statements written into its
+  loop (``harness/compiler/c_kernel.py``);
 - ``flat``: every instance inlined into one CasADi expression, CasADi's own C (``grouping="flat"``).
 
 Run: ``python benchmarks/bench_controller.py [--steps 5000] [--repeat 7]``.
@@ -58,6 +61,8 @@ def main() -> None:
     builds = {
         f"grouped {' '.join(native.optimization_flags(source))} (default)": (kinds, horizon(kinds, source, None)),
         "grouped -O1": (kinds, horizon(kinds, source, ("-O1",))),
+        "grouped, CasADi's calls": (kinds, horizon(kinds, c_step_source(kinds.schedule, kinds.dt, kinds.substeps,
+                                                                         inline_kernels=False), None)),
         "grouped, nothing carried": (kinds, horizon(kinds, c_step_source(kinds.schedule, kinds.dt, kinds.substeps,
                                                                           carry_costly=False), None)),
         f"flat {' '.join(native.optimization_flags(native.casadi_c_source([flat.step], 'x')))}":

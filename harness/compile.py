@@ -36,7 +36,7 @@ from cpgsim.components import memo
 from cpgsim.components.core import Block, ModelError, Port
 from cpgsim.components.graph import FlatGraph, Graph, as_graph
 from cpgsim.harness import cache
-from cpgsim.harness.compiler import c_form, casadi_form, kinds, layout, schedule, wiring
+from cpgsim.harness.compiler import c_form, c_kernel, casadi_form, kinds, layout, schedule, wiring
 from cpgsim.harness.compiler.layout import Layout, Slot
 from cpgsim.harness.compiler.schedule import Schedule, build_schedule
 from cpgsim.harness.compiler.wiring import Wiring
@@ -129,7 +129,7 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     signatures = kinds.leaf_signatures(flat)  # for the cache key, and the kinds reuse them
     if not memo.caching_enabled():
         return _build(flat, dt, int(substeps), grouping, signatures)
-    code = [__file__, *(m.__file__ for m in (wiring, layout, kinds, schedule, casadi_form, c_form)),
+    code = [__file__, *(m.__file__ for m in (wiring, layout, kinds, schedule, casadi_form, c_kernel, c_form)),
             sys.modules[Block.__module__].__file__]
     key = cache.model_key(flat, dt, int(substeps), grouping, signatures, code)
     entry = cache.load(key)

@@ -300,3 +300,103 @@ def test_a_costly_subexpression_repeated_between_passes_is_computed_once():
         assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
     second = model.signals_layout.index("leg3.second.y").start  # sin(q) + (0.5 + 3) sin(q), q = 0.2 + t
     assert rows[-1, second] == pytest.approx(4.5 * np.sin(0.2 + (n - 1) * model.dt), rel=1e-12)
+
+
+class _EveryOperation(Block):
+    """Every operation :mod:`cpgsim.harness.compiler.c_kernel` writes, on a state ``q`` (``dq/dt = rate``)
+    and an input ``a``, kept inside each function's domain (``q`` runs 0.3 -> 0.8 in 0.5 s); ``sign`` also
+    at 0 (``floor(3 q) - 1`` is -1, 0, 1 along the way)."""
+
+    def declare(self) -> None:
+        self.add_input("a", 1, "1")
+        self.add_parameter("c", 0.55, "1", (0, 1), "a second operand")
+        self.add_parameter("rate", 1.0, "1/s", (0, 10), "dq/dt")
+        self.add_state("q", 0.3, "1")
+        self.add_output("y", 46, "1")
+
+    def define(self, v: Symbols) -> Equations:
+        import casadi as ca
+
+        q, a, c = v.x["q"], v.u["a"], v.p["c"]
+        h = q - 0.5
+        unary = [-q, q * q, 2 * q, 1 / q, ca.logic_not(q > c), ca.fabs(h), ca.sign(ca.floor(3 * q) - 1),
+                 ca.sqrt(q), ca.exp(q), ca.log(q), ca.sin(q), ca.cos(q), ca.tan(q), ca.asin(h), ca.acos(h),
+                 ca.atan(q), ca.sinh(q), ca.cosh(q), ca.tanh(q), ca.asinh(q), ca.acosh(1 + q), ca.atanh(h),
+                 ca.floor(3 * q), ca.ceil(3 * q), ca.erf(q), ca.log1p(q), ca.expm1(q)]
+        binary = [q < c, q <= c, ca.floor(3 * q) == 1, q != c, ca.logic_and(q > c, a > 0),
+                  ca.logic_or(q > c, a > 1), ca.if_else(q > c, a, 0), q ** a, q ** 2.5, ca.fmin(q, a),
+                  ca.fmax(q, a), ca.fmod(q, a), ca.atan2(h, a), ca.copysign(q, h), ca.hypot(q, a),
+                  ca.remainder(q, a)]
+        terms = unary + binary + [q / a, q + a - c * a, ca.sin(q) * 1e-300 * 1e-300]  # (the last is 0.0)
+        return Equations(outputs={"y": ca.vertcat(*terms)}, derivatives={"q": v.p["rate"]})
+
+
+def every_operation_graph(n: int = 4) -> Graph:
+    """``n`` :class:`_EveryOperation` blocks, each driven by its own constant ``a`` (0.4 + 0.1 i)."""
+    g = Graph("every_operation")
+    for i in range(n):
+        g.add(Constant(f"a{i}", value=0.4 + 0.1 * i))
+        g.add(_EveryOperation(f"op{i}"))
+        g.connect(f"a{i}.y", f"op{i}.a")
+    return g
+
+
+def test_every_operation_written_into_the_loop_gives_casadis_numbers():
+    """The statements ``c_kernel`` writes into a group's loop against CasADi's generated C for the same
+    function, called per member (the form before them), and against CasADi's VM on the flat compile: the
+    same numbers bit for bit over 500 steps, for every operation it writes (checked present)."""
+    import casadi as ca
+
+    from cpgsim.harness.compiler import c_kernel
+    from cpgsim.harness.compiler.c_form import c_step_source
+    from cpgsim.harness.native import NativeHorizon
+
+    model = compile_graph(every_operation_graph(), grouping="kinds")
+    fns = [g.fn for level in model.schedule.signal_levels for g in level]
+    used = {f.instruction_id(k) for f in fns for k in range(f.n_instructions())}
+    assert set(c_kernel.UNARY) - {ca.OP_ASSIGN} <= used and set(c_kernel.BINARY) <= used
+    assert all(c_kernel.inlinable(f) for f in fns)
+    written = c_step_source(model.schedule, model.dt, model.substeps)
+    called = c_step_source(model.schedule, model.dt, model.substeps, inline_kernels=False)
+    assert "_L0_" not in written.split("grouped step")[1] and "_L0_" in called.split("grouped step")[1]
+    n = 500
+    U = np.zeros((n, 0))
+    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
+            for src in (written, called)]
+    flat = compile_graph(every_operation_graph(), grouping="flat")
+    x_ref, y_ref = flat.x0.copy(), []
+    for k in range(n):
+        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
+        y_ref.append(y)
+    for x_end, _, rows, bad in runs:
+        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_members_on_their_own_run_their_whole_step_in_blocks_with_the_same_numbers(substeps):
+    """An array of networks (no inputs, nothing sampled: each member's step is its own) runs each block of
+    members' whole RK4 step in L1-sized buffers (``c_form._member_local``); 23 members are not a multiple of
+    the block, so the last block is padded. Against the whole-vector step (every stage over the full state
+    vector) and the flat compile: the same states and signals bit for bit over 400 steps."""
+    from cpgsim.harness.compiler import c_form
+    from cpgsim.harness.native import NativeHorizon
+
+    model = compile_graph(networks(23), grouping="kinds", substeps=substeps)
+    assert 23 % c_form.BLOCK
+    blocks = c_form.c_step_source(model.schedule, model.dt, model.substeps)
+    vector = c_form.c_step_source(model.schedule, model.dt, model.substeps, inline_kernels=False)
+    assert "cpgsim_step_local" in blocks and "cpgsim_step_local" not in vector
+    mixed = compile_graph(mixed_graph(), grouping="kinds")  # inputs between members: not on their own
+    assert "cpgsim_step_local" not in c_form.c_step_source(mixed.schedule, mixed.dt, mixed.substeps)
+    n = 400
+    U = np.zeros((n, 0))
+    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
+            for src in (blocks, vector)]
+    flat = compile_graph(networks(23), grouping="flat", substeps=substeps)
+    x_ref, y_ref = flat.x0.copy(), []
+    for k in range(n):
+        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
+        y_ref.append(y)
+    assert np.ptp(np.array(y_ref), axis=0).max() > 0.1  # the networks move
+    for x_end, _, rows, bad in runs:
+        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))

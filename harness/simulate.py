@@ -26,6 +26,7 @@ import numpy as np
 
 from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
+from cpgsim.harness import prefault
 from cpgsim.harness.compile import CompiledModel, compile_graph
 from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
 from cpgsim.harness.master import run_master
@@ -151,6 +152,14 @@ class Simulator:
 
             rec.writer = ResultsWriter(stream, STREAM_FLUSH_SECONDS).open(columns, units, rec.meta)
             rec.flush_rows = rows_per_second(m.dt)
+        try:
+            return self._record_run(rec, times, x, z, p, u_free, picks, progress, resume)
+        finally:
+            rec.settle()  # the prefault thread is done with the table before anyone can free it
+
+    def _record_run(self, rec: _Recorder, times: np.ndarray, x: np.ndarray, z: np.ndarray, p: np.ndarray,
+                    u_free: np.ndarray, picks: Any, progress: bool, resume: Snapshot | None) -> Results:
+        """The body of :meth:`run` once the recorder exists: the loop, the checks, the results."""
         cs = self._cosim_blocks
         stop = None
         try:
@@ -543,6 +552,7 @@ class _Recorder:
 
     def __init__(self, times: np.ndarray, columns: list[str], units: list[str]) -> None:
         self.data = np.empty((len(times), len(columns)))  # rows past ``n`` are never read
+        self.settle = prefault.populate_async(self.data)  # large tables: pages faulted in on another thread
         self.times = times
         self.n = 0
         self.columns = columns

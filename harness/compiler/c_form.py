@@ -5,18 +5,22 @@ and signal vectors (states, parameters and outputs of a block are contiguous in 
 only inputs are gathered), then RK4 over the whole state vector. The function's SX statements are
 written into the loop body (:mod:`cpgsim.harness.compiler.c_kernel`: evenly spaced members are read at
 ``base + i * stride``, no call, no pointer arrays); a function it cannot write is CasADi's generated C,
-called once per member. The first stage computes
-every signal (the recorded ``y``); the inner stages only the signal *rows* that derivatives read,
-directly or through other signals, and of those only the ones that depend on ``t`` or ``x`` (the rest are
-fixed for the step once the sampled update has run, and keep the first stage's values); the pass before
-the sampled update only the rows the update reads, and a kind's update is merged into the last of those
-passes of its kind where the order allows (:func:`_sampled_pass`). Each pruned or merged pass is its own
-CasADi function of the kind (same expressions, so the same numbers), and each kind's functions are
-generated with common subexpression elimination (a leg's kinematics appear in several of its blocks and
-again in its update). Kinds without inputs compute signals and derivatives in one pass in the first
-stage. Costly subexpressions that a later pass of the same members would compute again are carried in a
-per-member buffer instead (:mod:`cpgsim.harness.compiler.carry`). It defines ``cpgsim_step_impl`` with
-CasADi's calling convention, so every driver of :mod:`cpgsim.harness.native` runs it unchanged.
+called once per member. The first stage computes every signal (the recorded ``y``); the inner stages
+only the signal *rows* that derivatives read, directly or through other signals, and of those only the
+ones that depend on ``t`` or ``x`` (the rest are fixed for the step once the sampled update has run, and
+keep the first stage's values); the pass before the sampled update only the rows the update reads, and a
+kind's update is merged into the last of those passes of its kind where the order allows
+(:func:`_sampled_pass`). Each pruned or merged pass is its own CasADi function of the kind (same
+expressions, so the same numbers), and each kind's functions are generated with common subexpression
+elimination (a leg's kinematics appear in several of its blocks and again in its update). Kinds without
+inputs compute signals and derivatives in one pass in the first stage. Costly subexpressions that a
+later pass of the same members would compute again are carried in a per-member buffer instead
+(:mod:`cpgsim.harness.compiler.carry`). When no member reads another's signals and nothing is sampled
+(:func:`_member_local`: arrays of CPG networks), blocks of :data:`BLOCK` members run their whole RK4
+step in small element-major buffers instead of each stage passing over the whole state vector
+(:func:`_c_member_local_step`; same arithmetic per element, same numbers). It defines
+``cpgsim_step_impl`` with CasADi's calling convention, so every driver of :mod:`cpgsim.harness.native`
+runs it unchanged.
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ rows mapped. The advice never changes the table's contents (it only maps pages, 
 the loop writing rows meanwhile is safe; the work is the same zeroing the loop would have done, moved
 to another core (on a busy machine it simply competes for one, as the loop's own faults would). Where
 the call is not available (another system, an older kernel) nothing happens and the loop faults its
-pages in as before. ``CPGSIM_PREFAULT=0`` turns it off (the loop faults its own pages, as before
+pages in as before. A run that ends early has then mapped rows it never writes (memory ``np.empty``
+reserved for them anyway; the table is the run's whole horizon). ``CPGSIM_PREFAULT=0`` turns it off (the loop faults its own pages, as before
 2026-12-03).
 """
 

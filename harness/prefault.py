@@ -1,18 +1,18 @@
 """Fault a fresh results table's pages in on a second thread while the run fills it.
 
-A results table is allocated empty (``np.empty``); the kernel maps and zeroes each page when it is
-first written. For a large run that zeroing is a third of the run's time (18,000 neurons, every signal
-recorded: 34 % of a 2 s run in ``clear_page_erms``, ``perf``), paid inside the simulation loop, and
-its cost jumps with how many transparent huge pages the kernel finds (the same run took 1.6 or 2.9 s
-at 6 s simulated). :func:`populate_async` asks the kernel to fault the whole table in
+A results table is allocated empty (``np.empty``); the kernel maps and zeroes each page when it is first
+written. For a large run that zeroing is a third of the run's time (18,000 neurons, every signal
+recorded: 34 % of a 2 s run in ``clear_page_erms``, ``perf``), paid inside the simulation loop, and its
+cost jumps with how many transparent huge pages the kernel finds (the same run took 1.6 or 2.9 s at 6 s
+simulated). :func:`populate_async` asks the kernel to fault the whole table in
 (``madvise(MADV_POPULATE_WRITE)``, Linux 5.14 and later) on a thread of its own, so the loop finds its
 rows mapped. The advice never changes the table's contents (it only maps pages, as a write would), so
-the loop writing rows meanwhile is safe; the work is the same zeroing the loop would have done, moved
-to another core (on a busy machine it simply competes for one, as the loop's own faults would). Where
-the call is not available (another system, an older kernel) nothing happens and the loop faults its
-pages in as before. A run that ends early has then mapped rows it never writes (memory ``np.empty``
-reserved for them anyway; the table is the run's whole horizon). ``CPGSIM_PREFAULT=0`` turns it off (the loop faults its own pages, as before
-2026-12-03).
+the loop writing rows meanwhile is safe; the work is the same zeroing the loop would have done, moved to
+another core (on a busy machine it simply competes for one, as the loop's own faults would). Where the
+call is not available (another system, an older kernel) nothing happens and the loop faults its pages in
+as before. A run that ends early has then mapped rows it never writes (memory ``np.empty`` reserved for
+them anyway; the table is the run's whole horizon). ``CPGSIM_PREFAULT=0`` turns it off (the loop faults
+its own pages, as before 2026-12-03).
 """
 
 from __future__ import annotations

@@ -253,6 +253,23 @@ class _SinePlus(Block):
         return Equations(outputs={"y": ca.sin(v.u["a"]) + v.u["b"]})
 
 
+def assert_native_steps_equal_flat(model, flat, sources: list[str], n: int) -> np.ndarray:
+    """Run ``n`` steps of each C source of ``model``'s step (``NativeHorizon``) and of ``flat``'s CasADi
+    step; every source's end state and signal rows must equal the flat ones bit for bit. Returns the rows."""
+    from cpgsim.harness.native import NativeHorizon
+
+    U = np.zeros((n, 0))
+    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
+            for src in sources]
+    x_ref, y_ref = flat.x0.copy(), []
+    for k in range(n):
+        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
+        y_ref.append(y)
+    for x_end, _, rows, bad in runs:
+        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+    return np.array(y_ref)
+
+
 def echo_graph(n: int = 4) -> Graph:
     """``n`` identical nested graphs: an angle ``q`` (``dq/dt = 1``, ``q(0) = 0.2``), ``first.y = sin(q)`` at
     level 0, an outside gain on it (level 1) fed back into ``second.y = sin(q) + gain`` (level 2).
@@ -280,7 +297,6 @@ def echo_graph(n: int = 4) -> Graph:
 
 def test_a_costly_subexpression_repeated_between_passes_is_computed_once():
     from cpgsim.harness.compiler.c_form import c_step_source
-    from cpgsim.harness.native import NativeHorizon
 
     model = compile_graph(echo_graph(), grouping="kinds")
     assert any(k.label == "graph_leg0" and len(k.members) == 4 for k in model.schedule.kinds)
@@ -289,15 +305,7 @@ def test_a_costly_subexpression_repeated_between_passes_is_computed_once():
     assert len(re.findall(r"\bsin\(", plain)) == 2 and len(re.findall(r"\bsin\(", carried)) == 1
     flat = compile_graph(echo_graph(), grouping="flat")
     n = 500
-    U = np.zeros((n, 0))
-    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
-            for src in (carried, plain)]
-    x_ref, y_ref = flat.x0.copy(), []
-    for k in range(n):
-        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
-        y_ref.append(y)
-    for x_end, _, rows, bad in runs:
-        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+    rows = assert_native_steps_equal_flat(model, flat, [carried, plain], n)
     second = model.signals_layout.index("leg3.second.y").start  # sin(q) + (0.5 + 3) sin(q), q = 0.2 + t
     assert rows[-1, second] == pytest.approx(4.5 * np.sin(0.2 + (n - 1) * model.dt), rel=1e-12)
 
@@ -349,7 +357,6 @@ def test_every_operation_written_into_the_loop_gives_casadis_numbers():
 
     from cpgsim.harness.compiler import c_kernel
     from cpgsim.harness.compiler.c_form import c_step_source
-    from cpgsim.harness.native import NativeHorizon
 
     model = compile_graph(every_operation_graph(), grouping="kinds")
     fns = [g.fn for level in model.schedule.signal_levels for g in level]
@@ -359,17 +366,8 @@ def test_every_operation_written_into_the_loop_gives_casadis_numbers():
     written = c_step_source(model.schedule, model.dt, model.substeps)
     called = c_step_source(model.schedule, model.dt, model.substeps, inline_kernels=False)
     assert "_L0_" not in written.split("grouped step")[1] and "_L0_" in called.split("grouped step")[1]
-    n = 500
-    U = np.zeros((n, 0))
-    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
-            for src in (written, called)]
     flat = compile_graph(every_operation_graph(), grouping="flat")
-    x_ref, y_ref = flat.x0.copy(), []
-    for k in range(n):
-        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
-        y_ref.append(y)
-    for x_end, _, rows, bad in runs:
-        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+    assert_native_steps_equal_flat(model, flat, [written, called], 500)
 
 
 @pytest.mark.parametrize("substeps", [1, 3])
@@ -379,7 +377,6 @@ def test_members_on_their_own_run_their_whole_step_in_blocks_with_the_same_numbe
     the block, so the last block is padded. Against the whole-vector step (every stage over the full state
     vector) and the flat compile: the same states and signals bit for bit over 400 steps."""
     from cpgsim.harness.compiler import c_form
-    from cpgsim.harness.native import NativeHorizon
 
     model = compile_graph(networks(23), grouping="kinds", substeps=substeps)
     assert 23 % c_form.BLOCK
@@ -388,15 +385,6 @@ def test_members_on_their_own_run_their_whole_step_in_blocks_with_the_same_numbe
     assert "cpgsim_step_local" in blocks and "cpgsim_step_local" not in vector
     mixed = compile_graph(mixed_graph(), grouping="kinds")  # inputs between members: not on their own
     assert "cpgsim_step_local" not in c_form.c_step_source(mixed.schedule, mixed.dt, mixed.substeps)
-    n = 400
-    U = np.zeros((n, 0))
-    runs = [NativeHorizon(model.step, src).run(n, 0.0, model.dt, model.x0.copy(), model.z0.copy(), U, model.p0)
-            for src in (blocks, vector)]
     flat = compile_graph(networks(23), grouping="flat", substeps=substeps)
-    x_ref, y_ref = flat.x0.copy(), []
-    for k in range(n):
-        x_ref, _, y = (np.asarray(v).ravel() for v in flat.step(k * flat.dt, x_ref, flat.z0, np.zeros(0), flat.p0))
-        y_ref.append(y)
-    assert np.ptp(np.array(y_ref), axis=0).max() > 0.1  # the networks move
-    for x_end, _, rows, bad in runs:
-        assert bad == -1 and np.array_equal(x_end, x_ref) and np.array_equal(rows, np.array(y_ref))
+    rows = assert_native_steps_equal_flat(model, flat, [blocks, vector], 400)
+    assert np.ptp(rows, axis=0).max() > 0.1  # the networks move

@@ -289,19 +289,19 @@ def _c_local_step_impl(s: Schedule, pairs: list[tuple[Group, Group]], first: lis
         tag = f"{names[id(f)]}_{names[id(d)]}"
         loops.append(_c_member_local_step(tag, names[id(f)], names[id(d)], f, d, dt, substeps))
         calls.append(f"  {tag}_local(t0, x, z, p, S, xn);")
-    stateless = "\n".join(f"  {names[id(g)]}_run(t0, x, z, p, S, E, 0, 0, C);" for g in first
+    stateless = "\n".join(f"  {names[id(g)]}_run(t0, x, z, p, S, E, 0, 0, 0);" for g in first
                           if id(g) not in local_first)
     nl = "\n"
     return "".join(loops) + f"""
 /* Every member's step depends on that member alone (no inputs, nothing sampled): each derivative
-   group's members run their whole RK4 step one after another, in registers (c_form._member_local). */
+   group's members run their whole RK4 step in blocks of L1-sized buffers (c_form._member_local). */
 static int cpgsim_step_local(const casadi_real **arg, casadi_real **res, casadi_real *w) {{
   const double t0 = arg[0] ? arg[0][0] : 0.0;
   const double *x = arg[1], *z = arg[2], *u = arg[3], *p = arg[4];
-  double *Sw = w, *E = Sw + {max(s.n_sig, 1)}, *xa = E + {s.n_u + 1}, *C = 0;  /* the work layout of cpgsim_step_impl */
+  double *Sw = w, *E = Sw + {max(s.n_sig, 1)}, *xa = E + {s.n_u + 1};  /* the work layout of cpgsim_step_impl */
   double *S = res[2] ? res[2] : Sw, *xn = res[0] ? res[0] : xa;
   long i;
-  (void)C; (void)u;
+  (void)u;
   for (i = 0; i < {s.n_u}; ++i) E[i] = u[i];
   E[{s.n_u}] = 0.0;
 {stateless}
@@ -309,7 +309,6 @@ static int cpgsim_step_local(const casadi_real **arg, casadi_real **res, casadi_
   if (res[1]) for (i = 0; i < {s.nz}; ++i) res[1][i] = z[i];
   return 0;
 }}
-#define CPGSIM_STEP_LOCAL 1
 """
 
 
@@ -362,6 +361,14 @@ def _input_columns(g: Group, n_sig: int, pool_size: int) -> tuple[np.ndarray, li
     return ui, modes
 
 
+def _input_element(tag: str, modes: list[str], j: int, nu: int, n_sig: int) -> str:
+    """C reading input element ``j`` of member ``i`` from where :func:`_input_columns` says it lives."""
+    ref = f"{tag}_ui[i * {nu} + {j}]"
+    if modes[j] in ("S", "E", "C"):  # the signal pool, the external inputs, the carry buffer
+        return f"{modes[j]}[{ref}]"
+    return f"({ref} < {n_sig} ? S[{ref}] : E[{ref} - {n_sig}])"
+
+
 def _c_tables(tag: str, g: Group, n_sig: int, pool_size: int, inlined: bool = False) -> str:
     """The group's offset tables; an inlined loop (:mod:`.c_kernel`) needs only the unevenly spaced ones."""
     ui, _ = _input_columns(g, n_sig, pool_size)
@@ -383,13 +390,7 @@ def _c_group_loop(tag: str, g: Group, n_sig: int, pool_size: int) -> str:
     for k, what in enumerate(g.out_target):
         base, table = where[what]
         res_lines.append(f"    res[{k}] = {base} + {tag}_{table.format(k=k)}[i];")
-    gathers = []
-    for j, mode in enumerate(modes):
-        ref = f"{tag}_ui[i * {nu} + {j}]"
-        if mode in ("S", "E", "C"):  # the signal pool, the external inputs, the carry buffer
-            gathers.append(f"    ub[{j}] = {mode}[{ref}];")
-        else:
-            gathers.append(f"    {{ long long k = {ref}; ub[{j}] = k < {n_sig} ? S[k] : E[k - {n_sig}]; }}")
+    gathers = [f"    ub[{j}] = {_input_element(tag, modes, j, nu, n_sig)};" for j in range(nu)]
     n_res = max(1, len(g.out_target))
     nl = "\n"
     return f"""
@@ -419,11 +420,7 @@ def _c_inlined_loop(tag: str, g: Group, n_sig: int, pool_size: int) -> str:
     _, modes = _input_columns(g, n_sig, pool_size)
 
     def u_element(j: int) -> str:
-        ref = f"{tag}_ui[i * {nu} + {j}]"
-        mode = modes[j]
-        if mode in ("S", "E", "C"):
-            return f"{mode}[{ref}]"
-        return f"({ref} < {n_sig} ? S[{ref}] : E[{ref} - {n_sig}])"
+        return _input_element(tag, modes, j, nu, n_sig)
 
     xo = c_kernel.offset(tag, "xo", g.x_off)
     read = {0: lambda j: "t", 1: f"(x + {xo})", 2: f"(z + {c_kernel.offset(tag, 'zo', g.z_off)})",
@@ -493,7 +490,7 @@ def _c_member_local_step(tag: str, f_tag: str, d_tag: str, f: Group, d: Group, d
     h = dt / substeps
 
     def member(table: str, offsets, group_tag: str = d_tag) -> str:
-        return c_kernel.offset(group_tag, table, offsets).replace("i *", "m *").replace("[i]", "[m]")
+        return c_kernel.offset(group_tag, table, offsets, index="m")
 
     signal_writes = {k: f"(S + {member(f'o{k}', f.out_off[k], f_tag)})"
                      for k, what in enumerate(f.out_target) if what == "pool"}

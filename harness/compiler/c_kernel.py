@@ -4,7 +4,7 @@ CasADi's code generator writes one C function per kind, called once per member t
 argument and result pointers; every argument read is ``arg[k] ? arg[k][j] : 0`` and every result write
 ``if (res[k]) res[k][j] = ...``. For many small members (an 18,000-neuron array is 6,000 members of
 17 operations per derivative) that call, the pointer set-up and the offset tables cost as much as the
-arithmetic. :func:`group_loop` instead writes the function's SX algorithm (the same instructions CasADi's
+arithmetic. :func:`body` instead writes the function's SX algorithm (the same instructions CasADi's
 generator walks, in the same order, with the same C operators) directly into the loop body, reading
 each member's states, parameters and inputs at their offsets (``base + i * stride`` when the offsets
 are evenly spaced, a table otherwise). The arithmetic is the same expression for expression, so the
@@ -49,11 +49,8 @@ static inline double cpgsim_sign(double x) { return x < 0 ? -1 : x > 0 ? 1 : x; 
 """
 """Helpers the inlined loops use (included once in the step's source)."""
 
-_ARGS = ("t", "x", "z", "u", "p")
-
-
 def inlinable(fn: ca.Function) -> bool:
-    """Whether :func:`group_loop` can write ``fn``: an SX function of dense arguments and results whose
+    """Whether :func:`body` can write ``fn``: an SX function of dense arguments and results whose
     every operation is in :data:`UNARY` or :data:`BINARY`."""
     if not fn.is_a("SXFunction"):
         return False
@@ -74,15 +71,16 @@ def _c_double(value: float) -> str:
     return f"({text})" if text.startswith("-") else text
 
 
-def offset(tag: str, table: str, offsets: np.ndarray) -> str:
-    """C for member ``i``'s offset: ``base + i * stride`` when ``offsets`` are evenly spaced, else the table."""
+def offset(tag: str, table: str, offsets: np.ndarray, index: str = "i") -> str:
+    """C for the offset of the member numbered by the C variable ``index``: ``base + index * stride`` when
+    ``offsets`` are evenly spaced, else the group's table ``{tag}_{table}``."""
     offsets = np.asarray(offsets, dtype=np.int64)
     if offsets.size == 1:
         return str(int(offsets[0]))
     steps = np.diff(offsets)
     if np.all(steps == steps[0]):
-        return f"({int(offsets[0])} + i * {int(steps[0])})"
-    return f"{tag}_{table}[i]"
+        return f"({int(offsets[0])} + {index} * {int(steps[0])})"
+    return f"{tag}_{table}[{index}]"
 
 
 def body(fn: ca.Function, read: dict[int, object], write: dict[int, str]) -> list[str]:

@@ -155,7 +155,7 @@ class Simulator:
         try:
             return self._record_run(rec, times, x, z, p, u_free, picks, progress, resume)
         finally:
-            rec.settle()  # the prefault thread is done with the table before anyone can free it
+            rec.prefetch.close()  # the prefault thread is done with the table before anyone can free it
 
     def _record_run(self, rec: _Recorder, times: np.ndarray, x: np.ndarray, z: np.ndarray, p: np.ndarray,
                     u_free: np.ndarray, picks: Any, progress: bool, resume: Snapshot | None) -> Results:
@@ -418,12 +418,16 @@ class Simulator:
         n = len(times) - 1
         y_idx = np.array([i for _, i, _ in picks], dtype=np.int64)
         bar = _progress(n, progress, m.name)
-        # the C loop takes the whole horizon in one call unless a progress bar or a stream needs rows sooner
+        # the C loop takes the whole horizon in one call unless a progress bar or a stream needs rows sooner,
+        # or a large table is mapped a window ahead of it (harness/prefault.py)
         chunk = self.chunk if (progress or self._native() is None) else n
+        if rec.prefetch.active:
+            chunk = min(chunk, rec.prefetch.rows_per_window)
         k = 0
         try:
             while k < n:
                 c = chunk_length(k, n, chunk, rec.flush_rows if rec.writer is not None else None)
+                rec.prefetch.starting(rec.n)
                 x_new, z_new, bad, finite = self._run_chunk(k, c, times, x, z, p, u_free, y_idx,
                                                             rec.data[rec.n:rec.n + c])
                 if finite and rec.checked == rec.n:  # checked in C while written: no second pass
@@ -552,7 +556,7 @@ class _Recorder:
 
     def __init__(self, times: np.ndarray, columns: list[str], units: list[str]) -> None:
         self.data = np.empty((len(times), len(columns)))  # rows past ``n`` are never read
-        self.settle = prefault.populate_async(self.data)  # large tables: pages faulted in on another thread
+        self.prefetch = prefault.RowPrefetcher(self.data)  # large tables: the next rows mapped on another thread
         self.times = times
         self.n = 0
         self.columns = columns

@@ -30,6 +30,9 @@ def make_plant(engine: str, name: str = "robot", **kwargs: Any) -> CoSimBlock:
     if engine == "dart":
         from cpgsim.robots.plant import DartHexapod
 
+        if kwargs.pop("contact", None) is not None:
+            raise ParameterError("contact (a MuJoCo ContactModel) applies to engine 'mujoco', not 'dart'")
+
         return DartHexapod(name, **kwargs)
     if engine == "mujoco":
         if not mujoco_available():

@@ -24,15 +24,20 @@ pair's coefficient is DART's. Contact parameters (:class:`ContactModel`) are doc
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import LEG_NAMES, RobotGeometry
 from cpgsim.robots.terrain import Terrain
 
 GRAVITY = 9.81
+CONES = ("pyramidal", "elliptic")
+CONDIMS = (1, 3, 4, 6)
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,14 @@ class ContactModel:
       as DART's contacts);
     - ``cone``: ``'pyramidal'``, the friction pyramid DART's boxed LCP uses too (``'elliptic'`` is the
       true Coulomb cone; it cost 1.6x per step here and changed no reflex);
-    - ``impratio``: 1 (MuJoCo's default; frictional and normal constraints equally soft).
+    - ``impratio``: 1 (MuJoCo's default; frictional and normal constraints equally soft);
+    - ``noslip_iterations``: 0 (MuJoCo's default: off). Above 0, MuJoCo's noslip post-solver removes the
+      slow slip that soft friction allows under a sustained tangential load (Coulomb sticking, as DART's
+      rigid friction); on the 40 mm step 20 iterations changed which legs elevate but not R2's outcome
+      (docs/engines.md).
+
+    Scenario files set any of these in ``[robot.mujoco]`` (``--set robot.mujoco.impratio=10``); the values
+    are checked here (``ParameterError`` naming the field) and written into the MJCF by :func:`mjcf`.
     """
 
     timestep: float = 1e-3
@@ -58,6 +70,67 @@ class ContactModel:
     condim: int = 3
     cone: str = "pyramidal"
     impratio: float = 1.0
+    noslip_iterations: int = 0
+
+    def __post_init__(self) -> None:
+        def number(name: str, value: object) -> float:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParameterError(f"ContactModel.{name} must be a finite number, got {value!r}")
+            return float(value)
+
+        def numbers(name: str, value: object, n: int) -> tuple[float, ...]:
+            if not isinstance(value, (tuple, list)) or len(value) != n:
+                raise ParameterError(f"ContactModel.{name} must be {n} numbers, got {_plain(value)}")
+            return tuple(number(f"{name}[{k}]", v) for k, v in enumerate(value))
+
+        timestep = number("timestep", self.timestep)
+        if timestep <= 0:
+            raise ParameterError(f"ContactModel.timestep must be > 0 s, got {timestep:g}")
+        timeconst, dampratio = numbers("solref", self.solref, 2)
+        if timeconst <= 0 or dampratio <= 0:
+            raise ParameterError(f"ContactModel.solref = (time constant, damping ratio) must both be > 0 "
+                                 f"(MuJoCo reads negative values as stiffness and damping), got {_plain(self.solref)}")
+        d0, dwidth, width = numbers("solimp", self.solimp, 3)
+        if not (0 < d0 < 1 and 0 < dwidth < 1 and width > 0):
+            raise ParameterError(f"ContactModel.solimp = (d0, dwidth, width) needs 0 < d0, dwidth < 1 and "
+                                 f"width > 0 m, got {_plain(self.solimp)}")
+        if self.condim not in CONDIMS or isinstance(self.condim, bool):
+            raise ParameterError(f"ContactModel.condim must be one of {', '.join(map(str, CONDIMS))}, "
+                                 f"got {self.condim!r}")
+        if self.cone not in CONES:
+            raise ParameterError(f"ContactModel.cone must be one of {', '.join(CONES)}, got {self.cone!r}")
+        if number("impratio", self.impratio) <= 0:
+            raise ParameterError(f"ContactModel.impratio (frictional over normal impedance) must be > 0, "
+                                 f"got {self.impratio!r}")
+        if isinstance(self.noslip_iterations, bool) or not isinstance(self.noslip_iterations, int) \
+                or self.noslip_iterations < 0:
+            raise ParameterError(f"ContactModel.noslip_iterations must be an integer >= 0, "
+                                 f"got {self.noslip_iterations!r}")
+        object.__setattr__(self, "timestep", timestep)
+        object.__setattr__(self, "solref", (timeconst, dampratio))
+        object.__setattr__(self, "solimp", (d0, dwidth, width))
+        object.__setattr__(self, "impratio", float(self.impratio))
+
+    @classmethod
+    def fields(cls) -> tuple[str, ...]:
+        """The settable fields, in declaration order."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def describe(self) -> dict[str, object]:
+        """The settings as plain values (JSON, summaries)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+
+def option_element(contact: ContactModel, gravity: float = GRAVITY) -> str:
+    """The MJCF ``<option>`` of ``contact`` (the integrator is ``implicitfast``: the servos' damping implicit)."""
+    return (f'<option timestep="{contact.timestep:.17g}" gravity="0 0 {-gravity:.17g}" integrator="implicitfast" '
+            f'cone="{contact.cone}" impratio="{contact.impratio:.17g}" '
+            f'noslip_iterations="{contact.noslip_iterations}"/>')
+
+
+def _plain(value: object) -> str:
+    """``value`` as a scenario file writes it (a tuple as a list)."""
+    return repr(list(value)) if isinstance(value, tuple) else repr(value)
 
 
 def box_inertia(mass: float, size: Sequence[float]) -> np.ndarray:
@@ -148,8 +221,7 @@ def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
     lines = [
         f'<mujoco model="{geometry.name}">',
         '  <compiler angle="radian" autolimits="true" inertiafromgeom="false"/>',
-        f'  <option timestep="{contact.timestep:.17g}" gravity="0 0 {-GRAVITY}" integrator="implicitfast" '
-        f'cone="{contact.cone}" impratio="{contact.impratio:.17g}"/>',
+        f'  {option_element(contact)}',
         '  <size memory="4M"/>',
         '  <worldbody>',
     ]

@@ -21,15 +21,18 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
 
 def test_the_examples_are_all_here():
     assert EXAMPLES == ["01_simulate_and_verify.py", "02_export_and_run_in_fmpy.py", "03_import_fmu.py",
-                        "04_robot_scenario.py", "05_sweep.py"]
+                        "04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py"]
     assert (ROOT / "examples" / "06_notebook.ipynb").exists()
 
 
-SLOW = {"04_robot_scenario.py", "05_sweep.py"}  # DART runs
+SLOW = {"04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py"}  # DART runs
+NEEDS_MUJOCO = {"07_step_in_two_engines.py"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in EXAMPLES])
 def test_example_runs(name, tmp_path):
+    if name in NEEDS_MUJOCO:
+        pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
     proc = _run([sys.executable, str(ROOT / "examples" / name)], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
@@ -37,7 +40,8 @@ def test_example_runs(name, tmp_path):
                 "02_export_and_run_in_fmpy.py": "largest difference to cpgsim",
                 "03_import_fmu.py": "amplified output at 2 s",
                 "04_robot_scenario.py": "fell False",
-                "05_sweep.py": "rule2=0: 2/2"}[name]
+                "05_sweep.py": "rule2=0: 2/2",
+                "07_step_in_two_engines.py": "R2 meets the step at its corner, within 2 mm of the top, in both"}[name]
     assert expected in proc.stdout, proc.stdout
 
 

@@ -143,6 +143,79 @@ def test_make_plant_and_scenario_engine():
         build_scenario("step", {"robot.engine": "bullet"})
 
 
+def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
+    """``[robot.mujoco]`` values end up in MuJoCo's compiled model (read back from ``mjModel``, not from the
+    MJCF text cpgsim writes), on every robot and terrain geom; the run's summary says which model ran."""
+    from cpgsim.harness.experiments.runner import build_scenario
+
+    sets = {"robot.engine": "mujoco", "robot.mujoco.noslip_iterations": 7, "robot.mujoco.cone": "elliptic",
+            "robot.mujoco.impratio": 4.0, "robot.mujoco.solref": [0.004, 0.9],
+            "robot.mujoco.solimp": [0.8, 0.95, 0.002], "robot.mujoco.condim": 1}
+    setup = build_scenario("step", sets)
+    plant = setup.graph.blocks["robot"]
+    plant.setup(0.0)
+    m = plant.model
+    assert m.opt.noslip_iterations == 7 and m.opt.impratio == 4.0
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    assert m.ngeom > 19  # every robot shape and the terrain's boxes
+    np.testing.assert_array_equal(m.geom_solref, np.tile([0.004, 0.9], (m.ngeom, 1)))
+    np.testing.assert_array_equal(m.geom_solimp[:, :3], np.tile([0.8, 0.95, 0.002], (m.ngeom, 1)))
+    assert np.all(m.geom_condim == 1)
+    assert setup.info["mujoco_contact"]["noslip_iterations"] == 7
+    assert setup.info["mujoco_contact"]["solref"] == [0.004, 0.9]
+    default = build_scenario("step", {"robot.engine": "mujoco"}).graph.blocks["robot"]
+    default.setup(0.0)
+    assert default.model.opt.noslip_iterations == 0 and default.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    np.testing.assert_array_equal(default.model.geom_solref[0], [0.005, 1.0])
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("solref", [0.005], r"robot\.mujoco\.solref must be 2 numbers"),
+    ("solref", [-2000.0, -50.0], r"robot\.mujoco\.solref = .* must both be > 0"),
+    ("solimp", [0.9, 1.5, 0.001], r"robot\.mujoco\.solimp .* 0 < d0, dwidth < 1"),
+    ("solimp", [0.9, "x", 0.001], r"robot\.mujoco\.solimp\[1\] must be a finite number"),
+    ("cone", "ellipse", r"robot\.mujoco\.cone must be one of pyramidal, elliptic"),
+    ("condim", 2, r"robot\.mujoco\.condim must be one of 1, 3, 4, 6"),
+    ("impratio", 0.0, r"robot\.mujoco\.impratio = 0.0 is out of range"),
+    ("noslip_iterations", -1, r"robot\.mujoco\.noslip_iterations = -1 is out of range"),
+    ("noslip_iterations", 2.5, r"robot\.mujoco\.noslip_iterations must be an integer"),
+    ("impratoi", 2.0, r"unknown key 'robot\.mujoco\.impratoi'.*did you mean 'impratio'"),
+])
+def test_scenario_contact_model_rejects_bad_values(key, value, message):
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.scenario import ScenarioError
+
+    with pytest.raises(ScenarioError, match=message):
+        build_scenario("step", {"robot.engine": "mujoco", f"robot.mujoco.{key}": value})
+
+
+def test_scenario_contact_model_on_dart_is_an_error_and_its_fields_are_contactmodels():
+    """A ``[robot.mujoco]`` table on a DART run would do nothing: an error naming both keys. The schema's
+    keys are :class:`ContactModel`'s fields (one list of settable fields)."""
+    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.harness.experiments.scenario import MUJOCO_SCHEMA, ScenarioError
+    from cpgsim.robots.mjcf import ContactModel
+
+    with pytest.raises(ScenarioError, match=r"robot\.mujoco sets MuJoCo's contact model \(impratio\).*"
+                                            r"robot\.engine = 'dart'"):
+        build_scenario("step", {"robot.mujoco.impratio": 10.0})
+    with pytest.raises(ScenarioError, match="robot.mujoco sets"):
+        build_scenario("fukuhara-gap", {"robot.mujoco.cone": "elliptic"})
+    assert tuple(MUJOCO_SCHEMA) == ContactModel.fields()
+    with pytest.raises(Exception, match="contact .* applies to engine 'mujoco'"):
+        make_plant("dart", "robot", contact=ContactModel())
+
+
+def test_report_names_the_engine_and_contact_model():
+    """report.html's facts table says which engine ran and MuJoCo's contact settings."""
+    from cpgsim.harness.experiments.report import _summary_html
+
+    page = _summary_html({"scenario": "step", "engine": "mujoco", "reflexes": [],
+                          "mujoco_contact": {"solref": [0.002, 1.0], "noslip_iterations": 20}})
+    assert "<th>engine</th><td>mujoco</td>" in page
+    assert "<th>mujoco_contact</th><td>solref [0.002, 1.0], noslip_iterations 20</td>" in page
+
+
 def test_native_step_equals_python_step():
     """The C macro step (mj_step + contact sums in C) gives bit-identical outputs to the Python sub-steps."""
 

@@ -252,12 +252,17 @@ def _forces(e: dict) -> str:
 
 
 def _summary_html(summary: dict) -> str:
-    keys = ["scenario", "t_end", "complete", "success", "criteria_failed", "distance_m", "speed_m_s", "fell",
-            "fell_reason", "max_tilt_deg", "height_drop_m", "stalled", "waiting_share", "real_time_factor"]
+    """The run's facts as a table (the physics engine and, on MuJoCo, its contact model included: two runs
+    that differ only in the engine must not look alike), then the reflex events."""
+    keys = ["scenario", "engine", "mujoco_contact", "t_end", "complete", "success", "criteria_failed", "distance_m",
+            "speed_m_s", "fell", "fell_reason", "max_tilt_deg", "height_drop_m", "stalled", "waiting_share",
+            "real_time_factor"]
     rows = []
     for k in keys:
         if k in summary:
             v = summary[k]
+            if isinstance(v, dict):
+                v = ", ".join(f"{name} {value}" for name, value in v.items())
             v = f"{v:.4g}" if isinstance(v, float) and math.isfinite(v) else v
             rows.append(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>")
     ev = "".join(f"<li>{html.escape(e['kind'])} on {html.escape(e['leg'])} (leg {e['leg_number']}) at "

@@ -116,6 +116,17 @@ class Field:
 POSITIVE = {"lo": 0.0, "strict": True}
 GEOMETRY_KEYS = ("body_length", "body_width", "body_thickness", "body_mass", "height", "clearance", "stance_width")
 
+MUJOCO_SCHEMA: dict[str, Field] = {  # the fields of cpgsim.robots.mjcf.ContactModel, which checks the values
+    "timestep": Field(float, **POSITIVE, doc="s, MuJoCo's step (the 1 ms control step a multiple of it)"),
+    "solref": Field(list, doc="[time constant s, damping ratio] of every contact's spring-damper"),
+    "solimp": Field(list, doc="[d0, dwidth, width m]: contact impedance"),
+    "condim": Field(int, choices=(1, 3, 4, 6), doc="contact dimensions (3: Coulomb friction)"),
+    "cone": Field(str, choices=("pyramidal", "elliptic"), doc="friction cone"),
+    "impratio": Field(float, **POSITIVE, doc="frictional over normal constraint impedance"),
+    "noslip_iterations": Field(int, lo=0, doc="MuJoCo's noslip post-solver (0: off)"),
+}
+"""``[robot.mujoco]``: MuJoCo's contact model for a ``robot.engine = "mujoco"`` run (docs/engines.md)."""
+
 SCHEMA: dict[str, Any] = {
     "name": Field(str, doc="scenario name"),
     "description": Field(str, "", doc="one line"),
@@ -130,6 +141,7 @@ SCHEMA: dict[str, Any] = {
         "kd": Field(float, **POSITIVE, doc="joint servo damping N*m*s/rad"),
         "friction": Field(float, **POSITIVE, doc="Coulomb friction of the robot's shapes"),
         "velocity_ff": Field(bool, doc="servo velocity feed-forward"),
+        "mujoco": MUJOCO_SCHEMA,
     },
     "controller": {
         "kind": Field(str, "yu", choices=CONTROLLER_KINDS),
@@ -317,6 +329,11 @@ def _validate_table(scenario: Scenario, name: str, table: dict, spec: dict, over
         full = f"{name}.{key}"
         if name == "terrain" and isinstance(value, dict):
             continue  # a feature, checked by _check_features
+        if isinstance(spec.get(key), dict):  # a sub-table ([robot.mujoco])
+            if not isinstance(value, dict):
+                raise ScenarioError(f"{full} must be a table{_where(scenario, full, overridden)}")
+            _validate_table(scenario, full, value, spec[key], overridden)
+            continue
         if key not in spec:
             known = ", ".join(spec) + (", or a feature table [terrain.NAME]" if name == "terrain" else "")
             raise ScenarioError(f"unknown key {full!r}{_where(scenario, full, overridden)}: known keys of "
@@ -328,6 +345,8 @@ def _validate_table(scenario: Scenario, name: str, table: dict, spec: dict, over
             continue
         table[key] = f.check(full, value, _where(scenario, full, overridden))
     for key, f in spec.items():
+        if isinstance(f, dict):
+            continue  # a sub-table: its defaults are its reader's (robot.mujoco: ContactModel)
         if key not in table and f.default is not None:
             table[key] = f.default.copy() if isinstance(f.default, dict) else f.default
 

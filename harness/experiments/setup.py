@@ -43,6 +43,38 @@ class RunSetup:
     paper_hit_forces: dict[int, float] = field(default_factory=dict)  # leg number -> the paper's peak hit force
 
 
+def engine_of(scenario: Scenario) -> str:
+    """The scenario's physics engine (``robot.engine``)."""
+    return str(scenario.doc["robot"].get("engine", "dart"))
+
+
+def contact_model(scenario: Scenario):
+    """The MuJoCo contact model of a ``robot.engine = "mujoco"`` scenario: :class:`ContactModel`'s defaults
+    with the ``[robot.mujoco]`` table's values (``None`` on DART). A ``[robot.mujoco]`` table on DART is an
+    error, not ignored: its settings would silently do nothing."""
+    from cpgsim.components.core import ParameterError
+    from cpgsim.robots.mjcf import ContactModel
+
+    table = scenario.doc["robot"].get("mujoco") or {}
+    engine = engine_of(scenario)
+    if engine != "mujoco":
+        if table:
+            raise ScenarioError(f"robot.mujoco sets MuJoCo's contact model ({', '.join(table)}), but the scenario "
+                                f"runs on robot.engine = {engine!r}: set robot.engine = \"mujoco\" or remove "
+                                f"[robot.mujoco] ({scenario.source})")
+        return None
+    try:
+        return ContactModel(**{k: tuple(v) if isinstance(v, list) else v for k, v in table.items()})
+    except ParameterError as exc:
+        raise ScenarioError(f"{str(exc).replace('ContactModel.', 'robot.mujoco.', 1)} ({scenario.source})") from None
+
+
+def engine_info(scenario: Scenario) -> dict[str, Any]:
+    """What a run's summary says about its physics: the engine and, on MuJoCo, the contact model used."""
+    contact = contact_model(scenario)
+    return {"engine": engine_of(scenario), **({"mujoco_contact": contact.describe()} if contact else {})}
+
+
 def leg_fields(index: int) -> dict[str, Any]:
     """How every output names leg ``index`` (0-5): the papers' label and Yu's number (1-6)."""
     return {"leg": LEG_NAMES[index], "leg_number": index + 1}

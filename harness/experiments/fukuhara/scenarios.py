@@ -47,7 +47,16 @@ from cpgsim.components.graph import Graph
 from cpgsim.harness.experiments.gait_classifier import classify, stance_from_fz
 from cpgsim.harness.experiments.outcomes import crossing, fall
 from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
-from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
+from cpgsim.harness.experiments.setup import (
+    PLANT_KEYS,
+    RunSetup,
+    contact_model,
+    engine_info,
+    engine_of,
+    leg_fields,
+    robot_geometry,
+    terrain_of,
+)
 from cpgsim.harness.results import Results
 from cpgsim.robots.engines import make_plant
 from cpgsim.robots.plant import DartHexapod
@@ -127,9 +136,11 @@ def initial_alpha(seed: int | None, geometry: RobotGeometry = YU_SIM) -> np.ndar
 
 def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: dict[str, float],
                 amputated: tuple[str, ...] = (), terrain: Terrain | None = None,
-                geometry: RobotGeometry = YU_SIM, engine: str = "dart") -> tuple[Graph, dict, dict, np.ndarray]:
-    """Controller + plant graph (``engine``: ``"dart"`` or ``"mujoco"``); returns (graph, scenario options,
-    controller overrides, initial alpha)."""
+                geometry: RobotGeometry = YU_SIM, engine: str = "dart",
+                contact=None) -> tuple[Graph, dict, dict, np.ndarray]:
+    """Controller + plant graph (``engine``: ``"dart"`` or ``"mujoco"``, ``contact`` MuJoCo's
+    :class:`~cpgsim.robots.mjcf.ContactModel` or ``None``); returns (graph, scenario options, controller
+    overrides, initial alpha)."""
     opts, ctrl_params, paths = _split_sets(sets, options)
     setting = _setting(opts.get("setting", 1))
     omega_sw, omega_st = SPEED_SETTINGS[setting]
@@ -144,7 +155,7 @@ def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: di
                                  settle=SETTLE)
     else:
         robot = make_plant(engine, "robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
-                           settle=SETTLE)
+                           settle=SETTLE, **({"contact": contact} if contact is not None else {}))
     g = Graph(name.replace("-", "_"), f"Fukuhara controller + {engine} hexapod ({name})")
     g.add(ctrl)
     g.add(robot)
@@ -318,7 +329,8 @@ def build(scenario: Scenario) -> RunSetup:
     try:
         graph, opts, ctrl_params, alpha0 = closed_loop(scenario.name, _sets_of(scenario), seed, opts0,
                                                        amputated=amputated, terrain=terrain, geometry=geometry,
-                                                       engine=doc["robot"].get("engine", "dart"))
+                                                       engine=engine_of(scenario),
+                                                       contact=contact_model(scenario))
     except ScenarioError:
         raise
     except ModelError as exc:
@@ -330,7 +342,7 @@ def build(scenario: Scenario) -> RunSetup:
     if expected == "auto":
         expected = None if custom_speed else EXPECTED_GAIT[setting]
     legs = [i for i in range(6) if LEG_NAMES[i] not in amputated]
-    info = _info(graph, seed, opts, alpha0, amputated)
+    info = {**_info(graph, seed, opts, alpha0, amputated), **engine_info(scenario)}
     info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"],
                  "rule2": float(ctrl_params.get("rule2", 1.0)), "expected_gait": expected})
     cross = scenario.features().get(crit["cross"]) if crit["cross"] else None

@@ -82,7 +82,16 @@ from cpgsim.components.graph import Graph
 from cpgsim.components.yu.leg import hexapod_controller
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.experiments.scenario import Scenario, ScenarioError
-from cpgsim.harness.experiments.setup import PLANT_KEYS, RunSetup, leg_fields, robot_geometry, terrain_of
+from cpgsim.harness.experiments.setup import (
+    PLANT_KEYS,
+    RunSetup,
+    contact_model,
+    engine_info,
+    engine_of,
+    leg_fields,
+    robot_geometry,
+    terrain_of,
+)
 from cpgsim.harness.results import Results
 from cpgsim.robots import terrain as tr
 from cpgsim.robots.engines import make_plant
@@ -110,13 +119,15 @@ def initial_targets(controller: Graph) -> np.ndarray:
 
 def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[str, float],
                 sets: dict[str, float], clearance_elevator: float | None = None,
-                gait: int = 1, engine: str = "dart") -> tuple[Graph, DartHexapod]:
+                gait: int = 1, engine: str = "dart", contact=None) -> tuple[Graph, DartHexapod]:
     """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``);
-    ``engine`` picks the plant (:mod:`cpgsim.robots.engines`; same ports in every engine)."""
+    ``engine`` picks the plant (:mod:`cpgsim.robots.engines`; same ports in every engine), ``contact`` a
+    MuJoCo :class:`~cpgsim.robots.mjcf.ContactModel` (MuJoCo only; ``None``: its defaults)."""
     ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator)
     for key, value in thresholds.items():
         ctrl.set_param(f"*.sensors.{key}", value)
-    robot = make_plant(engine, ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2)
+    robot = make_plant(engine, ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2,
+                       **({"contact": contact} if contact is not None else {}))
     g = Graph("yu_closed_loop", f"Yu hexapod controller on the {engine} {geometry.name} robot")
     g.add(ctrl)
     g.add(robot)
@@ -253,11 +264,14 @@ def build(scenario: Scenario) -> RunSetup:
     plant = {f"{ROBOT}.{k}": float(doc["robot"][k]) for k in PLANT_KEYS if k in doc["robot"]}
     try:
         graph, _ = closed_loop(geometry, terrain, thresholds, {**params, **plant}, ctrl.get("clearance_elevator"),
-                               gait=int(ctrl.get("gait", 1)), engine=doc["robot"].get("engine", "dart"))
+                               gait=int(ctrl.get("gait", 1)), engine=engine_of(scenario),
+                               contact=contact_model(scenario))
+    except ScenarioError:
+        raise
     except ModelError as exc:
         raise ScenarioError(f"{scenario.name}: {exc}") from None
     info = {"terrain": terrain.describe(), "stance_width_m": geometry.stance_width, "parameters": params,
-            "controller_kind": ctrl["kind"], "engine": doc["robot"].get("engine", "dart"), **feature_summary(terrain)}
+            "controller_kind": ctrl["kind"], **engine_info(scenario), **feature_summary(terrain)}
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
                     thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
                     waiting=waiting_of, scenario=scenario, held=held_of, paper_hit_forces=YU_HIT_PEAKS_N)

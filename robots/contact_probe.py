@@ -111,14 +111,13 @@ def _dart_path(theta, phi, force, mass, friction, radius, n, dt, contact) -> np.
 def _mujoco_path(theta, phi, force, mass, friction, radius, n, dt, contact) -> np.ndarray:
     import mujoco
 
-    from cpgsim.robots.mjcf import ContactModel, option_element
+    from cpgsim.robots.mjcf import ContactModel, geom_contact, option_element
 
     contact = contact or ContactModel()
     if abs(contact.timestep - dt) > 1e-15:
         contact = ContactModel(**{**contact.__dict__, "timestep": dt})
     y0, z0 = _start(theta, radius)
-    solver = (f'condim="{contact.condim}" solref="{contact.solref[0]:.17g} {contact.solref[1]:.17g}" '
-              f'solimp="{" ".join(f"{v:.17g}" for v in contact.solimp)}" friction="{friction:.17g} 0 0"')
+    solver = f'{geom_contact(contact)} friction="{friction:.17g} 0 0"'
     xml = (f'<mujoco>{option_element(contact, gravity=0.0)}<worldbody>'
            f'<geom type="box" size="0.1 0.1 {EDGE_Z / 2:.17g}" pos="0 0.1 {EDGE_Z / 2:.17g}" priority="1" {solver}/>'
            f'<body pos="0 {y0:.17g} {z0:.17g}"><joint type="slide" axis="0 1 0"/><joint type="slide" axis="0 0 1"/>'

@@ -128,6 +128,11 @@ def option_element(contact: ContactModel, gravity: float = GRAVITY) -> str:
             f'noslip_iterations="{contact.noslip_iterations}"/>')
 
 
+def geom_contact(contact: ContactModel) -> str:
+    """A geom's contact attributes (``condim``, ``solref``, ``solimp``) of ``contact``."""
+    return f'condim="{contact.condim}" solref="{_v(contact.solref)}" solimp="{_v(contact.solimp)}"'
+
+
 def _plain(value: object) -> str:
     """``value`` as a scenario file writes it (a tuple as a list)."""
     return repr(list(value)) if isinstance(value, tuple) else repr(value)
@@ -215,7 +220,7 @@ def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
     leg = geometry.leg
     links = links or LinkSizes.for_geometry(geometry)
     masses = mass_properties(geometry, links)
-    geom_common = f'condim="{contact.condim}" solref="{_v(contact.solref)}" solimp="{_v(contact.solimp)}"'
+    geom_common = geom_contact(contact)
     rgeom = f'{ROBOT_COLLISION} friction="{friction:.17g} 0 0" {geom_common}'
     shank_len = leg.shank - 0.5 * leg.foot_radius
     lines = [

@@ -69,9 +69,9 @@ def contact_model(scenario: Scenario):
         raise ScenarioError(f"{str(exc).replace('ContactModel.', 'robot.mujoco.', 1)} ({scenario.source})") from None
 
 
-def engine_info(scenario: Scenario) -> dict[str, Any]:
-    """What a run's summary says about its physics: the engine and, on MuJoCo, the contact model used."""
-    contact = contact_model(scenario)
+def engine_info(scenario: Scenario, contact) -> dict[str, Any]:
+    """What a run's summary says about its physics: the engine and, on MuJoCo, ``contact``, the contact
+    model used (:func:`contact_model`)."""
     return {"engine": engine_of(scenario), **({"mujoco_contact": contact.describe()} if contact else {})}
 
 

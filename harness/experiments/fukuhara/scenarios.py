@@ -326,11 +326,12 @@ def build(scenario: Scenario) -> RunSetup:
     amputated = AMPUTATION_CASES.get(case, ())
     seed = int(doc["seed"])
     opts0 = {"setting": 1.0, "transient": 15.0}
+    contact = contact_model(scenario)
     try:
         graph, opts, ctrl_params, alpha0 = closed_loop(scenario.name, _sets_of(scenario), seed, opts0,
                                                        amputated=amputated, terrain=terrain, geometry=geometry,
                                                        engine=engine_of(scenario),
-                                                       contact=contact_model(scenario))
+                                                       contact=contact)
     except ScenarioError:
         raise
     except ModelError as exc:
@@ -342,7 +343,7 @@ def build(scenario: Scenario) -> RunSetup:
     if expected == "auto":
         expected = None if custom_speed else EXPECTED_GAIT[setting]
     legs = [i for i in range(6) if LEG_NAMES[i] not in amputated]
-    info = {**_info(graph, seed, opts, alpha0, amputated), **engine_info(scenario)}
+    info = {**_info(graph, seed, opts, alpha0, amputated), **engine_info(scenario, contact)}
     info.update({"omega_sw": ctrl_params["omega_sw"], "omega_st": ctrl_params["omega_st"],
                  "rule2": float(ctrl_params.get("rule2", 1.0)), "expected_gait": expected})
     cross = scenario.features().get(crit["cross"]) if crit["cross"] else None

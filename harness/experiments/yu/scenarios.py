@@ -262,16 +262,17 @@ def build(scenario: Scenario) -> RunSetup:
     if ctrl["kind"] == "yu-open-loop":
         params.update({f"{CONTROLLER}.{k}": v for k, v in OPEN_LOOP.items()})
     plant = {f"{ROBOT}.{k}": float(doc["robot"][k]) for k in PLANT_KEYS if k in doc["robot"]}
+    contact = contact_model(scenario)
     try:
         graph, _ = closed_loop(geometry, terrain, thresholds, {**params, **plant}, ctrl.get("clearance_elevator"),
                                gait=int(ctrl.get("gait", 1)), engine=engine_of(scenario),
-                               contact=contact_model(scenario))
+                               contact=contact)
     except ScenarioError:
         raise
     except ModelError as exc:
         raise ScenarioError(f"{scenario.name}: {exc}") from None
     info = {"terrain": terrain.describe(), "stance_width_m": geometry.stance_width, "parameters": params,
-            "controller_kind": ctrl["kind"], **engine_info(scenario), **feature_summary(terrain)}
+            "controller_kind": ctrl["kind"], **engine_info(scenario, contact), **feature_summary(terrain)}
     return RunSetup(graph=graph, geometry=geometry, terrain=terrain, t_end=float(doc["t_end"]), robot=ROBOT,
                     thresholds=thresholds, stance=stance_of, reflexes=reflex_events, record=RECORD, info=info,
                     waiting=waiting_of, scenario=scenario, held=held_of, paper_hit_forces=YU_HIT_PEAKS_N)

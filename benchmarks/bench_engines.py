@@ -1,10 +1,12 @@
 """DART vs MuJoCo on the same scenario: wall time of the closed-loop run and of the plant alone.
 
-1. The scenario run (controller + plant through the co-simulation master, as ``cpgsim run``), the two
-   engines alternately, ``--repeat`` times each (load from other processes hits both alike); medians of
-   the real-time factors and their ratio.
+1. The scenario run (controller + plant through the co-simulation master, as ``cpgsim run``) in DART, in
+   MuJoCo (cpgsim's default contact model: Coulomb friction) and in MuJoCo with its own soft friction
+   (pyramidal cone, impratio 1: what the Coulomb cone costs), alternately, ``--repeat`` times each (load
+   from other processes hits all alike); medians of the real-time factors and their ratios.
 2. The plant alone holding the standing posture on the scenario's terrain (``do_step`` + I/O per 1 ms):
-   median microseconds per control step for DART, MuJoCo with the C macro step, MuJoCo in Python.
+   median microseconds per control step for DART, MuJoCo with the C macro step (both friction models),
+   MuJoCo in Python.
 
 Run: ``python benchmarks/bench_engines.py [--scenario step] [--t-end 10] [--repeat 3]``.
 """
@@ -17,21 +19,26 @@ import tempfile
 import time
 
 from cpgsim.harness.experiments.runner import build_scenario, run_scenario
+from cpgsim.robots.contact_probe import MUJOCO_OWN_DEFAULTS
+
+SOFT = {f"robot.mujoco.{key}": value for key, value in MUJOCO_OWN_DEFAULTS.items()}
+CONFIGS = {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
+           "mujoco-soft": {"robot.engine": "mujoco", **SOFT}}
 
 
-def scenario_rtf(scenario: str, engine: str, t_end: float) -> float:
+def scenario_rtf(scenario: str, config: str, t_end: float) -> float:
     """Real-time factor of one run (the simulated time over the wall time of the loop, setup excluded)."""
     with tempfile.TemporaryDirectory() as tmp:
-        summary = run_scenario(scenario, tmp, t_end=t_end, sets={"robot.engine": engine}, progress=False,
+        summary = run_scenario(scenario, tmp, t_end=t_end, sets=CONFIGS[config], progress=False,
                                plots=False, save_results=False)
     return float(summary["real_time_factor"])
 
 
-def plant_us_per_step(scenario: str, engine: str, steps: int = 2000, native: bool = True) -> float:
+def plant_us_per_step(scenario: str, config: str, steps: int = 2000, native: bool = True) -> float:
     """Median (of 5 blocks) microseconds per 1 ms control step of the scenario's plant, holding posture."""
-    setup = build_scenario(scenario, {"robot.engine": engine})
+    setup = build_scenario(scenario, CONFIGS[config])
     plant = setup.graph.blocks[setup.robot]
-    if engine == "mujoco":
+    if config.startswith("mujoco"):
         plant.native = native
     plant.setup(0.0)
     q = {"q_target": plant.q0}
@@ -55,19 +62,21 @@ def main() -> None:
     ap.add_argument("--t-end", type=float, default=10.0)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    rtf: dict[str, list[float]] = {"dart": [], "mujoco": []}
+    rtf: dict[str, list[float]] = {config: [] for config in CONFIGS}
     for _ in range(args.repeat):
-        for engine in rtf:
-            rtf[engine].append(scenario_rtf(args.scenario, engine, args.t_end))
+        for config in rtf:
+            rtf[config].append(scenario_rtf(args.scenario, config, args.t_end))
     med = {e: statistics.median(v) for e, v in rtf.items()}
-    print(f"scenario {args.scenario}, {args.t_end:g} s simulated, {args.repeat} runs per engine (medians)")
-    for engine, values in rtf.items():
-        print(f"  {engine:7s} real-time factor {med[engine]:5.2f}x  (runs: {', '.join(f'{v:.2f}' for v in values)})")
-    print(f"  mujoco / dart speed ratio: {med['mujoco'] / med['dart']:.2f}")
+    print(f"scenario {args.scenario}, {args.t_end:g} s simulated, {args.repeat} runs per configuration (medians)")
+    for config, values in rtf.items():
+        print(f"  {config:11s} real-time factor {med[config]:5.2f}x  (runs: {', '.join(f'{v:.2f}' for v in values)})")
+    print(f"  mujoco / dart speed ratio: {med['mujoco'] / med['dart']:.2f}; "
+          f"mujoco-soft / mujoco: {med['mujoco-soft'] / med['mujoco']:.2f} (the Coulomb cone's cost)")
     print("plant alone (do_step + set_inputs + get_outputs per 1 ms, median of 5 blocks):")
-    for label, engine, native in (("dart", "dart", True), ("mujoco, C macro step", "mujoco", True),
+    for label, config, native in (("dart", "dart", True), ("mujoco, C macro step", "mujoco", True),
+                                  ("mujoco-soft, C macro step", "mujoco-soft", True),
                                   ("mujoco, Python sub-steps", "mujoco", False)):
-        print(f"  {label:26s} {plant_us_per_step(args.scenario, engine, native=native):7.1f} us/step")
+        print(f"  {label:26s} {plant_us_per_step(args.scenario, config, native=native):7.1f} us/step")
 
 
 if __name__ == "__main__":

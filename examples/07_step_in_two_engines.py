@@ -1,11 +1,15 @@
-"""The 40 mm step (Yu 2019, Sec. 6.1.1) in DART and in MuJoCo: where R2's foot meets the step, and why one
-engine calls it an obstacle and the other a foothold.
+"""The 40 mm step (Yu 2019, Sec. 6.1.1) at 0.355 m, where R2's foot reaches the step at its swing apex: why one
+engine calls the contact an obstacle and the others a foothold.
 
-Runs ``step`` twice (``robot.engine = "dart"`` and ``"mujoco"``, 30 s each), finds the middle right leg's
-(R2, leg 5) first contact with the step, prints where the foot was and the forces the sensory neurons saw,
-and draws ``step_r2_engines.png``: the foot's path over the step's corner and the force race that decides
-the reflex (the elevator fires when the horizontal force passes Fcy = 10 N while the contact is not a
-foothold, horizontal < 0.5 x vertical; docs/engines.md explains the numbers). Needs ``cpgsim[mujoco]``.
+The ``step`` scenario stands its step at 0.41 m, where every right foot reaches the riser below the top
+(``examples/08_step_position_map.py``). At 0.355 m (the scenario's position until 2026-12-03) R2 arrives
+at the apex of its swing, whose height is the step's: its foot meets the corner itself. This runs ``step``
+there in DART, in MuJoCo (cpgsim's default: Coulomb friction) and in MuJoCo with its own soft friction
+(35 s each), finds the middle right leg's (R2, leg 5) first contact with the step, prints where the foot
+was and the forces the sensory neurons saw, and draws ``step_r2_engines.png``: the foot's path over the
+corner and the force race that decides the reflex (the elevator fires when the horizontal force passes
+Fcy = 10 N while the contact is not a foothold, horizontal < 0.5 x vertical; docs/engines.md explains the
+numbers). Needs ``cpgsim[mujoco]``.
 
     python examples/07_step_in_two_engines.py [OUTPUT.png]
 """
@@ -23,7 +27,9 @@ from cpgsim.harness.results import Results
 from cpgsim.robots.engines import mujoco_available
 
 LEG = 4  # R2 (leg 5 in Yu's numbering)
-STEP_H, EDGE_Y = 0.04, 0.355  # the scenario's step: height and riser position (m)
+STEP_H, EDGE_Y = 0.04, 0.355  # the step's height and riser position here (m): R2 arrives at its apex
+RUNS = {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
+        "mujoco-soft": {"robot.engine": "mujoco", "robot.mujoco.cone": "pyramidal", "robot.mujoco.impratio": 1.0}}
 FOOT_R = 0.01  # the yu-sim foot sphere's radius (m)
 
 
@@ -51,7 +57,7 @@ def draw(found: dict[str, dict], summaries: dict[str, dict], path: Path) -> None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    colours = {"dart": "tab:blue", "mujoco": "tab:red"}
+    colours = {"dart": "tab:blue", "mujoco": "tab:red", "mujoco-soft": "tab:orange"}
     fig, (ax_path, ax_force) = plt.subplots(1, 2, figsize=(12, 4.6))
     ax_path.fill([0, 12, 12, 0], [0, 0, STEP_H * 1e3, STEP_H * 1e3], color="0.85", label="step (40 mm)")
     for engine, c in found.items():
@@ -82,13 +88,14 @@ def main() -> None:
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "step_r2_engines.png")
     found, summaries = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for engine in ("dart", "mujoco"):
+        for engine, sets in RUNS.items():
             run = Path(tmp) / engine
-            summaries[engine] = run_scenario("step", run, sets={"robot.engine": engine}, progress=False, plots=False)
+            summaries[engine] = run_scenario("step", run, sets={**sets, "terrain.step.position_y": EDGE_Y},
+                                             progress=False, plots=False)
             found[engine] = first_contact(run)
             c, s = found[engine], summaries[engine]
             elevators = [e["leg"] for e in s["reflexes"] if e["kind"] == "elevator"]
-            print(f"{engine:6s}: R2 first touches the step at {c['t']:.3f} s, foot centre "
+            print(f"{engine:11s}: R2 first touches the step at {c['t']:.3f} s, foot centre "
                   f"{c['centre_to_edge_mm']:+.1f} mm from the riser, sole {c['sole_below_top_mm']:.1f} mm below "
                   f"the top, horizontal force up to "
                   f"{c['fh_max_100ms']:.1f} N in 100 ms; elevators {', '.join(elevators)}; "
@@ -98,7 +105,7 @@ def main() -> None:
     for engine, c in found.items():  # the geometry both engines share: the contact is on the corner itself
         assert -FOOT_R * 1e3 < c["centre_to_edge_mm"] < FOOT_R * 1e3, (engine, c["centre_to_edge_mm"])
         assert abs(c["sole_below_top_mm"]) < 2.0, (engine, c["sole_below_top_mm"])
-    print("R2 meets the step at its corner, within 2 mm of the top, in both engines")
+    print("R2 meets the step at its corner, within 2 mm of the top, in every engine")
 
 
 if __name__ == "__main__":

@@ -52,13 +52,20 @@ class ContactModel:
     - ``solimp``: impedance ``(d0, dwidth, width)``: stiffening from 0.9 to 0.99 over 1 mm of penetration;
     - ``condim``: 3 (normal + two tangential directions: Coulomb friction, no torsional/rolling friction,
       as DART's contacts);
-    - ``cone``: ``'pyramidal'``, the friction pyramid DART's boxed LCP uses too (``'elliptic'`` is the
-      true Coulomb cone; it cost 1.6x per step here and changed no reflex);
-    - ``impratio``: 1 (MuJoCo's default; frictional and normal constraints equally soft);
+    - ``cone``: ``'elliptic'``, the true Coulomb cone, and ``impratio``: 100 (frictional constraints 100
+      times harder than normal ones). MuJoCo's own defaults (pyramidal, impratio 1) make friction a soft
+      constraint: at a step's corner a 50 g sphere pushed 20 degrees off the contact normal slides away, where
+      Coulomb's law with mu = 1 holds it up to 45 degrees (``python -m cpgsim.robots.contact_probe``); with
+      these two settings MuJoCo holds to 44 and releases at 46 degrees. On the robot the soft friction let
+      swing feet step onto the 40 mm step without the elevator reflex where a Coulomb foot is arrested
+      (over 41 step positions from 0.30 to 0.50 m: R1, R2, R3 and a success at 3 with MuJoCo's defaults, 34
+      with these, 39 in DART; ``examples/08_step_position_map.py``, docs/engines.md). They cost about 13 %
+      per step (the whole ``step`` run 28.0x -> 23.9x real time, interleaved); a pyramidal cone with
+      impratio 100 holds too but is slower (21.9x: the solver needs more iterations) and gave R1, R2, R3
+      at 6 of 21 positions 10 mm apart, the elliptic cone at 18;
     - ``noslip_iterations``: 0 (MuJoCo's default: off). Above 0, MuJoCo's noslip post-solver removes the
-      slow slip that soft friction allows under a sustained tangential load (Coulomb sticking, as DART's
-      rigid friction); on the 40 mm step 20 iterations changed which legs elevate but not R2's outcome
-      (docs/engines.md).
+      slow creep that is left under a sustained tangential load (about 0.03 mm per 0.1 s for a 50 g sphere
+      inside the cone with the settings above; 50 iterations: none) at about 6 % more per step.
 
     Scenario files set any of these in ``[robot.mujoco]`` (``--set robot.mujoco.impratio=10``); the values
     are checked here (``ParameterError`` naming the field) and written into the MJCF by :func:`mjcf`.
@@ -68,8 +75,8 @@ class ContactModel:
     solref: tuple[float, float] = (0.005, 1.0)
     solimp: tuple[float, float, float] = (0.9, 0.99, 0.001)
     condim: int = 3
-    cone: str = "pyramidal"
-    impratio: float = 1.0
+    cone: str = "elliptic"
+    impratio: float = 100.0
     noslip_iterations: int = 0
 
     def __post_init__(self) -> None:

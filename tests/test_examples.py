@@ -21,19 +21,21 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
 
 def test_the_examples_are_all_here():
     assert EXAMPLES == ["01_simulate_and_verify.py", "02_export_and_run_in_fmpy.py", "03_import_fmu.py",
-                        "04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py"]
+                        "04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py",
+                        "08_step_position_map.py"]
     assert (ROOT / "examples" / "06_notebook.ipynb").exists()
 
 
-SLOW = {"04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py"}  # DART runs
-NEEDS_MUJOCO = {"07_step_in_two_engines.py"}
+SLOW = {"04_robot_scenario.py", "05_sweep.py", "07_step_in_two_engines.py", "08_step_position_map.py"}  # DART runs
+NEEDS_MUJOCO = {"07_step_in_two_engines.py", "08_step_position_map.py"}
+ARGS = {"08_step_position_map.py": ["--positions", "0.355,0.41", "--configs", "dart,mujoco"]}  # 2 of its 21
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in EXAMPLES])
 def test_example_runs(name, tmp_path):
     if name in NEEDS_MUJOCO:
         pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
-    proc = _run([sys.executable, str(ROOT / "examples" / name)], tmp_path)
+    proc = _run([sys.executable, str(ROOT / "examples" / name), *ARGS.get(name, [])], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
     expected = {"01_simulate_and_verify.py": "verify: stable-cycle, period 1.000000000 s",
@@ -41,7 +43,9 @@ def test_example_runs(name, tmp_path):
                 "03_import_fmu.py": "amplified output at 2 s",
                 "04_robot_scenario.py": "fell False",
                 "05_sweep.py": "rule2=0: 2/2",
-                "07_step_in_two_engines.py": "R2 meets the step at its corner, within 2 mm of the top, in both"}[name]
+                "07_step_in_two_engines.py": "R2 meets the step at its corner, within 2 mm of the top, in every",
+                # 0.355 m: R2 arrives at its swing apex; DART elevates it, MuJoCo's foot lands on the corner
+                "08_step_position_map.py": "mujoco: R1, R2, R3 in order and a success at 1 of 2 positions"}[name]
     assert expected in proc.stdout, proc.stdout
 
 

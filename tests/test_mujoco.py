@@ -148,7 +148,7 @@ def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
     MJCF text cpgsim writes), on every robot and terrain geom; the run's summary says which model ran."""
     from cpgsim.harness.experiments.runner import build_scenario
 
-    sets = {"robot.engine": "mujoco", "robot.mujoco.noslip_iterations": 7, "robot.mujoco.cone": "elliptic",
+    sets = {"robot.engine": "mujoco", "robot.mujoco.noslip_iterations": 7, "robot.mujoco.cone": "pyramidal",
             "robot.mujoco.impratio": 4.0, "robot.mujoco.solref": [0.004, 0.9],
             "robot.mujoco.solimp": [0.8, 0.95, 0.002], "robot.mujoco.condim": 1}
     setup = build_scenario("step", sets)
@@ -156,7 +156,7 @@ def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
     plant.setup(0.0)
     m = plant.model
     assert m.opt.noslip_iterations == 7 and m.opt.impratio == 4.0
-    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
     assert m.ngeom > 19  # every robot shape and the terrain's boxes
     np.testing.assert_array_equal(m.geom_solref, np.tile([0.004, 0.9], (m.ngeom, 1)))
     np.testing.assert_array_equal(m.geom_solimp[:, :3], np.tile([0.8, 0.95, 0.002], (m.ngeom, 1)))
@@ -165,7 +165,9 @@ def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
     assert setup.info["mujoco_contact"]["solref"] == [0.004, 0.9]
     default = build_scenario("step", {"robot.engine": "mujoco"}).graph.blocks["robot"]
     default.setup(0.0)
-    assert default.model.opt.noslip_iterations == 0 and default.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    # the default: Coulomb's cone with hard friction (docs/engines.md), noslip off
+    assert default.model.opt.noslip_iterations == 0 and default.model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+    assert default.model.opt.impratio == 100.0
     np.testing.assert_array_equal(default.model.geom_solref[0], [0.005, 1.0])
 
 
@@ -309,3 +311,24 @@ def test_fukuhara_amputation_runs_on_mujoco_with_the_cut_legs_touching_nothing()
     assert np.all(force[:, [1, 4]] == 0.0)  # L2, R2
     fz = force[:, [0, 2, 3, 5], 2].sum(axis=1)
     assert np.median(fz[len(fz) // 2:]) == pytest.approx(setup.geometry.mass * 9.81, rel=0.1)
+
+
+@pytest.mark.slow  # two closed-loop 30 s runs
+def test_step_in_mujoco_elevates_r1_r2_r3_in_order_and_succeeds(tmp_path):
+    """Issue 28's must-show, Yu 2019 Sec. 6.1.1 in MuJoCo: on the 40 mm step (at 0.41 m, where every right
+    foot reaches the riser below its top) the elevator reflex fires on legs 4, 5, 6 (R1, R2, R3) in that
+    order, each triggered by a horizontal toe force above Fcy = 10 N, none on a left leg, and the run
+    succeeds. With MuJoCo's own soft friction (pyramidal cone, impratio 1) R3's foot slides up the face
+    instead: no R3 (docs/engines.md) -- the reason the MuJoCo default is Coulomb's cone."""
+    from cpgsim.harness.experiments.runner import run_scenario
+
+    summary = run_scenario("step", tmp_path / "run", sets={"robot.engine": "mujoco"}, progress=False,
+                           plots=False)
+    elevators = [e for e in summary["reflexes"] if e["kind"] == "elevator"]
+    assert [e["leg"] for e in elevators] == ["R1", "R2", "R3"], summary["reflexes"]
+    assert all(e["force_N"] > 10.0 for e in elevators)
+    assert np.all(np.diff([e["t"] for e in elevators]) > 2.0)  # gait cycles apart (Yu: 3.7 s, 4.2 s)
+    assert summary["success"] and summary["complete"] and summary["engine"] == "mujoco"
+    soft = run_scenario("step", tmp_path / "soft", progress=False, plots=False,
+                        sets={"robot.engine": "mujoco", "robot.mujoco.cone": "pyramidal", "robot.mujoco.impratio": 1.0})
+    assert [e["leg"] for e in soft["reflexes"] if e["kind"] == "elevator"] == ["R1", "R2"]

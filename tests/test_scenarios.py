@@ -44,7 +44,7 @@ def load_text(text: str, tmp=None):
 def test_overrides_reach_the_document_and_the_terrain():
     s = load("step", {"terrain.step.height": 0.06, "terrain.step.side": "left", "robot.body_mass": 4,
                       "controller.Fcx": 20, "controller.R1.reflex.x1_apex": 0.5})
-    assert s.features()["step"] == {"type": "step", "height": 0.06, "position_y": 0.355, "side": "left"}
+    assert s.features()["step"] == {"type": "step", "height": 0.06, "position_y": 0.41, "side": "left"}
     assert s.doc["robot"]["body_mass"] == 4.0 and s.doc["controller"]["Fcx"] == 20.0
     assert s.doc["controller"]["params"]["R1.reflex.x1_apex"] == 0.5
     setup = build_scenario(s)

@@ -58,6 +58,11 @@ def _feet(res: Results) -> np.ndarray:
     return res[f"{ROBOT}.foot_position"].reshape(len(res.time), 6, 3)
 
 
+def _feet_force_z(res: Results, leg: int) -> np.ndarray:
+    """Vertical toe force (N) of one leg (index 0-5)."""
+    return res[f"{ROBOT}.toe_force"][:, 3 * leg + 2]
+
+
 def _idx(event: dict) -> int:
     """Array index (0-5) of an event's leg (events carry the label ``leg`` and Yu's ``leg_number`` 1-6)."""
     return event["leg_number"] - 1
@@ -162,9 +167,16 @@ def test_step_robot_ends_past_the_step(step_run):
     for leg in RIGHT:
         assert feet[leg, 1] > summary["step_y_m"], f"leg {leg + 1} did not cross the step"
         assert feet[leg, 2] - R_FOOT > summary["step_height_m"] - 3 * MM, f"leg {leg + 1} is not on the step"
-    # and it walks on, on the step: the last 5 s after the hind leg's elevator swing
+    # and it walks on, on the step: from the hind leg's touchdown after its elevator swing to the end
+    last = _elevators(summary)[-1]
+    assert last["leg"] == "R3"
+    fz = _feet_force_z(res, _idx(last))
+    k = _at(res, last["t"])
+    k_off = k + int(np.argmax(fz[k:] < 0.5))  # the foot leaves the face ...
+    k_down = k_off + int(np.argmax(fz[k_off:] > 2.0))  # ... and touches down (Fcz = 2 N) on the step
+    assert res.time[-1] - res.time[k_down] > 5.0  # the scenario leaves time to walk on
     pos = res[f"{ROBOT}.body_position"][:, 1]
-    assert pos[-1] - pos[_at(res, res.time[-1] - 5.0)] > summary["stride_length_m"]
+    assert pos[-1] - pos[k_down] > summary["stride_length_m"]
 
 
 # -- ditches (Yu 6.1.2) -------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ A scenario file (the built-ins are ``harness/experiments/scenarios/*.toml``)::
     [terrain.step]
     type = "step"
     height = 0.04
-    position_y = 0.355
+    position_y = 0.41
     side = "right"
 
     [criteria]                        # what "success" means (cpgsim.harness.experiments.outcomes)

@@ -44,12 +44,17 @@ elevator trigger window (``-0.98 < x1 < 0.9``), the servo gains, the shank sensi
 Scenario geometry (positions along the walking direction ``y``, world, from the body's start):
 
 - ``flat``: flat ground, 20 s.
-- ``step`` (Yu 6.1.1): a 40 mm step under the right legs from ``y = 0.355 m``; Fcx = Fcy = 10 N,
-  Fcz = 2 N; the elevator raises the clearance to 80 mm (200 % of the obstacle); 30 s (R3's
-  reflex ends near 24 s). The position puts the front right leg's face contact early in its
-  second swing; as the stride is 33 mm shorter than the mount spacing the middle and hind legs
-  meet the face at other points of their swings; 0.347 to 0.362 m all gave elevator reflexes on
-  R1, R2, R3 in that order (measured).
+- ``step`` (Yu 6.1.1): a 40 mm step under the right legs from ``y = 0.41 m``; Fcx = Fcy = 10 N,
+  Fcz = 2 N; the elevator raises the clearance to 80 mm (200 % of the obstacle); 35 s (R3's
+  reflex comes near 25 s). The paper does not say where its step stands; the position decides how
+  high each right foot is when it first reaches the riser, and the step's height is the swing
+  apex's (40 mm), so a foot that arrives at its apex grazes the corner and its reflex hinges on a
+  fraction of a millimetre. At 0.41 m every right foot reaches the riser below the top (R1 about 4 mm,
+  R2 9-12 mm, R3 about 31 mm below it), as at every position from 0.400 to 0.420 m; R1, R2, R3
+  elevate in that order in DART and in MuJoCo at every position from 0.400 to 0.475 m (measured,
+  ``examples/08_step_position_map.py``; docs/engines.md). The
+  position used until 2026-12-03, 0.355 m, put R2's arrival at its apex: R1, R2, R3 in DART
+  (R2 at 10.5 N against the 10 N threshold), R1, R3 in MuJoCo.
 - ``ditches`` (Yu 6.1.2): ditches 18, 40 and 80 mm deep under the right legs at ``y = 0.316,
   0.487, 0.664 m``, 89, 83 and 86 mm wide; Fcz = 2 N; 48 s. In a tripod gait with this stride
   each right leg steps about 34 mm behind the one in front of it, so the ditches are placed on the

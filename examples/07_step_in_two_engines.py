@@ -24,12 +24,14 @@ import numpy as np
 
 from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.results import Results
+from cpgsim.robots.contact_probe import MUJOCO_OWN_DEFAULTS
 from cpgsim.robots.engines import mujoco_available
 
 LEG = 4  # R2 (leg 5 in Yu's numbering)
 STEP_H, EDGE_Y = 0.04, 0.355  # the step's height and riser position here (m): R2 arrives at its apex
+SOFT = {f"robot.mujoco.{key}": value for key, value in MUJOCO_OWN_DEFAULTS.items()}  # MuJoCo's own friction
 RUNS = {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
-        "mujoco-soft": {"robot.engine": "mujoco", "robot.mujoco.cone": "pyramidal", "robot.mujoco.impratio": 1.0}}
+        "mujoco-soft": {"robot.engine": "mujoco", **SOFT}}
 FOOT_R = 0.01  # the yu-sim foot sphere's radius (m)
 
 

@@ -19,11 +19,7 @@ import tempfile
 import time
 
 from cpgsim.harness.experiments.runner import build_scenario, run_scenario
-from cpgsim.robots.contact_probe import MUJOCO_OWN_DEFAULTS
-
-SOFT = {f"robot.mujoco.{key}": value for key, value in MUJOCO_OWN_DEFAULTS.items()}
-CONFIGS = {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
-           "mujoco-soft": {"robot.engine": "mujoco", **SOFT}}
+from cpgsim.harness.experiments.setup import ENGINE_CONFIGS as CONFIGS
 
 
 def scenario_rtf(scenario: str, config: str, t_end: float) -> float:

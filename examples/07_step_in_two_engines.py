@@ -23,15 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.harness.experiments.setup import ENGINE_CONFIGS  # dart, mujoco, mujoco-soft (its own friction)
 from cpgsim.harness.results import Results
-from cpgsim.robots.contact_probe import MUJOCO_OWN_DEFAULTS
 from cpgsim.robots.engines import mujoco_available
 
 LEG = 4  # R2 (leg 5 in Yu's numbering)
 STEP_H, EDGE_Y = 0.04, 0.355  # the step's height and riser position here (m): R2 arrives at its apex
-SOFT = {f"robot.mujoco.{key}": value for key, value in MUJOCO_OWN_DEFAULTS.items()}  # MuJoCo's own friction
-RUNS = {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
-        "mujoco-soft": {"robot.engine": "mujoco", **SOFT}}
 FOOT_R = 0.01  # the yu-sim foot sphere's radius (m)
 
 
@@ -90,7 +87,7 @@ def main() -> None:
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "step_r2_engines.png")
     found, summaries = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for engine, sets in RUNS.items():
+        for engine, sets in ENGINE_CONFIGS.items():
             run = Path(tmp) / engine
             summaries[engine] = run_scenario("step", run, sets={**sets, "terrain.step.position_y": EDGE_Y},
                                              progress=False, plots=False)

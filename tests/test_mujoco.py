@@ -313,14 +313,16 @@ def test_fukuhara_amputation_runs_on_mujoco_with_the_cut_legs_touching_nothing()
     assert np.median(fz[len(fz) // 2:]) == pytest.approx(setup.geometry.mass * 9.81, rel=0.1)
 
 
-@pytest.mark.slow  # two closed-loop 30 s runs
+@pytest.mark.slow  # two closed-loop 35 s runs
 def test_step_in_mujoco_elevates_r1_r2_r3_in_order_and_succeeds(tmp_path):
     """Issue 28's must-show, Yu 2019 Sec. 6.1.1 in MuJoCo: on the 40 mm step (at 0.41 m, where every right
     foot reaches the riser below its top) the elevator reflex fires on legs 4, 5, 6 (R1, R2, R3) in that
-    order, each triggered by a horizontal toe force above Fcy = 10 N, none on a left leg, and the run
-    succeeds. With MuJoCo's own soft friction (pyramidal cone, impratio 1) R3's foot slides up the face
-    instead: no R3 (docs/engines.md) -- the reason the MuJoCo default is Coulomb's cone."""
+    order and on no other leg, each triggered by a horizontal toe force above Fcy = 10 N, and the run
+    succeeds. With MuJoCo's own soft friction (pyramidal cone, impratio 1) R3 arrives at the riser just
+    above its top and slides onto it where a Coulomb foot is arrested: no R3 (docs/engines.md) -- the
+    reason the MuJoCo default is Coulomb's cone."""
     from cpgsim.harness.experiments.runner import run_scenario
+    from cpgsim.harness.experiments.setup import ENGINE_CONFIGS
 
     summary = run_scenario("step", tmp_path / "run", sets={"robot.engine": "mujoco"}, progress=False,
                            plots=False)
@@ -329,6 +331,5 @@ def test_step_in_mujoco_elevates_r1_r2_r3_in_order_and_succeeds(tmp_path):
     assert all(e["force_N"] > 10.0 for e in elevators)
     assert np.all(np.diff([e["t"] for e in elevators]) > 2.0)  # gait cycles apart (Yu: 3.7 s, 4.2 s)
     assert summary["success"] and summary["complete"] and summary["engine"] == "mujoco"
-    soft = run_scenario("step", tmp_path / "soft", progress=False, plots=False,
-                        sets={"robot.engine": "mujoco", "robot.mujoco.cone": "pyramidal", "robot.mujoco.impratio": 1.0})
+    soft = run_scenario("step", tmp_path / "soft", sets=ENGINE_CONFIGS["mujoco-soft"], progress=False, plots=False)
     assert [e["leg"] for e in soft["reflexes"] if e["kind"] == "elevator"] == ["R1", "R2"]

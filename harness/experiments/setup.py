@@ -69,6 +69,19 @@ def contact_model(scenario: Scenario):
         raise ScenarioError(f"{str(exc).replace('ContactModel.', 'robot.mujoco.', 1)} ({scenario.source})") from None
 
 
+def _engine_configs() -> dict[str, dict[str, Any]]:
+    from cpgsim.robots.contact_probe import MUJOCO_OWN_DEFAULTS
+
+    soft = {f"robot.mujoco.{key}": value for key, value in MUJOCO_OWN_DEFAULTS.items()}
+    return {"dart": {"robot.engine": "dart"}, "mujoco": {"robot.engine": "mujoco"},
+            "mujoco-soft": {"robot.engine": "mujoco", **soft}}
+
+
+ENGINE_CONFIGS: dict[str, dict[str, Any]] = _engine_configs()
+"""The ``--set`` overrides of the engine comparisons (``benchmarks/bench_engines.py``, examples 07 and 08):
+DART, MuJoCo with cpgsim's contact model (Coulomb friction), MuJoCo with its own soft friction."""
+
+
 def engine_info(scenario: Scenario, contact) -> dict[str, Any]:
     """What a run's summary says about its physics: the engine and, on MuJoCo, ``contact``, the contact
     model used (:func:`contact_model`)."""

@@ -1,16 +1,17 @@
 """Compiled models cached by content hash, so a graph compiled once starts in well under a second.
 
 The key is a SHA-256 of everything the compiled functions depend on: each equation block's class
-and configuration (:func:`cpgsim.harness.compiler.kinds.leaf_signature`: declarations, attributes, which inputs
-are wired), the source files of the block classes' modules, the wiring, the graph's inputs and
-co-simulation ports, ``dt``, ``substeps``, the grouping, the compiler's own source and the CasADi
-version. Parameter values and start values are not part of it: they are data (the parameter
-vector, the initial state), rebuilt from the graph on every load. An entry is one JSON file
-(CasADi's own serialization of the four functions, the grouped step's C source, each block's direct
-feedthrough) with the SHA-256 of its content, written atomically in the cache folder itself
-(:mod:`cpgsim.components.private_store`); an unreadable entry, or one that fails its check, is recompiled
-and replaced. The C libraries
-built from a model are cached separately by the hash of their source (:mod:`cpgsim.harness.native`).
+and configuration (:func:`cpgsim.harness.compiler.kinds.leaf_signature`: declarations, attributes, which
+inputs are wired), the sources of the block classes, the wiring, the graph's inputs and co-simulation
+ports, ``dt``, ``substeps``, the grouping, the compiler's sources and the CasADi version. Sources are
+computed from the imports (:mod:`cpgsim.harness.sources`): every file the compiler imports, and for each
+block class its module with every module that one imports, transitively. Parameter values and start
+values are not part of it: they are data (the parameter vector, the initial state), rebuilt from the
+graph on every load. An entry is one JSON file (CasADi's own serialization of the four functions, the
+grouped step's C source, each block's direct feedthrough) with the SHA-256 of its content, written
+atomically in the cache folder itself (:mod:`cpgsim.components.private_store`); an unreadable entry, or
+one that fails its check, is recompiled and replaced. The C libraries built from a model are cached
+separately by the hash of their source (:mod:`cpgsim.harness.native`).
 
 ``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
 ``CPGSIM_COMPILE_CACHE=0`` turns the model cache off.
@@ -29,11 +30,14 @@ import casadi as ca
 
 from cpgsim.components import memo, private_store
 from cpgsim.components.graph import FlatGraph
+from cpgsim.harness.sources import module_closure
 
 FORMAT = 2
 
 
 def _class_source(cls: type) -> str:
+    """Digest of the sources a block class's equations can depend on: its module and every module that one
+    imports (:func:`cpgsim.harness.sources.module_closure`), or the class's own source when it has no file."""
     module = sys.modules.get(cls.__module__)
     path = getattr(module, "__file__", None) if module else None
     if path is None:
@@ -41,7 +45,7 @@ def _class_source(cls: type) -> str:
             return hashlib.sha256(inspect.getsource(cls).encode()).hexdigest()
         except (OSError, TypeError):
             return f"unhashable:{id(cls)}"  # defined interactively: never shared across processes
-    return memo.file_digest(path)
+    return repr([memo.file_digest(f) for f in module_closure(path)])
 
 
 def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatures: Mapping[str, tuple],

@@ -25,7 +25,6 @@ feed equation blocks; ``p`` every parameter, so exported FMUs keep them tunable.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -36,10 +35,11 @@ from cpgsim.components import memo
 from cpgsim.components.core import Block, ModelError, Port
 from cpgsim.components.graph import FlatGraph, Graph, as_graph
 from cpgsim.harness import cache
-from cpgsim.harness.compiler import c_form, c_kernel, casadi_form, kinds, layout, schedule, wiring
+from cpgsim.harness.compiler import c_form, casadi_form, kinds
 from cpgsim.harness.compiler.layout import Layout, Slot
 from cpgsim.harness.compiler.schedule import Schedule, build_schedule
 from cpgsim.harness.compiler.wiring import Wiring
+from cpgsim.harness.sources import module_closure
 from cpgsim.harness.steps import check_substeps
 
 __all__ = ["GROUPED_MIN_BLOCKS", "CompiledModel", "Layout", "Slot", "compile_graph"]
@@ -122,16 +122,11 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     substeps = check_substeps(substeps)
     graph = as_graph(item)
     flat = graph.flatten()
-    if grouping == "auto":
-        eq = flat.equation_blocks()
-        classes = {type(b) for b in eq.values()}
-        grouping = "kinds" if len(eq) >= GROUPED_MIN_BLOCKS and len(eq) >= 4 * len(classes) else "flat"
+    grouping = _resolve_grouping(flat, grouping)
     signatures = kinds.leaf_signatures(flat)  # for the cache key, and the kinds reuse them
     if not memo.caching_enabled():
         return _build(flat, dt, int(substeps), grouping, signatures)
-    code = [__file__, *(m.__file__ for m in (wiring, layout, kinds, schedule, casadi_form, c_kernel, c_form)),
-            sys.modules[Block.__module__].__file__]
-    key = cache.model_key(flat, dt, int(substeps), grouping, signatures, code)
+    key = cache.model_key(flat, dt, int(substeps), grouping, signatures, list(compiler_sources()))
     entry = cache.load(key)
     if entry is not None:
         return _from_cache(Wiring(flat, dt, int(substeps), signatures), entry)
@@ -139,6 +134,29 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
     cache.store(key, fns, model.c_step_source(), model.feed, model.grouping)
     return model
+
+
+def _resolve_grouping(flat: FlatGraph, grouping: str) -> str:
+    if grouping != "auto":
+        return grouping
+    eq = flat.equation_blocks()
+    classes = {type(b) for b in eq.values()}
+    return "kinds" if len(eq) >= GROUPED_MIN_BLOCKS and len(eq) >= 4 * len(classes) else "flat"
+
+
+def model_key(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
+              grouping: Literal["auto", "flat", "kinds"] = "auto") -> str:
+    """The compiled-model cache key :func:`compile_graph` uses for these arguments
+    (:func:`cpgsim.harness.cache.model_key` over the computed :func:`compiler_sources`)."""
+    flat = as_graph(item).flatten()
+    return cache.model_key(flat, dt, int(check_substeps(substeps)), _resolve_grouping(flat, grouping),
+                           kinds.leaf_signatures(flat), list(compiler_sources()))
+
+
+def compiler_sources() -> tuple[str, ...]:
+    """Every source file of the package that this compiler imports, computed from the imports
+    (:func:`cpgsim.harness.sources.module_closure`): part of every compiled-model key."""
+    return module_closure(__file__)
 
 
 def _build(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatures: dict[str, tuple]) -> CompiledModel:

@@ -1,0 +1,107 @@
+"""The source files a module's behaviour depends on, computed from its imports (for cache keys).
+
+:func:`module_closure` reads a module's source with :mod:`ast` and follows every ``import`` in it (at the
+top, inside functions and under ``TYPE_CHECKING`` alike: a function-level import runs too) to the modules
+of the ``cpgsim`` package, and, for a module outside the package (a user's graph file), to the modules
+that sit in the same folder tree as it. It returns the files of that transitive closure, sorted. Nothing
+is imported to compute it, so a module that fails to import still gets a key; a name that is not a module
+(``from cpgsim.harness.compiler import Layout``) resolves to the module that defines it.
+
+The compiled-model key (:mod:`cpgsim.harness.cache`) hashes the closure of the compiler and of each
+block class's module, so an edit of any file that shapes a compiled model (the compiler, the step
+arithmetic, units, a helper a block's equations call) gives a new key: no hand-kept list to forget a
+file in.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+from pathlib import Path
+
+PACKAGE = "cpgsim"
+
+
+def _package_root() -> Path:
+    """The folder of the ``cpgsim`` package (this file's grandparent)."""
+    return Path(__file__).resolve().parents[1]
+
+
+def _file_of(parts: list[str], root: Path) -> Path | None:
+    """``root/a/b.py`` or ``root/a/b/__init__.py`` for the dotted parts ``[a, b]``, None when neither exists."""
+    base = root.joinpath(*parts)
+    for candidate in (base.with_name(base.name + ".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate.resolve()
+    return None
+
+
+def _module_name(path: Path) -> str | None:
+    """The dotted name of ``path`` inside the ``cpgsim`` package, or None when it is not in it."""
+    try:
+        rel = path.resolve().relative_to(_package_root())
+    except ValueError:
+        return None
+    parts = list(rel.with_suffix("").parts)
+    if parts and parts[-1] == "__init__":
+        parts.pop()
+    return ".".join([PACKAGE, *parts])
+
+
+def _imported_names(path: Path, own: str | None) -> set[str]:
+    """Dotted module names (and ``module.attribute`` candidates) imported anywhere in ``path``."""
+    try:
+        tree = ast.parse(path.read_bytes(), filename=str(path))
+    except (OSError, SyntaxError, ValueError):
+        return set()
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: resolve against this module's package
+                if own is None:
+                    continue
+                pkg = own.split(".")
+                if path.name != "__init__.py":
+                    pkg = pkg[:-1]
+                pkg = pkg[: len(pkg) - (node.level - 1)] if node.level > 1 else pkg
+                base = ".".join([*pkg, base]) if base else ".".join(pkg)
+            names.add(base)
+            names.update(f"{base}.{a.name}" for a in node.names if a.name != "*")
+    return names
+
+
+@functools.cache
+def module_closure(path: str) -> tuple[str, ...]:
+    """Files of the module at ``path`` and of every module it imports transitively (see module docstring).
+
+    Followed: modules of the ``cpgsim`` package, and modules whose files lie in the folder of ``path`` when
+    ``path`` itself is outside the package (a user's block module and its own helpers). Names are resolved
+    to files by path, without importing anything.
+    """
+    start = Path(path).resolve()
+    pkg_root = _package_root()
+    local_root = None if _module_name(start) is not None else start.parent
+    seen: set[Path] = set()
+    todo = [start]
+    while todo:
+        file = todo.pop()
+        if file in seen or not file.is_file():
+            continue
+        seen.add(file)
+        for name in _imported_names(file, _module_name(file)):
+            parts = name.split(".")
+            if parts[0] == PACKAGE:
+                root, parts = pkg_root, parts[1:]
+                todo.append(pkg_root / "__init__.py")
+            elif local_root is not None:
+                root = local_root
+            else:
+                continue
+            for i in range(1, len(parts) + 1):  # every package on the way runs its __init__ too
+                found = _file_of(parts[:i], root)
+                if found is not None:
+                    todo.append(found)
+    return tuple(sorted(str(f) for f in seen))

@@ -1,0 +1,252 @@
+"""The safety modules tested from the property each one promises, not from one planted case.
+
+- private store: an entry's content is used only after its digest is verified (a byte changed anywhere, a
+  missing or foreign header, a truncation, an entry another user could have written: never used);
+- trust: an FMU binary is trusted only through a verified read of an export record for its exact bytes;
+- run folders: deletion never leaves the run folder, whatever the manifest says;
+- pushes: the magnitude limits hold in every direction (the norm, not each component).
+
+Each property is checked over generated cases (hypothesis), in the quick tier.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import zipfile
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cpgsim.components import private_store
+from cpgsim.components.core import ParameterError
+from cpgsim.fmus import trust
+from cpgsim.harness import rundir
+from cpgsim.robots import disturbance
+
+FAST = settings(max_examples=60, deadline=None)
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("CPGSIM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("CPGSIM_COMPILE_CACHE", raising=False)
+    private_store._warned.clear()
+    return tmp_path / "cache"
+
+
+# -- private store ---------------------------------------------------------------------------------------
+
+def _fresh(tmp_path: Path, name: str) -> Path:
+    folder = tmp_path / "store"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return folder / name
+
+
+@FAST
+@given(payload=st.binary(max_size=200))
+def test_an_entry_reads_back_exactly_what_was_written(tmp_path_factory, payload):
+    path = _fresh(tmp_path_factory.mktemp("e"), "entry.json")
+    private_store.write_entry(path, payload)
+    assert private_store.read_entry(path) == payload
+    assert os.stat(path).st_mode & 0o077 == 0  # private: nobody else reads or writes it
+
+
+@FAST
+@given(payload=st.binary(min_size=1, max_size=120), data=st.data())
+def test_an_entry_changed_anywhere_is_never_used(tmp_path_factory, payload, data):
+    """One byte changed at any offset (header, digest, separator or payload) makes the entry a miss."""
+    path = _fresh(tmp_path_factory.mktemp("e"), "entry.json")
+    private_store.write_entry(path, payload)
+    raw = bytearray(path.read_bytes())
+    i = data.draw(st.integers(0, len(raw) - 1))
+    raw[i] = (raw[i] + data.draw(st.integers(1, 255))) % 256
+    path.write_bytes(bytes(raw))
+    assert private_store.read_entry(path) is None
+
+
+@FAST
+@given(payload=st.binary(max_size=120), cut=st.integers(0, 200))
+def test_a_truncated_entry_is_never_used(tmp_path_factory, payload, cut):
+    path = _fresh(tmp_path_factory.mktemp("e"), "entry.json")
+    private_store.write_entry(path, payload)
+    raw = path.read_bytes()
+    if cut >= len(raw):
+        return
+    path.write_bytes(raw[:cut])
+    assert private_store.read_entry(path) is None
+
+
+@FAST
+@given(content=st.binary(max_size=200))
+def test_an_entry_without_a_digest_is_never_used(tmp_path_factory, content):
+    """A file under an entry's name that cpgsim's writer did not make (no header, a header of another
+    format, a digest of other bytes) gives no payload, whatever it holds."""
+    path = _fresh(tmp_path_factory.mktemp("e"), "entry.json")
+    path.write_bytes(content)
+    path.chmod(0o600)
+    got = private_store.read_entry(path)
+    header = private_store.HEADER + hashlib.sha256(content.partition(b"\n")[2]).hexdigest().encode()
+    assert got is None or content.partition(b"\n")[0] == header
+
+
+def test_a_digest_of_other_bytes_is_never_used(tmp_path):
+    path = _fresh(tmp_path, "entry.json")
+    path.write_bytes(private_store.HEADER + hashlib.sha256(b"other").hexdigest().encode() + b"\n" + b"payload")
+    path.chmod(0o600)
+    assert private_store.read_entry(path) is None
+
+
+@pytest.mark.parametrize("mode", [0o620, 0o602, 0o666])
+def test_an_entry_others_could_write_is_never_used(tmp_path, mode, capsys):
+    path = _fresh(tmp_path, "entry.json")
+    private_store.write_entry(path, b"payload")
+    path.chmod(mode)
+    assert private_store.read_entry(path) is None
+    assert "writable by group or others" in capsys.readouterr().err
+
+
+def test_an_entry_reached_through_a_symlink_is_never_used(tmp_path):
+    real = _fresh(tmp_path, "real.json")
+    private_store.write_entry(real, b"payload")
+    link = real.with_name("link.json")
+    link.symlink_to(real)
+    assert private_store.read_entry(link) is None
+
+
+@FAST
+@given(data=st.binary(max_size=100), flip=st.integers(0, 10_000))
+def test_an_installed_file_checks_only_with_its_own_digest(tmp_path_factory, data, flip):
+    path = tmp_path_factory.mktemp("lib") / "lib.so"
+    private_store.install_file(data, path)
+    assert private_store.check_file(path) == "ok"
+    if data:
+        raw = bytearray(data)
+        raw[flip % len(raw)] ^= 0x01
+        path.write_bytes(bytes(raw))
+        assert private_store.check_file(path) == "its content does not match its digest"
+    path.unlink()
+    assert private_store.check_file(path) is None  # missing: a plain miss, never "ok"
+
+
+# -- trust of FMU binaries ---------------------------------------------------------------------------------
+
+def _fmu(folder: Path, library: bytes, name: str = "m.fmu") -> Path:
+    fmu = folder / name
+    with zipfile.ZipFile(fmu, "w") as zf:
+        zf.writestr("binaries/linux64/m.so", library)
+    return fmu
+
+
+def test_trust_needs_a_verified_export_record_of_the_exact_bytes(tmp_path, private_cache):
+    lib = tmp_path / "m.so"
+    lib.write_bytes(b"\x7fELF exported library")
+    member = "binaries/linux64/m.so"
+    fmu = _fmu(tmp_path, lib.read_bytes())
+    assert not trust.exported_here(fmu, member)  # no record yet
+    trust.record_export(lib, fmu)
+    assert trust.exported_here(fmu, member)
+    other = _fmu(tmp_path, lib.read_bytes() + b"\0", "other.fmu")
+    assert not trust.exported_here(other, member)  # one byte more: another binary
+    assert not trust.exported_here(fmu, "binaries/linux64/missing.so")
+
+
+@pytest.mark.parametrize("damage", ["empty", "no-header", "wrong-digest", "world-writable", "symlink"])
+def test_an_export_record_that_fails_its_check_trusts_nothing(tmp_path, private_cache, damage):
+    """The record's file existing is not enough: it must be read and verified."""
+    lib = tmp_path / "m.so"
+    lib.write_bytes(b"\x7fELF exported library")
+    fmu = _fmu(tmp_path, lib.read_bytes())
+    trust.record_export(lib, fmu)
+    record = trust._entry(hashlib.sha256(lib.read_bytes()).hexdigest())
+    body = json.dumps({"fmu": str(fmu)}).encode()
+    if damage == "empty":
+        record.write_bytes(b"")
+    elif damage == "no-header":
+        record.write_bytes(body)
+    elif damage == "wrong-digest":
+        record.write_bytes(private_store.HEADER + b"0" * 64 + b"\n" + body)
+    elif damage == "world-writable":
+        record.chmod(0o666)
+    else:
+        target = tmp_path / "elsewhere.json"
+        target.write_bytes(record.read_bytes())
+        record.unlink()
+        record.symlink_to(target)
+    assert not trust.exported_here(fmu, "binaries/linux64/m.so")
+
+
+# -- run folders -------------------------------------------------------------------------------------------
+
+_ESCAPES = ["../outside.txt", "../../outside.txt", "sub/../../outside.txt", "./../outside.txt",
+            "link/outside.txt", "{abs}"]
+
+
+@pytest.mark.parametrize("entry", _ESCAPES)
+def test_removing_a_run_never_deletes_outside_it_whatever_the_manifest_says(tmp_path, entry):
+    outside_dir = tmp_path / "elsewhere"
+    outside_dir.mkdir()
+    victim = tmp_path / "outside.txt"
+    victim.write_text("not cpgsim's")
+    (outside_dir / "outside.txt").write_text("not cpgsim's either")
+    run = tmp_path / "runs" / "r"
+    (run / "sub").mkdir(parents=True)
+    (run / "link").symlink_to(outside_dir)
+    (run / "results.csv").write_text("t\n0\n")
+    name = str(victim) if entry == "{abs}" else entry
+    (run / rundir.MANIFEST).write_text(json.dumps({"cpgsim_run": 1, "complete": True,
+                                                    "files": ["results.csv", name]}))
+    # the same escape one level up too (from runs/r, ../outside.txt is runs/outside.txt)
+    (tmp_path / "runs" / "outside.txt").write_text("a sibling's file")
+    rundir.remove_run(run)
+    assert victim.read_text() == "not cpgsim's"
+    assert (outside_dir / "outside.txt").read_text() == "not cpgsim's either"
+    assert (tmp_path / "runs" / "outside.txt").read_text() == "a sibling's file"
+    assert not (run / "results.csv").exists()  # its own file is gone
+
+
+@FAST
+@given(names=st.lists(st.text(alphabet="ab./", min_size=1, max_size=12), max_size=6))
+def test_removal_stays_inside_for_any_manifest(tmp_path_factory, names):
+    base = tmp_path_factory.mktemp("rm")
+    keep = {base / "a", base / "b", base / "a.b"}
+    for k in keep:
+        k.write_text("keep")
+    run = base / "run"
+    run.mkdir()
+    (run / rundir.MANIFEST).write_text(json.dumps({"cpgsim_run": 1, "complete": True,
+                                                    "files": [f"../{n}" for n in names] + names}))
+    rundir.remove_run(run)
+    assert all(k.read_text() == "keep" for k in keep)
+
+
+# -- pushes ------------------------------------------------------------------------------------------------
+
+_unit = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).filter(lambda v: math.hypot(*v) > 0.1)
+
+
+@FAST
+@given(direction=_unit, scale=st.floats(1.0001, 3.0))
+def test_a_push_over_the_limit_is_refused_in_every_direction(direction, scale):
+    """The limits are on the vector's length: a push just over them is refused whichever way it points,
+    including diagonals whose components are each under the limit."""
+    n = math.hypot(*direction)
+    force = [c / n * disturbance.MAX_FORCE_N * scale for c in direction]
+    with pytest.raises(ParameterError, match="over the limit"):
+        disturbance.as_push({"start_s": 0.0, "duration_s": 0.1, "force_N": force})
+    point = [c / n * disturbance.MAX_POINT_M * scale for c in direction]
+    with pytest.raises(ParameterError, match="over the limit"):
+        disturbance.as_push({"start_s": 0.0, "duration_s": 0.1, "force_N": [1.0, 0, 0], "point_m": point})
+
+
+@FAST
+@given(direction=_unit, scale=st.floats(0.0, 0.9999))
+def test_a_push_under_the_limit_is_taken_in_every_direction(direction, scale):
+    n = math.hypot(*direction)
+    force = tuple(c / n * disturbance.MAX_FORCE_N * scale for c in direction)
+    push = disturbance.as_push({"start_s": 0.0, "duration_s": 0.1, "force_N": list(force)})
+    assert push.force_N == pytest.approx(force)

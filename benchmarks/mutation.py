@@ -27,6 +27,7 @@ import argparse
 import ast
 import json
 import os
+import shlex
 import shutil
 import sqlite3
 import subprocess
@@ -39,6 +40,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 BLOCKS_MD = "tests/test_core_blocks.py::test_block_listing_is_generated_from_the_declarations_and_docs_are_current"
 
+QUICK = "-m 'not slow'"
+"""Put first in a module's test list: only the quick tier's tests of those files run against its mutants."""
+
 # module (repository path) -> the tests that specify it (quick ones, no robot runs)
 MODULES: dict[str, tuple[str, list[str]]] = {
     "units": ("components/units.py", ["tests/test_units.py"]),
@@ -50,6 +54,17 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py", BLOCKS_MD]),
     "reflexes": ("components/yu/reflexes.py", ["tests/test_reflex_rules.py", BLOCKS_MD]),
     "steps": ("harness/steps.py", ["tests/test_steps.py"]),  # the compile's substep and horizon arithmetic
+    # the safety modules: what keeps a user's files and process safe, scored by the quick tier's tests alone
+    "private-store": ("components/private_store.py", [QUICK, "tests/test_safety_properties.py",
+                                                      "tests/test_cache_trust.py", "tests/test_cache.py"]),
+    "trust": ("fmus/trust.py", [QUICK, "tests/test_safety_properties.py", "tests/test_fmu_trust.py"]),
+    "cache": ("harness/cache.py", [QUICK, "tests/test_cache_key.py", "tests/test_cache.py",
+                                   "tests/test_cache_trust.py"]),
+    "sources": ("harness/sources.py", [QUICK, "tests/test_cache_key.py"]),
+    "rundir": ("harness/rundir.py", [QUICK, "tests/test_safety_properties.py", "tests/test_run_directory.py"]),
+    "disturbance": ("robots/disturbance.py", [QUICK, "tests/test_safety_properties.py", "tests/test_disturbance.py"]),
+    "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_fuzz.py", "tests/test_scratch_folders.py",
+                                             "tests/test_fmu_import.py"]),
 }
 
 ANNOTATION_NOTE = "skipped: inside an annotation (never evaluated: from __future__ import annotations)"
@@ -252,7 +267,8 @@ def recheck(session: Path, name: str, timeout: float) -> dict[str, object]:
             subprocess.run(["cosmic-ray", "apply", rel, op, str(occ)], cwd=work, env=env, check=True,
                            capture_output=True)
             try:
-                r = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests],
+                r = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+                                    *shlex.split(" ".join(tests))],
                                    cwd=work, env=env, capture_output=True, timeout=timeout)
                 dead = r.returncode != 0
             except subprocess.TimeoutExpired:

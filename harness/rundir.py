@@ -7,7 +7,7 @@ whether the run finished writing. :func:`run_directory` builds a new run in the 
 ``DIR`` and the partial one readable beside it. Of a replaced run only the files its manifest lists are
 deleted; a folder without a manifest is never emptied (:class:`~cpgsim.harness.results.ResultsError`).
 One writer per output: a second run into ``DIR`` while one is being written gets an "in use" error
-(an ``fcntl.flock`` on ``.DIR.cpgsim-lock`` beside it).
+(an ``fcntl.flock`` on ``.DIR.cpgsim-lock`` beside it, removed when the run ends).
 """
 
 from __future__ import annotations
@@ -130,19 +130,51 @@ def _swap_in(new: Path, path: Path) -> None:
               file=sys.stderr)
 
 
+def lock_path(path: Path) -> Path:
+    """The lock file of output ``path`` while a run writes it (``.NAME.cpgsim-lock`` beside it)."""
+    return path.with_name(f".{path.name}.cpgsim-lock")
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether the open file ``fd`` is still the file at ``path`` (not removed or replaced since it was opened)."""
+    try:
+        st = os.stat(path, follow_symlinks=False)
+    except OSError:
+        return False
+    own = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (own.st_dev, own.st_ino)
+
+
 @contextmanager
 def output_lock(path: Path) -> Iterator[None]:
-    """One writer per output ``path``: raise :class:`ResultsError` ("in use") when another process holds it."""
+    """One writer per output ``path``: raise :class:`ResultsError` ("in use") when another process holds it.
+
+    The lock is an ``flock`` on :func:`lock_path`, removed when the run ends, so nothing stays beside the
+    output. A lock file that a killed run left is taken over by the next run (an ``flock`` dies with its
+    process) and removed at its end. Removing a lock file races with a process that opened it just before:
+    so a process that got the ``flock`` checks that the file it holds is still the one at the path, and
+    starts again when it is not (the usual unlink-safe lock file).
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    lock = path.with_name(f".{path.name}.cpgsim-lock")
-    fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
-    try:
+    lock = lock_path(path)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
+            os.close(fd)
             raise ResultsError(f"output {path} is in use by another cpgsim run (lock {lock})") from None
+        if _same_file(fd, lock):
+            break
+        os.close(fd)  # removed by the run that held it, after this process opened it: take the new one
+    try:
         yield
     finally:
+        try:
+            if _same_file(fd, lock):
+                os.unlink(lock)
+        except OSError:
+            pass
         os.close(fd)
 
 

@@ -17,6 +17,13 @@ import pytest
 from cpgsim.harness.cli.main import main
 from cpgsim.harness.results import Results
 
+CLI = [sys.executable, "-c",
+       "import signal, runpy, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+       "sys.argv[0] = 'cpgsim'; runpy.run_module('cpgsim.harness.cli.main', run_name='__main__')"]
+"""``python -m cpgsim.harness.cli.main`` with Python's own SIGINT handler put back first: a process started
+with SIGINT ignored (``nohup pytest ... &`` passes that on to every child) keeps it ignored, and Python then
+installs no KeyboardInterrupt handler, so the child would never end on the signal these tests send."""
+
 
 def _rows(path: Path) -> int:
     if path.suffix == ".csv":
@@ -41,9 +48,11 @@ def wait_for_rows(path: Path, proc: subprocess.Popen, rows: int = 50, limit: flo
 @pytest.mark.parametrize("sig, code, word", [(signal.SIGTERM, 143, "terminated (SIGTERM)"),
                                              (signal.SIGINT, 130, "interrupted")])
 def test_simulate_ends_on_a_signal_with_its_code_and_one_line(tmp_path, sig, code, word):
+    """A 2e4 s horizon (2e7 rows: about 100 s of CSV writing, far longer than the test waits) is ended by the
+    signal after its first rows."""
     out = tmp_path / "o.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "damped-oscillator",
-                             "--t-end", "1e5", "--dt", "0.001", "-o", str(out)], stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([*CLI, "simulate", "damped-oscillator",
+                             "--t-end", "2e4", "--dt", "0.001", "-o", str(out)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
     wait_for_rows(out, proc)
     proc.send_signal(sig)
@@ -58,7 +67,7 @@ def test_simulate_ends_on_a_signal_with_its_code_and_one_line(tmp_path, sig, cod
 def test_robot_run_interrupted_keeps_the_previous_run_and_marks_the_partial_one(tmp_path):
     out = tmp_path / "r"
     env = dict(os.environ)
-    base = [sys.executable, "-m", "cpgsim.harness.cli.main", "run", "flat", "-o", str(out), "--no-progress"]
+    base = [*CLI, "run", "flat", "-o", str(out), "--no-progress"]
     assert subprocess.run([*base, "--t-end", "0.2", "--set", "criteria.min_distance_m=0"], env=env,
                           capture_output=True).returncode == 0
     before = (out / "summary.json").read_bytes()

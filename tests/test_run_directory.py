@@ -17,7 +17,7 @@ import pytest
 from cpgsim.harness.cli.main import main
 from cpgsim.harness.experiments.scenario import ScenarioError, load
 from cpgsim.harness.results import ResultsError
-from cpgsim.harness.rundir import MANIFEST, output_lock, partial_path, read_manifest, run_directory
+from cpgsim.harness.rundir import MANIFEST, lock_path, output_lock, partial_path, read_manifest, run_directory
 
 
 def make_run(path: Path, files: dict[str, str]) -> None:
@@ -103,7 +103,45 @@ def test_killed_reruns_never_lose_the_previous_complete_run(tmp_path, kills):
             assert (part / MANIFEST).exists() and read_manifest(part) is not None
     make_run(run, {"summary.json": "last"})  # whatever the kills left, the next run goes through
     assert (run / "summary.json").read_text() == "last" and not partial_path(run).exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".run.cpgsim-lock", "run", "w.py"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "w.py"]  # no lock left, even after a SIGKILL
+
+
+def test_a_run_leaves_nothing_beside_its_output(tmp_path):
+    """After a run, after a failed run and after an "in use" refusal, the parent folder holds the run and
+    nothing else (no hidden lock files)."""
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "x"})
+    with pytest.raises(RuntimeError):
+        with run_directory(run, ["summary.json"]) as work:
+            (work / "summary.json").write_text("y")
+            raise RuntimeError("the body failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", "run.partial"]
+    make_run(run, {"summary.json": "z"})
+    with output_lock(run):
+        with pytest.raises(ResultsError, match="in use"):
+            make_run(run, {"summary.json": "w"})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_lock_removed_under_a_waiting_process_is_not_shared(tmp_path):
+    """The unlink-safe lock: a process that opened the lock file just before its holder removed it must not
+    count the removed file as held; it takes the new one, so two holders never run at once."""
+    import fcntl
+
+    run = tmp_path / "run"
+    lock = lock_path(run)
+    with output_lock(run):
+        stale = os.open(lock, os.O_RDWR)  # opened while held: the inode the holder will remove
+    try:
+        fcntl.flock(stale, fcntl.LOCK_EX | fcntl.LOCK_NB)  # the holder is gone: this flock succeeds...
+        assert not lock.exists()
+        with output_lock(run):  # ...but a new run makes and holds a new file
+            assert lock.exists() and os.stat(lock).st_ino != os.fstat(stale).st_ino
+            with pytest.raises(ResultsError, match="in use"):
+                with output_lock(run):
+                    pass
+    finally:
+        os.close(stale)
 
 
 def test_one_writer_per_output(tmp_path):

@@ -34,12 +34,8 @@ def record_export(library: Path, fmu: Path) -> None:
 def binary_digest(fmu: str | Path, member: str) -> str | None:
     """SHA-256 of the archive member ``member`` of ``fmu`` (None when it cannot be read)."""
     try:
-        with zipfile.ZipFile(fmu) as zf:
-            h = hashlib.sha256()
-            with zf.open(member) as f:
-                for chunk in iter(lambda: f.read(1 << 20), b""):
-                    h.update(chunk)
-            return h.hexdigest()
+        with zipfile.ZipFile(fmu) as zf, zf.open(member) as f:
+            return hashlib.file_digest(f, "sha256").hexdigest()
     except (OSError, KeyError, zipfile.BadZipFile, RuntimeError, ValueError):
         return None
 

@@ -39,7 +39,9 @@ def test_example_runs(name, tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
     expected = {"01_simulate_and_verify.py": "verify: stable-cycle, period 1.000000000 s",
-                "02_export_and_run_in_fmpy.py": "largest difference to cpgsim",
+                # 5 s at 1 ms: 5001 rows, each printed figure measured from the data the example got
+                "02_export_and_run_in_fmpy.py": "fmpy wrote 5001 output rows (one per 1 ms communication point); "
+                                                "largest difference to cpgsim",
                 "03_import_fmu.py": "amplified output at 2 s",
                 "04_robot_scenario.py": "fell False",
                 "05_sweep.py": "rule2=0: 2/2",
@@ -47,6 +49,33 @@ def test_example_runs(name, tmp_path):
                 # 0.355 m: R2 arrives at its swing apex; DART elevates it, MuJoCo's foot lands on the corner
                 "08_step_position_map.py": "mujoco: R1, R2, R3 in order and a success at 1 of 2 positions"}[name]
     assert expected in proc.stdout, proc.stdout
+    check_printed_claims(name, proc.stdout)
+
+
+def _floats(pattern: str, text: str) -> list[float]:
+    import re
+
+    m = re.search(pattern, text)
+    assert m, f"{pattern!r} not in the output: {text}"
+    return [float(g) for g in m.groups()]
+
+
+def check_printed_claims(name: str, out: str) -> None:
+    """What an example prints is true: each printed number against the one it claims to equal (a newcomer
+    reads the text, not the asserts)."""
+    num = r"([-+0-9.e]+)"
+    if name == "01_simulate_and_verify.py":
+        steps, = _floats(r"simulated (\d+) steps", out)
+        assert steps == 20001  # 20 s at 1 ms, both ends
+        r2, mu = _floats(rf"radius\^2 at the end {num} \(analytic {num}\)", out)
+        assert abs(r2 - mu) < 5e-6
+        period, analytic = _floats(rf"period {num} s \(analytic {num}\)", out)
+        assert abs(period - analytic) < 2e-9
+        mult, analytic = _floats(rf"multiplier {num} \(analytic exp\(-2 mu T\) = {num}\)", out)
+        assert abs(mult - analytic) < 2e-6
+    elif name == "03_import_fmu.py":
+        amp, x = _floats(rf"amplified output at 2 s: {num} = 3 x {num}", out)
+        assert abs(amp - 3 * x) < 2e-6  # printed to 6 decimals
 
 
 def test_own_graph_and_own_scenario_from_the_command_line(tmp_path):

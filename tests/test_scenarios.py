@@ -218,6 +218,19 @@ def test_misspelt_keys_get_a_suggestion(key, fragment):
         load("step", {k: parse_value(v)})
 
 
+@pytest.mark.parametrize("scenario, key, meant", [("step", "t_ned", "t_end"), ("flat", "sed", "seed"),
+                                                   ("fukuhara-gaits", "setin", "setting")])
+def test_a_misspelt_bare_key_is_suggested_from_the_scenario_keys(scenario, key, meant):
+    """Found from outside: `--set t_ned=5` was taken for a controller parameter and the suggestion pointed
+    at 'controller.*.T_net'. A bare key that is neither a scenario key nor a controller parameter now gets
+    the scenario key it was most likely meant for, and names what it is not."""
+    from cpgsim.harness.experiments.runner import build_scenario
+
+    with pytest.raises(ScenarioError, match=re.escape(f"--set {key}: no scenario key or controller parameter "
+                                                      f"{key!r}; did you mean {meant!r}?")):
+        build_scenario(scenario, {key: 5})
+
+
 def test_misspelt_graph_parameter_gets_a_suggestion():
     from cpgsim.components.core import ParameterError
     from cpgsim.components.networks import leader_follower_network

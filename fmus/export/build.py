@@ -293,9 +293,14 @@ def compile_binary(src_dir: Path, out: Path, sources: list[str], opt: str | None
 
 
 def write_fmu(staging: Path, path: Path) -> None:
-    """Zip ``staging`` into ``path`` atomically (sorted entries, fixed timestamps: reproducible)."""
+    """Zip ``staging`` into ``path`` atomically (sorted entries, fixed timestamps: reproducible), with the
+    mode the user's umask gives a new file (like every file cpgsim writes for the user; only the private
+    cache is 0600)."""
+    from cpgsim.harness.results import file_mode
+
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, file_mode())
     os.close(fd)
     try:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:

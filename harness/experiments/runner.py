@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from cpgsim.components.core import ParameterError
 from cpgsim.harness.errors import interruption
 from cpgsim.harness.experiments import outcomes
 from cpgsim.harness.experiments import plots as plots_run
 from cpgsim.harness.experiments.fukuhara import scenarios as fukuhara
-from cpgsim.harness.experiments.scenario import Scenario, builtin_names, load
+from cpgsim.harness.experiments.scenario import Scenario, ScenarioError, bare_key_error, builtin_names, load
 from cpgsim.harness.experiments.setup import RunSetup
 from cpgsim.harness.experiments.summary import RunSummary
 from cpgsim.harness.experiments.yu import scenarios as yu
@@ -44,7 +45,13 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
     if seed is not None:
         scenario.doc["seed"] = int(seed)
     kind = scenario.doc["controller"]["kind"]
-    setup = (fukuhara.build if kind == "fukuhara" else yu.build)(scenario)
+    try:
+        setup = (fukuhara.build if kind == "fukuhara" else yu.build)(scenario)
+    except (ScenarioError, ParameterError) as exc:
+        better = bare_key_error(scenario, exc)
+        if better is None:
+            raise
+        raise better from None
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
     if scenario.doc["disturbance"]:
         from cpgsim.robots.disturbance import as_pushes

@@ -193,6 +193,7 @@ class Scenario:
     source: str  # file path or "built-in NAME"
     text: str = ""  # the TOML text (to find the line of a key)
     overrides: dict[str, Any] = field(default_factory=dict)
+    bare_keys: list[str] = field(default_factory=list)  # --set keys without a dot taken as controller keys
 
     @property
     def name(self) -> str:
@@ -415,6 +416,7 @@ def resolve_key(scenario: Scenario, key: str) -> list[str]:
             return target.split(".")
         if key in SCHEMA and not isinstance(SCHEMA[key], dict):
             return [key]
+        scenario.bare_keys.append(key)
         key = f"controller.{key}"
     parts = key.split(".")  # two parts at least: the key holds a dot here
     if parts[0] == "controller" and parts[1] not in SCHEMA["controller"]:
@@ -422,6 +424,33 @@ def resolve_key(scenario: Scenario, key: str) -> list[str]:
     if parts[0] == "terrain" and len(parts) > 3:
         raise ScenarioError(f"--set {key}: terrain keys are terrain.KEY or terrain.FEATURE.FIELD")
     return parts
+
+
+def scenario_keys(scenario: Scenario) -> list[str]:
+    """The keys a bare ``--set KEY`` can mean besides a controller parameter: the scenario's top-level
+    values, its aliases and the controller table's own keys."""
+    keys = ([k for k, f in SCHEMA.items() if not isinstance(f, dict)] + list(scenario.doc.get("aliases", {}))
+            + [k for k in SCHEMA["controller"] if k != "params"])
+    return list(dict.fromkeys(keys))
+
+
+def bare_key_error(scenario: Scenario, exc: Exception) -> ScenarioError | None:
+    """A clearer error for a failed build caused by a bare ``--set`` key that is not a controller parameter:
+    when the key is close to a scenario key (``t_ned`` for ``t_end``), the suggestion comes from there, not
+    from the controller's parameters (None when no bare key is behind ``exc``)."""
+    import difflib
+
+    text = str(exc)
+    for key in scenario.bare_keys:
+        if f"controller.{key}" not in text and repr(key) not in text:
+            continue
+        close = difflib.get_close_matches(key, scenario_keys(scenario), n=3, cutoff=0.6)
+        if close:
+            hint = " or ".join(repr(c) for c in close)
+            return ScenarioError(f"--set {key}: no scenario key or controller parameter {key!r}; did you mean {hint}? "
+                                 f"(scenario keys: {', '.join(scenario_keys(scenario))}; controller parameters are "
+                                 f"paths such as controller.L1.sensors.Fcx)")
+    return None
 
 
 def apply_override(scenario: Scenario, key: str, value: Any) -> None:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import inspect
-import os
 import re
 from pathlib import Path
 
@@ -83,9 +82,6 @@ def run(args: argparse.Namespace) -> int:
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
                         params=params, name=args.name, optimize=None if args.opt == "auto" else f"-O{args.opt}",
                         clocks=args.clocks)
-    from cpgsim.harness.results import file_mode
-
-    os.chmod(result.path, file_mode())  # the user's umask, like every other file cpgsim writes
     variables = result.variables
     counts = {c: len(variables.of(c)) for c in ("input", "output", "parameter", "state", "dstate")}
     kinds = {"cs": "co-simulation", "me": "model exchange", "both": "co-simulation + model exchange"}[args.kind]

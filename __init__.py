@@ -6,6 +6,7 @@ The public face of the package. The names below are loaded on first use (``cpgsi
     import cpgsim
     g = cpgsim.leader_follower_network()           # Yu 2019 Y5 network, a Graph of blocks
     res = cpgsim.simulate(g, t_end=20.0, dt=1e-3)  # one compiled step, looped in C
+    run = cpgsim.Results.load("runs/demo/results.arrow")  # a finished run, with units and metadata
     study = cpgsim.simulate_batch(g, params={"z1.eps": [0.05, 0.1]}, t_end=20.0)
 
 Subpackages, lowest layer first: :mod:`cpgsim.components` (the block kit and each paper's blocks),
@@ -13,10 +14,7 @@ Subpackages, lowest layer first: :mod:`cpgsim.components` (the block kit and eac
 :mod:`cpgsim.fmus` (FMU export and import, SSP) and :mod:`cpgsim.robots` (DART hexapod, terrains).
 """
 
-from __future__ import annotations
-
-import importlib
-from typing import Any
+from importlib import import_module as _import_module
 
 __version__ = "0.2.0"
 
@@ -39,6 +37,7 @@ _EXPORTS: dict[str, str] = {
     "VerifyOptions": "harness.verify.result",
     "export_fmu": "fmus.export.exporter",
     "FmuBlock": "fmus.importer.block",
+    "Results": "harness.results",
     # the block library: generic blocks
     "Constant": "components.basic",
     "StepSource": "components.basic",
@@ -72,14 +71,15 @@ _EXPORTS: dict[str, str] = {
 __all__ = ["__version__", *_EXPORTS]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'cpgsim' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    value = getattr(_import_module(f"{__name__}.{module}"), name)
     globals()[name] = value  # later look-ups skip this function
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+    """The public API only (what ``__all__`` lists), not this module's own helpers."""
+    return sorted(__all__)

@@ -51,6 +51,32 @@ def write_manifest(path: Path, complete: bool, files: list[str] | None = None) -
     atomic_write(path / MANIFEST, lambda f: json.dump(doc, f, indent=2), text=True)
 
 
+def adopt(files: list[Path]) -> Path | None:
+    """Add ``files`` (just written by cpgsim into a finished run folder: a conversion, a rebuilt report) to
+    the manifest of the run folder holding them, so that cpgsim's next run into that folder knows them as
+    its own and replaces them instead of moving the whole folder aside as foreign. Files outside any run
+    folder are left as they are. Returns the run folder whose manifest was updated, or None."""
+    if not files:
+        return None
+    first = Path(files[0]).resolve()
+    for folder in list(first.parents)[:3]:  # the run folder itself or one or two levels above the file
+        doc = read_manifest(folder)
+        if doc is None:
+            continue
+        names = list(doc["files"])
+        for f in files:
+            try:
+                rel = str(Path(f).resolve().relative_to(folder))
+            except ValueError:
+                continue
+            if rel != MANIFEST and rel not in names:
+                names.append(rel)
+        if names != doc["files"]:
+            write_manifest(folder, complete=bool(doc.get("complete")), files=sorted(names))
+        return folder
+    return None
+
+
 def _check_replaceable(path: Path) -> None:
     if path.is_symlink() or (path.exists() and not path.is_dir()):
         raise ResultsError(f"output {path} exists and is not a directory")

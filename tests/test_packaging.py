@@ -113,3 +113,18 @@ def test_wheel_beside_a_package_named_harness(wheel, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["51"]
     assert os.access(env_dir / "bin" / "cpgsim", os.X_OK)
+
+
+def test_the_top_level_lists_only_the_public_api_each_documented():
+    """Found from outside: dir(cpgsim) listed Any, annotations and importlib, and not Results (how a user
+    loads a finished run). Now it lists exactly __all__, every name loads, and each has a docstring."""
+    import cpgsim
+
+    assert dir(cpgsim) == sorted(cpgsim.__all__)
+    assert "Results" in cpgsim.__all__ and hasattr(cpgsim.Results, "load")
+    for name in cpgsim.__all__:
+        if name == "__version__":
+            assert isinstance(cpgsim.__version__, str)
+            continue
+        obj = getattr(cpgsim, name)
+        assert (obj.__doc__ or "").strip(), f"cpgsim.{name} has no docstring"

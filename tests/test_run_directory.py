@@ -227,3 +227,24 @@ def test_the_demo_follows_the_run_directory_rules(tmp_path, capsys):
     assert main(["demo", "-o", str(folder)]) == 2
     assert "holds no cpgsim run" in capsys.readouterr().err
     assert [p.name for p in folder.iterdir()] == ["notes.txt"] and (folder / "notes.txt").read_text() == "mine"
+
+
+def test_a_conversion_inside_a_run_folder_is_cpgsims_own(tmp_path, capsys):
+    """Found from outside: `cpgsim results runs/demo/results.arrow --csv` (the README's own command) wrote
+    the CSV into the run folder unlisted, so the next run took it for a user's file and moved the whole folder
+    aside (runs/demo.kept-*). Now the conversion is added to the manifest: the README's sequence twice leaves
+    one run folder and nothing beside it."""
+    import numpy as np
+
+    from cpgsim.harness.results import Results
+
+    run = tmp_path / "run"
+    for _ in range(2):
+        with run_directory(run, ["results.arrow"]) as work:
+            Results(np.arange(3) * 0.1, ["x"], ["m"], np.ones((3, 1))).save(work / "results.arrow")
+        capsys.readouterr()
+        assert main(["results", str(run / "results.arrow"), "--csv", "--force"]) == 0
+        listed = set(read_manifest(run)["files"])
+        assert {p.name for p in run.iterdir()} - {MANIFEST} <= listed
+    assert "moved to" not in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]

@@ -42,6 +42,22 @@ REFLEX_LABELS = {"elevator": "elevator reflex", "searching": "searching reflex",
                  "giveup": "search given up", "withdraw": "withdraw"}
 
 
+def gait_legend(stance: np.ndarray, held: np.ndarray, reflexes: Sequence[dict], names: dict[str, str]) -> list:
+    """The gait diagram's legend: an entry for each style the diagram draws, and only those."""
+    handles = [plt.Rectangle((0, 0), 1, 1, color="black", label="stance"),
+               plt.Rectangle((0, 0), 1, 1, facecolor="white", edgecolor="0.5", lw=0.5, label="swing")]
+    if (stance & held).any():  # only what the plot draws is in its legend
+        handles.append(plt.Rectangle((0, 0), 1, 1, color="0.6", label="stance, held by the FSM"))
+    if (~stance & held).any():
+        handles.append(plt.Rectangle((0, 0), 1, 1, facecolor="white", edgecolor="0.5", hatch="////",
+                                     label="swing, held by the FSM"))
+    kinds = sorted({ev["kind"] for ev in reflexes}, key=lambda k: list(REFLEX_COLORS).index(k)
+                   if k in REFLEX_COLORS else 99)
+    handles += [plt.Line2D([], [], ls="none", marker="v", color=REFLEX_COLORS.get(k, "tab:green"),
+                           label=names.get(k, k)) for k in kinds]
+    return handles
+
+
 def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: Path, title: str = "",
               held: np.ndarray | None = None, labels: dict[str, str] | None = None) -> Path:
     """Gait diagram: stance black, swing white; ``held`` (time x 6) marks where the gait FSM holds the leg
@@ -62,15 +78,7 @@ def plot_gait(res: Results, stance: np.ndarray, reflexes: Sequence[dict], path: 
     for ev in reflexes:
         ax.plot(ev["t"], 6 - ev["leg_number"] + 0.45, marker="v", color=REFLEX_COLORS.get(ev["kind"], "tab:green"),
                 ms=7, clip_on=False)
-    handles = [plt.Rectangle((0, 0), 1, 1, color="black", label="stance")]
-    if held.any():
-        handles += [plt.Rectangle((0, 0), 1, 1, color="0.6", label="stance, held by the FSM"),
-                    plt.Rectangle((0, 0), 1, 1, facecolor="white", edgecolor="0.5", hatch="////",
-                                  label="swing, held by the FSM")]
-    kinds = sorted({ev["kind"] for ev in reflexes}, key=lambda k: list(REFLEX_COLORS).index(k)
-                   if k in REFLEX_COLORS else 99)
-    handles += [plt.Line2D([], [], ls="none", marker="v", color=REFLEX_COLORS.get(k, "tab:green"),
-                           label=names.get(k, k)) for k in kinds]
+    handles = gait_legend(stance, held, reflexes, names)
     ax.set_yticks(range(6), LEG_LABELS[::-1])
     ax.set_xlim(t[0], t[-1])
     ax.set_ylim(-0.7, 5.9)

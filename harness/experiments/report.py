@@ -228,7 +228,8 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
     titles = ["gait (black stance, white swing, grey: held by the FSM; triangles: reflexes)", title,
               f"vertical toe force Fz [N]{f' (dashed: Fcz = {fz:g} N)' if fz is not None else ''}",
               "body height [cm], roll and pitch [deg]"]
-    layout: dict[str, Any] = {"height": 760, "margin": {"l": 70, "r": 10, "t": 20, "b": 40}, "shapes": shapes,
+    # top margin 48 px: the first panel title sits below plotly's toolbar (about 30 px at the top right)
+    layout: dict[str, Any] = {"height": 760, "margin": {"l": 70, "r": 10, "t": 48, "b": 40}, "shapes": shapes,
                               "legend": {"orientation": "h", "y": -0.06, "font": {"size": 10}},
                               "hovermode": "closest", "annotations": []}
     for r, ((lo, hi), text) in enumerate(zip(dom, titles, strict=True), start=1):

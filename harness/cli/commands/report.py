@@ -29,5 +29,8 @@ def run(args: argparse.Namespace) -> int:
         if not (run_dir / name).is_file():
             raise CliError(f"{run_dir / name} does not exist (is {run_dir} a directory written by cpgsim run?)")
     path = build_report(run_dir)
+    from cpgsim.harness.rundir import adopt
+
+    adopt([path])  # listed in the run's manifest (a run of an earlier version may not have listed it)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB; opens offline in a browser)")
     return 0

@@ -52,5 +52,8 @@ def run(args: argparse.Namespace) -> int:
     if target.exists() and not args.force:
         raise CliError(f"{target} exists (use --force to replace it)")
     written = res.save(target)
+    from cpgsim.harness.rundir import adopt
+
+    adopt([Path(p) for p in written])  # inside a run folder: listed as cpgsim's, replaced by the next run
     print("wrote " + ", ".join(str(p) for p in written))
     return 0

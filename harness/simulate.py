@@ -143,7 +143,9 @@ class Simulator:
         self._exact_free = self._exact_free_inputs(inputs or {})
         rec = _Recorder(times, columns, units)
         rec.aliases = dict(self._recorded_aliases)
-        rec.meta = dict(meta or {})
+        from cpgsim.harness.results.provenance import provenance
+
+        rec.meta = {"provenance": provenance(), **(meta or {})}  # code, libraries, machine, command
         integer_columns = self._integer_columns(columns)
         if integer_columns:  # the stream's sidecar says from the start which columns hold exact integers
             rec.meta["integer_columns"] = integer_columns

@@ -104,7 +104,7 @@ def test_a_process_that_left_the_group_with_setsid_ends_with_the_run(tmp_path, m
     assert _gone([child, escaped], 10) == [], "a process the FMU started (setsid) outlived the run"
 
 
-@pytest.mark.parametrize("round_", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("round_", [0, *(pytest.param(r, marks=pytest.mark.slow) for r in (1, 2))])
 def test_sigkill_of_cpgsim_ends_the_isolated_child_and_what_it_started(tmp_path, monkeypatch, round_):
     """cpgsim killed by SIGKILL (no handler runs) while the isolated FMU hangs in doStep after starting a
     setsid process: the child's lifeline ends both, repeated at different moments of the hang."""

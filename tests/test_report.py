@@ -123,3 +123,24 @@ def test_nan_in_what_is_drawn_becomes_a_gap_not_an_error():
     assert _json_safe(plots)["data"][0]["y"] == [None, None]
     page = _page("amputated", {"success": True}, {"data": [], "layout": {}, "frames": []}, plots, [0.0], 20)
     assert '"y":[null,null]' in page
+
+
+def test_the_gait_legend_names_only_the_styles_drawn():
+    """Found from outside: gait.png's legend showed a "swing, held by the FSM" hatch that no bar used."""
+    import numpy as np
+
+    from cpgsim.harness.experiments.plots import REFLEX_LABELS, gait_legend
+
+    stance = np.zeros((10, 6), dtype=bool)
+    stance[:5] = True
+    held = np.zeros_like(stance)
+
+    def labels(held, reflexes=()):
+        return [h.get_label() for h in gait_legend(stance, held, list(reflexes), REFLEX_LABELS)]
+
+    assert labels(held) == ["stance", "swing"]
+    held[2, 0] = True  # held in stance only
+    assert labels(held) == ["stance", "swing", "stance, held by the FSM"]
+    held[7, 1] = True  # and in swing
+    assert labels(held, [{"kind": "elevator"}]) == ["stance", "swing", "stance, held by the FSM",
+                                                   "swing, held by the FSM", "elevator reflex"]

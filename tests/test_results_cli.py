@@ -129,3 +129,34 @@ def test_cli_divergence_exits_1_and_writes_partial(tmp_path, capsys):
     meta = json.loads(out.with_suffix(".meta.json").read_text())
     assert meta["complete"] is False and "diverged" in meta["message"]
     assert "partial results" in capsys.readouterr().out
+
+
+def test_every_result_records_the_code_libraries_and_command_that_made_it(tmp_path):
+    """Found from outside: neither summary.json nor the results' metadata said which cpgsim, commit or library
+    versions made them. Now every results file carries a provenance record (and every run's summary)."""
+    import json
+    import re
+    import subprocess
+    from importlib import metadata
+    from pathlib import Path
+
+    import numpy as np
+
+    from cpgsim import __version__
+    from cpgsim.harness.cli.main import main
+    from cpgsim.harness.results import Results
+
+    out = tmp_path / "r.csv"
+    assert main(["simulate", "vdp", "--t-end", "0.05", "-o", str(out)]) == 0
+    prov = Results.load(out).meta["provenance"]
+    assert prov["cpgsim"]["version"] == __version__
+    root = Path(__file__).resolve().parents[1]
+    head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if head.returncode == 0:
+        assert prov["cpgsim"]["commit"] == head.stdout.strip() and isinstance(prov["cpgsim"]["dirty"], bool)
+    else:
+        assert prov["cpgsim"]["commit"] == "not a git checkout"
+    assert prov["libraries"]["numpy"] == np.__version__ and prov["libraries"]["casadi"] == metadata.version("casadi")
+    assert re.match(r"3\.\d+", prov["python"]) and prov["platform"] and isinstance(prov["command"], list)
+    on_disk = json.loads(next(p for p in tmp_path.iterdir() if p.name.endswith(".meta.json")).read_text())
+    assert on_disk["provenance"]["cpgsim"] == prov["cpgsim"]

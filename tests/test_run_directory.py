@@ -177,7 +177,9 @@ def test_cli_rerun_replaces_the_run_and_failed_criteria_exit_1(tmp_path, monkeyp
     (out / "stale.png").write_text("x")  # not listed: the rerun moves it aside rather than deleting it
     assert main(["run", "flat", "-o", str(out), "--t-end", "0.2", "--no-progress", "--set",
                  "criteria.min_distance_m=0"]) == 0
-    assert json.loads((out / "summary.json").read_text())["t_end"] == pytest.approx(0.2, abs=2e-3)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["t_end"] == pytest.approx(0.2, abs=2e-3)
+    assert summary["provenance"]["engine"] == "dart" and summary["provenance"]["cpgsim"]["version"]
     assert not partial_path(out).exists() and not (out / "stale.png").exists()
     assert [p.name for p in tmp_path.glob("r.kept-*/*")] == ["stale.png"]
 

@@ -107,6 +107,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         res.to_csv(out / "results.csv")  # its sidecar is the stream's results.meta.json
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
+    from cpgsim.harness.results.provenance import provenance
+
+    summary["provenance"] = res.meta["provenance"] = provenance(setup.info.get("engine"))
     if error is not None:
         summary.update({"complete": False, "error": str(error)})
     if plots:

@@ -166,8 +166,6 @@ def locked(path: Path) -> Iterator[None]:
 
 def pid_alive(pid: int) -> bool:
     """Whether process ``pid`` runs (one of another user's counts as running: it cannot be signalled)."""
-    if pid == os.getpid():
-        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -250,3 +250,165 @@ def test_a_push_under_the_limit_is_taken_in_every_direction(direction, scale):
     force = tuple(c / n * disturbance.MAX_FORCE_N * scale for c in direction)
     push = disturbance.as_push({"start_s": 0.0, "duration_s": 0.1, "force_N": list(force)})
     assert push.force_N == pytest.approx(force)
+
+
+# -- the trust rule itself, for a user who is not root ------------------------------------------------------
+
+ME = int("70000")  # a non-root uid built at run time (not one of Python's cached small ints)
+needs_root = pytest.mark.skipif(not hasattr(os, "getuid") or os.getuid() != 0, reason="chown needs root")
+
+
+@pytest.fixture
+def as_user(monkeypatch):
+    """The private store's rule applied as user ``ME`` (files are chowned to ``ME`` or to others by root)."""
+    monkeypatch.setattr(private_store, "uid", lambda: ME)
+    return ME
+
+
+@needs_root
+@pytest.mark.parametrize("owner, mode, trusted", [
+    (ME, 0o700, True), (ME, 0o750, True), (ME, 0o701, True), (ME, 0o720, False), (ME, 0o702, False),
+    (ME + 1, 0o700, False), (0, 0o700, False)])
+def test_a_folder_is_trusted_only_when_mine_and_not_writable_by_others(tmp_path, as_user, owner, mode, trusted):
+    folder = tmp_path / "f"
+    folder.mkdir()
+    os.chown(folder, owner, owner)
+    folder.chmod(mode)
+    reason = private_store.untrusted_reason(folder)
+    assert (reason is None) == trusted, reason
+
+
+@needs_root
+def test_a_symlink_on_the_way_is_trusted_only_when_mine_or_roots(tmp_path, as_user):
+    real = tmp_path / "real"
+    real.mkdir()
+    os.chown(real, ME, ME)
+    real.chmod(0o700)
+    for owner, trusted in ((ME, True), (0, True), (ME + 1, False)):
+        link = tmp_path / f"link{owner}"
+        link.symlink_to(real)
+        os.lchown(link, owner, owner)
+        assert (private_store.untrusted_reason(link) is None) == trusted, owner
+
+
+def test_without_user_ids_no_ownership_rule_applies(tmp_path, monkeypatch):
+    monkeypatch.setattr(private_store, "uid", lambda: -1)
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w").chmod(0o777)
+    assert private_store.untrusted_reason(tmp_path / "w") is None
+    assert private_store.is_own_folder(tmp_path / "w")
+
+
+@needs_root
+def test_is_own_folder_means_a_real_folder_of_mine(tmp_path, as_user):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    os.chown(mine, ME, ME)
+    other = tmp_path / "other"
+    other.mkdir()
+    os.chown(other, ME + 1, ME + 1)
+    lower = tmp_path / "lower"
+    lower.mkdir()
+    os.chown(lower, ME - 1, ME - 1)
+    link = tmp_path / "link"
+    link.symlink_to(mine)
+    os.lchown(link, ME, ME)
+    file = tmp_path / "file"
+    file.write_text("x")
+    os.chown(file, ME, ME)
+    assert private_store.is_own_folder(mine)
+    assert not private_store.is_own_folder(other) and not private_store.is_own_folder(lower)
+    assert not private_store.is_own_folder(link) and not private_store.is_own_folder(file)
+    assert not private_store.is_own_folder(tmp_path / "missing")
+
+
+@needs_root
+def test_is_own_folder_as_root_refuses_another_users_folder(tmp_path):
+    other = tmp_path / "other"
+    other.mkdir()
+    os.chown(other, 65534, 65534)
+    assert not private_store.is_own_folder(other) and private_store.is_own_folder(tmp_path)
+
+
+def test_pid_alive_for_running_ended_and_unsignallable_processes(monkeypatch):
+    import subprocess
+    import sys
+
+    assert private_store.pid_alive(os.getpid())
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert private_store.pid_alive(child.pid)
+    finally:
+        child.kill()
+        child.wait()
+    assert not private_store.pid_alive(child.pid)  # ended and reaped
+
+    def denied(pid, sig):
+        raise PermissionError(1, "Operation not permitted")
+    monkeypatch.setattr(os, "kill", denied)
+    assert private_store.pid_alive(1) and private_store.pid_alive(child.pid)  # another user's: running
+    assert not private_store.pid_alive(0) and not private_store.pid_alive(-3)  # not one process
+
+    def overflow(pid, sig):
+        raise OverflowError("signed integer is greater than maximum")
+    monkeypatch.setattr(os, "kill", overflow)
+    assert private_store.pid_alive(2 ** 70)  # cannot be signalled: counted as running, the safe side
+
+
+def test_a_lock_file_is_private_and_never_followed(tmp_path):
+    lock = tmp_path / "x.lock"
+    with private_store.locked(lock):
+        assert stat_mode(lock) == 0o600
+    target = tmp_path / "target"
+    target.write_text("not a lock")
+    link = tmp_path / "link.lock"
+    link.symlink_to(target)
+    with pytest.raises(OSError):
+        with private_store.locked(link):
+            pass
+    assert target.read_text() == "not a lock"
+
+
+def stat_mode(path: Path) -> int:
+    import stat
+
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
+def test_a_new_entry_folder_is_private(tmp_path):
+    path = tmp_path / "new" / "deeper" / "entry.json"
+    old = os.umask(0)
+    try:
+        private_store.write_entry(path, b"x")
+    finally:
+        os.umask(old)
+    assert stat_mode(path.parent) == 0o700 and stat_mode(path) == 0o600
+
+
+def test_a_failed_write_leaves_the_old_entry_and_no_temporary(tmp_path, monkeypatch):
+    path = _fresh(tmp_path, "entry.json")
+    private_store.write_entry(path, b"old")
+
+    def full(fd):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError, match="No space"):
+        private_store.write_entry(path, b"new")
+    monkeypatch.undo()
+    assert private_store.read_entry(path) == b"old"
+    assert sorted(p.name for p in path.parent.iterdir()) == ["entry.json"]
+
+
+def test_an_unreadable_entry_is_a_reported_miss(tmp_path, monkeypatch, capsys):
+    path = _fresh(tmp_path, "entry.json")
+    private_store.write_entry(path, b"payload")
+    real = Path.read_bytes
+
+    def denied(self):
+        if self == path:
+            raise PermissionError(13, "Permission denied")
+        return real(self)
+    monkeypatch.setattr(Path, "read_bytes", denied)
+    assert private_store.read_entry(path) is None
+    assert "cannot be read (Permission denied)" in capsys.readouterr().err
+    assert private_store._entry_reason(tmp_path / "missing") == "cannot be read (No such file or directory)"

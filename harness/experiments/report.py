@@ -160,9 +160,11 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
              "aspectmode": "manual", "aspectratio": {k: v * scale for k, v in ranges.items()},
              "camera": {"eye": {"x": 1.5, "y": -1.3, "z": 0.9}}}
     viewer = {"data": [terrain_trace, *first, event_trace], "frames": frames,
-              "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 30, "b": 0}, "height": 560,
+              # the title on the left, under plotly's toolbar (top right; centred, the title ran under it)
+              "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 56, "b": 0}, "height": 586,
                          "title": {"text": "3D replay (drag to rotate; arrows: toe forces"
-                                   + ("; gold: pushes on the body" if pushes else "") + ")", "font": {"size": 13}},
+                                   + ("; gold: pushes on the body" if pushes else "") + ")", "font": {"size": 13},
+                                   "x": 0.01, "xanchor": "left", "y": 0.955, "yanchor": "top"},
                          "uirevision": "keep", "showlegend": False}}
     times = [float(t[k]) for k in idx]
     plots = _plots(res, summary, idx, robot)
@@ -225,7 +227,9 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
         shapes.append({"type": "line", "xref": "x3 domain", "yref": "y3", "x0": 0, "x1": 1, "y0": fz, "y1": fz,
                        "line": {"color": "gray", "dash": "dash", "width": 1}})
     dom = [(0.79, 1.0), (0.53, 0.74), (0.27, 0.48), (0.0, 0.22)]
-    titles = ["gait (black stance, white swing, grey: held by the FSM; triangles: reflexes)", title,
+    drawn = ["black stance", "white swing"] + (["grey: held by the FSM"] if held.any() else []) + \
+        (["triangles: reflexes"] if summary.get("reflexes") else [])  # only what the panel draws
+    titles = [f"gait ({', '.join(drawn)})", title,
               f"vertical toe force Fz [N]{f' (dashed: Fcz = {fz:g} N)' if fz is not None else ''}",
               "body height [cm], roll and pitch [deg]"]
     # top margin 48 px: the first panel title sits below plotly's toolbar (about 30 px at the top right)

@@ -65,7 +65,24 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "disturbance": ("robots/disturbance.py", [QUICK, "tests/test_safety_properties.py", "tests/test_disturbance.py"]),
     "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_fuzz.py", "tests/test_scratch_folders.py",
                                              "tests/test_fmu_import.py"]),
+    # two large modules scored on their safety functions only (SCOPES): the rest is the engine and the
+    # importer's plumbing, specified by other tests
+    "simulate-nonfinite": ("harness/simulate.py", [QUICK, "tests/test_nonfinite_signals.py",
+                                                   "tests/test_input_limits.py", "tests/test_core_blocks.py",
+                                                   "tests/test_cosim_master.py"]),
+    "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_fuzz.py", "tests/test_fmu_import.py",
+                                                            "tests/test_fmu_defaults.py", "tests/test_fmu_types.py"]),
 }
+
+SCOPES: dict[str, tuple[str, ...]] = {
+    # the checks that refuse non-finite inputs, states and signals and end a run as incomplete
+    "simulate-nonfinite": ("_input_series", "_initial_states", "_check_resume", "_run_chunk", "_diverged", "commit",
+                           "check_finite", "check_memory"),
+    # the model description's checks (XML limits, structure, binaries, default experiment)
+    "description-checks": ("_check_xml", "check", "check_binary", "default_experiment"),
+}
+"""Modules scored on some functions only: the mutants elsewhere are skipped (:func:`skip_out_of_scope`)."""
+SCOPE_NOTE = "skipped: outside the functions this module is scored on (SCOPES)"
 
 ANNOTATION_NOTE = "skipped: inside an annotation (never evaluated: from __future__ import annotations)"
 
@@ -146,6 +163,38 @@ def skip_annotation_mutants(session: Path, module_file: Path) -> int:
     return len(ids)
 
 
+def function_spans(source: str, names: tuple[str, ...]) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """``((row, col), (end_row, end_col))`` of every function or method of ``source`` named in ``names``, in
+    cosmic-ray's positions (as :func:`annotation_spans`)."""
+    tree = ast.parse(source)
+    lines = source.splitlines()
+
+    def pos(row: int, byte_col: int) -> tuple[int, int]:
+        return row, len(lines[row - 1].encode()[:byte_col].decode())
+
+    return [(pos(n.lineno, n.col_offset), pos(n.end_lineno, n.end_col_offset)) for n in ast.walk(tree)
+            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.name in names]
+
+
+def skip_out_of_scope(session: Path, module_file: Path, names: tuple[str, ...]) -> int:
+    """Mark every pending work item of ``session`` whose mutation lies outside the functions ``names`` of
+    ``module_file`` as skipped (the way :func:`skip_annotation_mutants` does). Returns how many."""
+    from cosmic_ray.work_db import use_db
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
+
+    spans = function_spans(module_file.read_text(), names)
+    missing = set(names) - {n.name for n in ast.walk(ast.parse(module_file.read_text()))
+                            if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+    if missing:
+        raise SystemExit(f"{module_file}: no function named {', '.join(sorted(missing))} (SCOPES is stale)")
+    with use_db(str(session)) as db:
+        ids = [item.job_id for item in db.pending_work_items
+               if not any(in_annotation(spans, m.start_pos, m.end_pos) for m in item.mutations)]
+        if ids:
+            db.set_multiple_results(ids, WorkResult(output=SCOPE_NOTE, worker_outcome=WorkerOutcome.SKIPPED))
+    return len(ids)
+
+
 def _config(module_path: str, tests: list[str], timeout: float) -> str:
     return (f'[cosmic-ray]\nmodule-path = "{module_path}"\ntimeout = {timeout}\nexcluded-modules = []\n'
             f'test-command = "{sys.executable} -m pytest -x -q -p no:cacheprovider {" ".join(tests)}"\n\n'
@@ -162,10 +211,12 @@ def _counts(session: Path) -> dict[str, int]:
                               (ANNOTATION_NOTE,)).fetchone()[0]
         unsampled = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
                                 (SAMPLE_NOTE,)).fetchone()[0]
+        out_of_scope = con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND "
+                                   "output = ?", (SCOPE_NOTE,)).fetchone()[0]
     finally:
         con.close()
     out = {str(k).split(".")[-1].lower(): int(v) for k, v in rows}
-    out["total"] = int(total)
+    out["total"] = int(total) - int(out_of_scope)  # the mutants of the functions a module is scored on
     out["annotation"] = int(skipped)
     out["unsampled"] = int(unsampled)
     return out
@@ -201,6 +252,8 @@ def run_module(name: str, work: Path, timeout: float, survivors: bool,
                    capture_output=True, text=True)
     if not annotations:
         skip_annotation_mutants(session, work / module_path)
+    if name in SCOPES:
+        skip_out_of_scope(session, work / module_path, SCOPES[name])
     if sample is not None:
         keep_a_sample(session, sample)
     subprocess.run(["cosmic-ray", "exec", str(cfg), str(session)], cwd=work, env=env, check=True,

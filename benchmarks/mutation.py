@@ -63,14 +63,15 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "sources": ("harness/sources.py", [QUICK, "tests/test_cache_key.py"]),
     "rundir": ("harness/rundir.py", [QUICK, "tests/test_safety_properties.py", "tests/test_run_directory.py"]),
     "disturbance": ("robots/disturbance.py", [QUICK, "tests/test_safety_properties.py", "tests/test_disturbance.py"]),
-    "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_fuzz.py", "tests/test_scratch_folders.py",
-                                             "tests/test_fmu_import.py"]),
+    "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_archive_properties.py", "tests/test_fuzz.py",
+                                             "tests/test_scratch_folders.py", "tests/test_fmu_import.py"]),
     # two large modules scored on their safety functions only (SCOPES): the rest is the engine and the
     # importer's plumbing, specified by other tests
     "simulate-nonfinite": ("harness/simulate.py", [QUICK, "tests/test_nonfinite_signals.py",
                                                    "tests/test_input_limits.py", "tests/test_core_blocks.py",
                                                    "tests/test_cosim_master.py"]),
-    "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_fuzz.py", "tests/test_fmu_import.py",
+    "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_archive_properties.py",
+                                                            "tests/test_fuzz.py", "tests/test_fmu_import.py",
                                                             "tests/test_fmu_defaults.py", "tests/test_fmu_types.py"]),
 }
 

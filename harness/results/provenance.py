@@ -52,9 +52,7 @@ def _git() -> dict[str, Any]:
 
 @functools.cache
 def _static() -> dict[str, Any]:
-    from cpgsim import __version__
-
-    return {"cpgsim": {"version": __version__, **_git()},
+    return {"cpgsim": {"version": _version("cpgsim"), **_git()},
             "libraries": {name: _version(name) for name in LIBRARIES},
             "python": platform.python_version(),
             "platform": platform.platform()}

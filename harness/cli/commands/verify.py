@@ -10,6 +10,11 @@ cycle of the closed loop: Poincare section, stride map from exact saved states, 
 finite differences, a perturbation experiment (docs/verification.md, "The walking gait"); it writes
 DIR/gait.json and DIR/gait.png (default DIR verify_gait_<scenario>); --set then takes scenario keys.
 
+`--prove` adds a computer-assisted proof in ball arithmetic (python-flint arb): a validated Taylor
+integration of the graph's own CasADi tape, the Krawczyk test on the Poincare map and enclosures of the
+Floquet multipliers; its exit status is 0 only if the cycle is proved and proved stable, 1 otherwise
+(the reason in one line). `--certificate FILE` writes the proof, `--check-certificate FILE` re-checks it.
+
 Exit status: 0 stable limit cycle; 1 no stable cycle (diverges, converges to an equilibrium, period not
 found, no common period, unstable orbit) with the reason; 2 bad input.
 
@@ -17,6 +22,8 @@ Examples:
   cpgsim verify network -o out/network
   cpgsim verify vdp --set z.eps=0.5 --json
   cpgsim verify network --x0 z1.x=1          # legs 2, 4, 6 leader start [1, 0]
+  cpgsim verify vdp --set z.eps=1 --set z.b=1 --set z.omega=1 --prove --certificate vdp.cert.json
+  cpgsim verify --check-certificate vdp.cert.json
   cpgsim verify --sweep -o out/sweep          # eps x b table of docs/verification.md
   cpgsim verify gait flat -o out/gait         # the Yu tripod's walking gait (about 3 minutes)
   cpgsim verify gait flat --study controller.fsm.T_g=4,5,6 -o out/gait-study
@@ -60,6 +67,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plot", action="store_true", help="do not write the plot")
     p.add_argument("--sweep", action="store_true",
                    help="run the eps x b sweep of a single neuron against Yu Y4 (docs/verification.md)")
+    p.add_argument("--prove", action="store_true",
+                   help="also PROVE the limit cycle in ball arithmetic (validated Taylor integration, Krawczyk test, "
+                        "multiplier enclosures; docs/verification.md, 'Proof (--prove)')")
+    p.add_argument("--precision", type=int, default=192, metavar="BITS",
+                   help="with --prove: ball precision in bits (default 192)")
+    p.add_argument("--order", type=int, default=32, help="with --prove: Taylor order (default 32)")
+    p.add_argument("--certificate", default=None, metavar="FILE",
+                   help="with --prove: write the proof certificate (box, section, enclosures as exact numbers)")
+    p.add_argument("--check-certificate", default=None, metavar="FILE",
+                   help="re-check a proof certificate (re-derives the equations from its graph, re-runs the "
+                        "interval tests); exit 0 if it holds")
     from cpgsim.harness.cli import gait_command as _gait
 
     _gait.add_arguments(p)
@@ -71,11 +89,23 @@ def run(args: argparse.Namespace) -> int:
     from cpgsim.harness.verify.shooting import verify
 
     if args.graph == "gait" and not args.sweep:
+        if args.prove or args.check_certificate:
+            raise CliError("--prove is for graphs of analytic equation blocks: the walking gait (contact, DART, the "
+                           "gait FSM) is a hybrid co-simulated loop that cannot be proved this way "
+                           "(docs/verification.md, 'Proof (--prove)')")
         from cpgsim.harness.cli import gait_command as _gait
 
         return _gait.run(args)
     if args.scenario:
         raise CliError(f"unexpected argument {args.scenario!r} (a SCENARIO goes with 'verify gait')")
+    if args.check_certificate:
+        if args.graph or args.prove or args.sweep:
+            raise CliError("--check-certificate takes no GRAPH, --prove or --sweep (the certificate names its graph)")
+        return _check(args)
+    if (args.certificate or args.precision != 192 or args.order != 32) and not args.prove:
+        raise CliError("--certificate, --precision and --order go with --prove")
+    if args.prove and args.sweep:
+        raise CliError("--prove does not combine with --sweep")
     if args.sweep:
         if args.graph:
             raise CliError("--sweep takes no GRAPH (it sweeps a single Van der Pol neuron)")
@@ -107,10 +137,70 @@ def run(args: argparse.Namespace) -> int:
                          seed=args.seed, reference=args.reference, sync_pairs=pairs)
     rep = verify(graph, params=parse_sets(args.sets), inputs=parse_assignments(args.inputs, "--input"),
                  x0=parse_assignments(args.x0, "--x0"), options=opts)
+    proof = _prove(args, graph, rep) if args.prove else None
     out = Path(args.output or f"verify_{rep.graph}")
     written = [write_json(rep, out / "report.json")]
+    if proof is not None:
+        (out / "proof.json").write_text(json.dumps(proof.to_json(), indent=2))
+        written.append(out / "proof.json")
+        if args.certificate and proof.certificate is not None:
+            from cpgsim.harness.verify.prove import write_certificate
+
+            written.append(write_certificate(proof, Path(args.certificate), args.graph, parse_sets(args.sets),
+                                             parse_assignments(args.inputs, "--input")))
     if not args.no_plot:
         written.append(plot_report(rep, out / "orbit.png"))
-    print(json.dumps(rep.to_json(), indent=2) if args.json else format_report(rep))
+    if args.json:
+        data = rep.to_json()
+        if proof is not None:
+            data["proof"] = proof.to_json()
+        print(json.dumps(data, indent=2))
+    else:
+        print(format_report(rep))
+        if proof is not None:
+            print(_proof_text(proof))
     print("wrote " + ", ".join(map(str, written)), file=sys.stderr)
+    if proof is not None:
+        if not proof.proved or not proof.stable:
+            print(proof.reason, file=sys.stderr)
+        return proof.exit_code
     return rep.exit_code
+
+
+def _prove(args: argparse.Namespace, graph, rep):
+    """Run the proof on the cycle ``verify`` found (progress on stderr)."""
+    from cpgsim.harness.verify.prove import ProofOptions, prove_report
+
+    opts = ProofOptions(precision=args.precision, order=args.order)
+    try:
+        opts.validate()
+    except Exception as exc:  # noqa: BLE001 - a bad option is bad input
+        raise CliError(str(exc)) from exc
+    return prove_report(graph, rep, parse_assignments(args.inputs, "--input"), opts,
+                        progress=lambda msg: print(msg, file=sys.stderr, flush=True))
+
+
+def _proof_text(proof) -> str:
+    lines = ["", f"proof: {proof.reason}" if proof.reason.startswith("not proved") else
+             f"proof: {'PROVED' if proof.proved else 'not proved'} -- {proof.reason}"]
+    if proof.proved and proof.period is not None:
+        d = proof.to_json()
+        lines.append(f"  period in [{d['period'][0]!r}, {d['period'][1]!r}] s (width {d['period_width']:.3g} s)")
+        lines.append(f"  section {d['section']['definition']}; box radius {d['box']['radius']:.3g}")
+        for mu in d["multipliers"]:
+            lines.append(f"  |mu| in [{mu['abs'][0]:.12g}, {mu['abs'][1]:.12g}]  re in [{mu['re'][0]:.12g}, "
+                         f"{mu['re'][1]:.12g}]  im in [{mu['im'][0]:.3g}, {mu['im'][1]:.3g}]")
+        lines.append(f"  {d['taylor_steps']} Taylor steps, {d['wall_time_s']:.1f} s")
+    return "\n".join(lines)
+
+
+def _check(args: argparse.Namespace) -> int:
+    from cpgsim.harness.verify.prove import check_certificate
+
+    ok, msg = check_certificate(Path(args.check_certificate), catalog.load_graph,
+                                progress=lambda m: print(m, file=sys.stderr, flush=True))
+    if args.json:
+        print(json.dumps({"certificate": str(args.check_certificate), "valid": ok, "message": msg}, indent=2))
+    else:
+        print(msg)
+    return 0 if ok else 1

@@ -16,7 +16,10 @@ Hooks the model code defines (``M`` is the instance; ``m->r[vr]`` holds Float64/
   ``m->next_time``);
 - ``static int model_cs_step(M *m, double t, double h)``: a CS step, returns 0, or 1 to ask to stop
   (``m->time`` is then the last successful time), or 2 (FMI 2) for ``fmi2Discard`` without
-  ``fmi2Terminated``;
+  ``fmi2Terminated``; setting ``m->status`` (e.g. 3) makes ``fmi2DoStep``/``fmi3DoStep`` return that
+  status instead; FMI 3: ``m->early = 1`` returns ``earlyReturn = true`` with ``lastSuccessfulTime =
+  m->time``, ``m->cs_event = 1`` returns ``eventHandlingNeeded = true`` (``m->early_allowed`` and
+  ``m->event_mode_used`` hold what ``fmi3InstantiateCoSimulation`` was given);
 - any FMI function the layer lacks (e.g. ``fmi3SetString``), after ``/*HOOKS*/``.
 """
 
@@ -43,6 +46,8 @@ typedef struct {
     int b[NB > 0 ? NB : 1];
     int terminate, next_defined, terminated, step_event, cs;
     double next_time;
+    int status, early, cs_event, early_allowed, event_mode_used;  /* CS step: see the module docstring */
+    const void *logger, *logenv;  /* the FMU's log callback (FMI 2 callbacks / FMI 3 logMessage) */
 } M;
 """
 
@@ -52,7 +57,7 @@ const char* fmi2GetVersion(void) { return fmi2Version; }
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) { return fmi2OK; }
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
                               const fmi2CallbackFunctions* cb, fmi2Boolean vis, fmi2Boolean log) {
-    M *m = (M*) calloc(1, sizeof(M)); m->cs = type == fmi2CoSimulation; model_init(m); return m; }
+    M *m = (M*) calloc(1, sizeof(M)); m->cs = type == fmi2CoSimulation; m->logger = cb; model_init(m); return m; }
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0, fmi2Boolean stopDef,
                                fmi2Real stop) { ((M*)c)->time = t0; return fmi2OK; }
@@ -92,7 +97,12 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x[], size
     for (size_t k = 0; k < nx; k++) x[k] = 1.0; return fmi2OK; }
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet) {
     M *m = (M*)c; if (m->terminated) return fmi2Error;
-    int r = model_cs_step(m, t, h); if (r == 2) return fmi2Discard;   /* a plain discard: not a stop request */
+    m->status = 0; int r = model_cs_step(m, t, h);
+    if (m->status) { const fmi2CallbackFunctions *cb = m->logger;
+        if (cb && cb->logger) cb->logger(cb->componentEnvironment, "c", (fmi2Status) m->status, "logStatusError",
+                                         "doStep refused at t = %g", t);
+        return (fmi2Status) m->status; }
+    if (r == 2) return fmi2Discard;   /* a plain discard: not a stop request */
     if (r) { m->terminated = 1; return fmi2Discard; } return fmi2OK; }
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* v) {
     if (s != fmi2Terminated) return fmi2Discard; *v = ((M*)c)->terminated; return fmi2OK; }
@@ -108,7 +118,9 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String name, fmi3String token, fmi
     fmi3Boolean log, fmi3InstanceEnvironment env, fmi3LogMessageCallback lm) { return newM(0); }
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String name, fmi3String token, fmi3String res, fmi3Boolean vis,
     fmi3Boolean log, fmi3Boolean evm, fmi3Boolean early, const fmi3ValueReference req[], size_t nreq,
-    fmi3InstanceEnvironment env, fmi3LogMessageCallback lm, fmi3IntermediateUpdateCallback iu) { return newM(1); }
+    fmi3InstanceEnvironment env, fmi3LogMessageCallback lm, fmi3IntermediateUpdateCallback iu) {
+    M *m = newM(1); m->early_allowed = early; m->event_mode_used = evm; m->logger = (const void*) lm;
+    m->logenv = env; return m; }
 void fmi3FreeInstance(fmi3Instance c) { free(c); }
 fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean tolDef, fmi3Float64 tol, fmi3Float64 t0,
     fmi3Boolean stopDef, fmi3Float64 stop) { ((M*)c)->time = t0; return fmi3OK; }
@@ -156,8 +168,12 @@ fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance c, size_t* n) { *n = NZ; 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t* n) { *n = NX; return fmi3OK; }
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean noSet, fmi3Boolean* ev,
     fmi3Boolean* term, fmi3Boolean* early, fmi3Float64* last) {
-    M *m = (M*)c; *ev = fmi3False; *early = fmi3False;
-    int stop = model_cs_step(m, t, h); *term = stop != 0; *last = m->time; return fmi3OK; }
+    M *m = (M*)c; m->status = 0; m->early = 0; m->cs_event = 0;
+    int stop = model_cs_step(m, t, h); *term = stop != 0; *last = m->time; *early = m->early != 0;
+    *ev = m->cs_event != 0;
+    if (m->status && m->logger) ((fmi3LogMessageCallback) m->logger)((fmi3InstanceEnvironment) m->logenv,
+                                   (fmi3Status) m->status, "logStatusError", "doStep refused");
+    return (fmi3Status) m->status; }
 """
 
 

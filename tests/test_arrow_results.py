@@ -71,7 +71,7 @@ def test_a_finished_stream_is_complete_and_a_rerun_replaces_it_only_at_the_end(t
     back = Results.load(path)
     assert back.complete and len(back.time) == 5 and int(back["b.n"][4]) == BIG - 4
     assert not (tmp_path / "r.partial.arrow").exists()
-    assert json.loads((tmp_path / "r.meta.json").read_text())["integer_columns"] == {"b.n": "uint64"}
+    assert json.loads((tmp_path / "r.arrow.meta.json").read_text())["integer_columns"] == {"b.n": "uint64"}
 
 
 def test_cli_results_converts_to_csv_that_a_csv_reader_gets_exactly(tmp_path, capsys):

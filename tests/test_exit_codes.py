@@ -45,8 +45,9 @@ def wait_for_rows(path: Path, proc: subprocess.Popen, rows: int = 50, limit: flo
     pytest.fail(f"no rows in {path} within {limit} s")
 
 
-@pytest.mark.parametrize("sig, code, word", [(signal.SIGTERM, 143, "terminated (SIGTERM)"),
-                                             (signal.SIGINT, 130, "interrupted")])
+@pytest.mark.parametrize("sig, code, word", [
+    pytest.param(signal.SIGTERM, 143, "terminated (SIGTERM)", marks=pytest.mark.slow),  # the same path as SIGINT
+    (signal.SIGINT, 130, "interrupted")])
 def test_simulate_ends_on_a_signal_with_its_code_and_one_line(tmp_path, sig, code, word):
     """A 2e4 s horizon (2e7 rows: about 100 s of CSV writing, far longer than the test waits) is ended by the
     signal after its first rows."""

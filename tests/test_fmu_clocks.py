@@ -61,11 +61,17 @@ def test_coinciding_ticks_run_in_priority_order_then_declaration_order():
     assert s.next_time() == Fraction(4, 30)
 
 
-def test_a_start_time_between_ticks_starts_at_the_next_tick():
+def test_periodic_ticks_count_from_the_start_time():
+    """FMI 3.0 (periodic Clock): t_0 = t_start + T_shift, t_i = t_(i-1) + T_interval: a run started at 1/4 ticks
+    at 1/4, 7/20, ... (shift 0), or at 1/4 + 1/30 + k/30 (shift 1/30), not on multiples of the interval."""
     clocks, _ = read_clocks(CLOCK_XML)
-    s = TickSchedule(clocks[:1])
+    s = TickSchedule(clocks)
     s.start(1, Fraction(1, 10), Fraction(0), Fraction(1, 4))
-    assert s.next_time() == Fraction(3, 10)
+    s.start(2, Fraction(1, 30), Fraction(1, 30), Fraction(1, 4))
+    assert s.next_time() == Fraction(1, 4)
+    due = s.pop_due(Fraction(1, 4) + Fraction(1, 10))
+    assert due == [(Fraction(1, 4), 1), (Fraction(1, 4) + Fraction(1, 30), 2), (Fraction(1, 4) + Fraction(2, 30), 2),
+                   (Fraction(1, 4) + Fraction(3, 30), 2), (Fraction(1, 4) + Fraction(1, 10), 1)]
 
 
 # -- C FMUs ------------------------------------------------------------------------------------------------
@@ -234,6 +240,25 @@ def test_scheduled_execution_partitions_run_at_their_ticks(clock_fmus):
     assert res["p.order"][i] == 312
     # the countdown: set by the 50th fast tick (t = 0.49) to 5 ms, so one tick at 0.495
     assert list(res["p.n_cd"]) == [1 if x > 0.495 + 1e-9 else 0 for x in t]
+
+
+@pytest.mark.slow
+def test_scheduled_execution_ticks_from_a_start_time_off_the_interval(clock_fmus):
+    """A run from t0 = 0.005 (not a multiple of the 10 ms interval): the clock ticks at t0, t0 + 0.01, ... (FMI
+    3.0: the first activation of a periodic clock is t_start + shift); with inputs the row at t shows [t0, t)."""
+    from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import Simulator
+
+    res = Simulator(FmuBlock("p", clock_fmus["se"]), dt=0.004).run(0.105, t0=0.005)
+    t0 = Fraction(1, 200)
+    grid = [t0 + k * Fraction(4, 1000) for k in range(len(res.time))]
+    np.testing.assert_allclose(res.time, [float(g) for g in grid], rtol=0, atol=1e-15)
+    n_fast = [math.ceil((g - t0) / Fraction(1, 100)) for g in grid]  # ticks t0 + k/100 in [t0, t)
+    assert n_fast[:4] == [0, 1, 1, 2] and n_fast[-1] == 10
+    assert list(res["p.n_fast"]) == n_fast
+    got = [float(x) for x, n in zip(res["p.t_fast"], n_fast, strict=True) if n]
+    assert got == [float(t0 + Fraction(n - 1, 100)) for n in n_fast if n]  # 0.005, 0.015, ... exactly
+    assert list(res["p.n_slow"]) == [math.ceil((g - t0) / Fraction(1, 40)) for g in grid]
 
 
 @pytest.mark.slow

@@ -127,6 +127,10 @@ def test_python_api_sets_and_reads_64_bit_integers_exactly(types_fmu):
         assert int(out["io"][0]) == I64_MIN and int(out["uo"][0]) == U64_MAX
         with pytest.raises(Exception, match="not a UInt64 value"):
             rt.set_inputs({"u": -1})
+        with pytest.raises(Exception) as info:  # a float signal, as the master passes one
+            rt.set_inputs({"u": np.array([-1.0])})
+        assert str(info.value).endswith("(instance 't') input u: -1 is not a UInt64 value (an integer in "
+                                        "[0, 18446744073709551615])")
     finally:
         rt.terminate()
 

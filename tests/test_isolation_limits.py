@@ -75,6 +75,7 @@ def _gone(pids: list[int], seconds: float) -> list[int]:
     return [p for p in pids if alive(p)]
 
 
+@pytest.mark.slow  # an isolated child per test; the quick tier keeps the setsid and SIGKILL cases
 def test_a_process_the_fmu_forked_ends_with_the_run(tmp_path, monkeypatch):
     pidfile = tmp_path / "pid"
     monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
@@ -132,6 +133,7 @@ def test_sigkill_of_cpgsim_ends_the_isolated_child_and_what_it_started(tmp_path,
                 pass
 
 
+@pytest.mark.slow  # an isolated child per test; the quick tier keeps the setsid and SIGKILL cases
 def test_an_fmu_printing_megabytes_is_capped_and_counted(tmp_path):
     c_fmu(tmp_path / "spam.fmu", library=hostile_library(tmp_path / "spam.so", "SPAM"))
     r = run_cli(["simulate", "spam.fmu", "--isolate", "--t-end", "0.1", "--dt", "0.01", "-o", "o.csv"], tmp_path)

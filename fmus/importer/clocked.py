@@ -23,8 +23,9 @@ When a tick is activated: the inputs are those the master set at the last commun
 or before it (held over the macro step, as for any CS block). A tick at a communication point waits
 for the inputs at that point: it runs when the master sets them (for an FMU without inputs, at once),
 so outputs read at a point before the inputs are set show the values just before the tick there. The
-first tick (at the start time, for a clock without shift) therefore runs when the first inputs are set,
-and a run from 0 to T activates the ticks in [0, T) (plus the one at T if the FMU has no inputs).
+first tick (at the start time, for a clock without shift: FMI 3.0's periodic clocks tick at ``t_start + shift +
+k * interval``) therefore runs when the first inputs are set, and a run from 0 to T activates the ticks in
+[0, T) (plus the one at T if the FMU has no inputs).
 
 Refused (a :class:`~cpgsim.fmus.importer.clocks.ClockError` naming the FMU and the clock, when the block
 is built): ``triggered`` input clocks (cpgsim connects no clocks, nothing would tick them), output
@@ -43,21 +44,10 @@ from cpgsim.fmus.errors import FmuRuntimeError
 from cpgsim.fmus.importer.clocks import ClockError, TickSchedule, from_float, tolerance
 from cpgsim.fmus.importer.description import FmuDescription, describe_fmu
 from cpgsim.fmus.importer.runtime import FmuRuntime
+from cpgsim.fmus.importer.runtime import landing as _landing
 from cpgsim.harness.errors import StopRequested
 
 _CHANGED = 2  # fmi3IntervalChanged
-
-
-def _landing(t: float, target: float) -> float:
-    """The step size ``h`` with ``t + h == target`` in floating point (an FMU that adds the step to its time
-    lands exactly on the tick; ``target - t`` alone can miss it by one unit in the last place)."""
-    h = target - t
-    for _ in range(8):
-        miss = target - (t + h)
-        if miss == 0:
-            break
-        h += miss
-    return h
 
 
 def check_clocks(desc: FmuDescription, kind: str) -> None:
@@ -101,9 +91,11 @@ class ClockedRuntime(FmuRuntime):
         self._cs_event_mode = False
         self._cs_next: Fraction | None = None  # CS: the next time event the FMU announced
         self._after_tick_pending: list[tuple[int, Fraction]] = []  # ME: ticks set, counted after the iteration
+        self._t_start = 0.0
 
     def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
         self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
+        self._t_start = float(t0)
         self.schedule = None
         self.activations.clear()
         self._cs_next = None
@@ -137,7 +129,7 @@ class ClockedRuntime(FmuRuntime):
         if self.schedule is not None:
             return self.schedule
         s = TickSchedule(self.clocks)
-        t0 = from_float(self._time)
+        t0 = from_float(self._t_start)  # periodic ticks count from the start time (FMI 3.0: t_0 = t_start + shift)
         for c in self.clocks:
             if c.variability == "countdown":
                 continue
@@ -291,7 +283,9 @@ class ClockedRuntime(FmuRuntime):
         self._time = t_end
 
     def _do_step3(self, t: float, dt: float) -> None:
-        """CS: ``fmi3DoStep`` up to each tick inside the step, the tick's event, then on to the step's end."""
+        """CS: ``fmi3DoStep`` up to each tick inside the step, the tick's event, then on to the step's end. After
+        an early return the next ``fmi3DoStep`` starts at ``lastSuccessfulTime`` (an event the FMU reports
+        there is handled first) and the ticks and time events ahead are looked at again from there."""
         self._run_due()
         sched = self._sched()
         t_end = t + dt
@@ -301,21 +295,28 @@ class ClockedRuntime(FmuRuntime):
             nt = sched.next_time()
             own = self._cs_next if self._cs_next is not None and self._cs_next > from_float(cur) else None
             stops = [s for s in (nt, own) if s is not None and s < before_end]
-            if not stops:
-                break
-            at = min(stops)
-            tau = float(at)
-            if tau > cur:
-                self._cs_step(cur, _landing(cur, tau))
-                cur = self._time = tau
-            if at == nt:
-                self._fire(nt)
-            else:
-                self._cs_event(f"time event at t={tau:.12g}")
-        # a tick the step's end stands for (t + dt off by rounding): end the step exactly on the tick
-        end = float(nt) if nt is not None and nt <= from_float(t_end) + tolerance(t_end) else t_end
-        if end > cur:
-            self._cs_step(cur, _landing(cur, end))
+            if stops:
+                at = min(stops)
+                tau = float(at)
+                if tau > cur:
+                    got = self._cs_step(t, t_end, cur, _landing(cur, tau))
+                    if got is not None:  # returned early: go on from there
+                        cur = got
+                        continue
+                    cur = self._time = tau
+                if at == nt:
+                    self._fire(nt)
+                else:
+                    self._cs_event(f"time event at t={tau:.12g}")
+                continue
+            # a tick the step's end stands for (t + dt off by rounding): end the step exactly on the tick
+            end = float(nt) if nt is not None and nt <= from_float(t_end) + tolerance(t_end) else t_end
+            if end > cur:
+                got = self._cs_step(t, t_end, cur, _landing(cur, end))
+                if got is not None:
+                    cur = got
+                    continue
+            break
         self._time = t_end
         if not self.desc.inputs:
             self._run_due()
@@ -330,13 +331,18 @@ class ClockedRuntime(FmuRuntime):
         self._cs_update(where)
         self._countdowns(from_float(self._time))
 
-    def _cs_step(self, t: float, h: float) -> None:
-        """``fmi3DoStep`` (the base runtime's direct call); an event the FMU reports at the step's end
-        (``eventHandlingNeeded``) is handled there at once."""
-        event = self._fmi3_do_step(t, h)
-        self._time = t + h
+    def _cs_step(self, t0: float, t_end: float, t: float, h: float) -> float | None:
+        """``fmi3DoStep`` from ``t`` (the base runtime's direct call) within the macro step ``[t0, t_end]``; an
+        event the FMU reports where it stopped (``eventHandlingNeeded``) is handled there at once. Returns
+        the FMU's ``lastSuccessfulTime`` after an early return short of ``t + h``, else None."""
+        event, early_at = self._fmi3_do_step(t, h)
+        at = t + h if early_at is None else early_at
+        if early_at is not None:
+            self._early_return(t0, t_end, early_at)
+        self._time = at
         if event:
-            self._cs_event(f"event reported by fmi3DoStep at t={t + h:.12g}")
+            self._cs_event(f"event reported by fmi3DoStep at t={at:.12g}")
+        return early_at
 
     # -- model exchange: the ticks are time events ------------------------------------------------------
     def _me_start(self) -> None:

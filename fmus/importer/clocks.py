@@ -6,7 +6,8 @@ XML: ``intervalVariability``, ``intervalDecimal``, ``shiftDecimal``, ``supportsF
 ``resolution``, ``intervalCounter``, ``shiftCounter``, ``priority``, ``canBeDeactivated``, ``clocks``.
 
 Tick times are exact rationals (:class:`fractions.Fraction`): a clock of ``intervalDecimal="0.1"``
-ticks at ``shift + k/10``, computed from the integer ``k`` and handed to the FMU as the float nearest
+ticks at ``t_start + shift + k/10`` (FMI 3.0, periodic Clocks: the first activation is
+``t_start + T_shift``), computed from the integer ``k`` and handed to the FMU as the float nearest
 to that rational, so the 1000th tick is ``100.0`` exactly (adding ``0.1`` a thousand times gives
 ``99.9999999999986``). A decimal attribute is read as the decimal it spells (``"0.1"`` is 1/10, not
 the float nearest to it); ``intervalCounter/resolution`` (``supportsFraction``) is that fraction; an
@@ -167,7 +168,8 @@ def read_clocks(xml: bytes) -> tuple[list[ClockSpec], bool]:
 
 # -- the scheduler -----------------------------------------------------------------------------------------
 class _Periodic:
-    """A time-based clock's ticks ``anchor + k * interval`` (k = 0, 1, ...) after a start time."""
+    """A time-based clock's ticks ``anchor + k * interval`` (k = 0, 1, ...), the anchor the start time plus the
+    shift (or, after a new interval, the tick where it was set)."""
 
     def __init__(self, spec: ClockSpec, order: int) -> None:
         self.spec = spec
@@ -177,11 +179,11 @@ class _Periodic:
         self.k = 0
 
     def start(self, interval: Fraction, shift: Fraction, t0: Fraction) -> None:
-        """Ticks at ``shift + k * interval``, the first at or after ``t0``."""
+        """Ticks at ``t0 + shift + k * interval`` (k = 0, 1, ...) for a run that starts at ``t0``: FMI 3.0's
+        periodic Clock, whose first activation is ``t_start + T_shift`` (so a shift of 0 ticks at the start)."""
         if interval <= 0:
             raise ClockError(f"clock {self.spec.name!r}: interval {float(interval):g} s is not positive")
-        self.interval, self.anchor = interval, shift
-        self.k = max(0, math.ceil((t0 - shift) / interval))
+        self.interval, self.anchor, self.k = interval, t0 + shift, 0
 
     def restart(self, interval: Fraction, at: Fraction) -> None:
         """A new interval from the tick at ``at`` on (``tunable``/``changing`` clocks): next tick ``at + interval``."""

@@ -174,6 +174,16 @@ def format_number(value: float | int) -> str:
     return repr(float(value))
 
 
+def format_value(value: Any, fmi_type: str) -> str:
+    """A value of FMI type ``fmi_type`` as ``inspect`` prints it: a Boolean as ``true``/``false`` (the
+    modelDescription's spelling), an integer type's value exactly, a float as :func:`format_number` does."""
+    if fmi_type in BOOL_TYPES:
+        return "true" if value else "false"
+    if kind_of(fmi_type) == "integer" and not isinstance(value, int) and float(value).is_integer():
+        return str(int(float(value)))
+    return format_number(value)
+
+
 @dataclass
 class FmuDescription:
     """Everything the importer needs from ``modelDescription.xml``, as typed data."""
@@ -242,7 +252,7 @@ class FmuDescription:
             lines.append(f"  {title} ({len(table)}):")
             for p in table.values():
                 shape = "" if p.shape == (1,) else f" shape={p.shape}"
-                start = "" if p.start is None else f" start={_fmt(p.start)}"
+                start = "" if p.start is None else f" start={_fmt(p.start, p.element.type)}"
                 feed = ""
                 if p.direction == "out" and self.feedthrough.get(p.name):
                     feed = f" feedthrough from {', '.join(sorted(self.feedthrough[p.name]))}"
@@ -251,16 +261,16 @@ class FmuDescription:
         lines.append(f"  parameters ({len(self.parameters)}):")
         for q in self.parameters.values():
             fmi = "" if q.fmi_name == q.name else f" (FMI {q.fmi_name})"
-            bounds = ("" if q.bounds == (-math.inf, math.inf)
-                      else f" bounds=[{format_number(q.bounds[0])}, {format_number(q.bounds[1])}]")
-            start = "" if q.start is None else f" = {format_number(q.start)}"
+            bounds = ("" if q.bounds == (-math.inf, math.inf) or q.type in BOOL_TYPES
+                      else f" bounds=[{format_value(q.bounds[0], q.type)}, {format_value(q.bounds[1], q.type)}]")
+            start = "" if q.start is None else f" = {format_value(q.start, q.type)}"
             lines.append(f"    {q.name:24s} [{q.unit}] {q.kind}{start}{bounds}{fmi}")
         if self.value_parameters:
             lines.append(f"  array and string parameters ({len(self.value_parameters)}):")
             for q in self.value_parameters.values():
                 what = "String" if q.type == "String" else f"{q.type} shape={q.shape}"
                 start = "" if q.start is None else (f" = {q.start!r}" if isinstance(q.start, str)
-                                                    else f" = {_fmt(q.start)}")
+                                                    else f" = {_fmt(q.start, q.type)}")
                 fmi = "" if q.fmi_name == q.name else f" (FMI {q.fmi_name})"
                 lines.append(f"    {q.name:24s} [{q.unit}] {what}{start}{fmi}")
         if self.structural_parameters:
@@ -277,9 +287,9 @@ class FmuDescription:
         return "\n".join(lines)
 
 
-def _fmt(values: Sequence[float | int]) -> str:
-    return format_number(values[0]) if len(values) == 1 else "[" + ", ".join(format_number(v) for v in values[:6]) + (
-        ", ...]" if len(values) > 6 else "]")
+def _fmt(values: Sequence[float | int], fmi_type: str = "Float64") -> str:
+    shown = [format_value(v, fmi_type) for v in values[:6]]
+    return shown[0] if len(values) == 1 else "[" + ", ".join(shown) + (", ...]" if len(values) > 6 else "]")
 
 
 def _names(names: Sequence[str]) -> str:
@@ -607,8 +617,8 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
                   number_attribute(hi, element, "max", v.type) if hi is not None else math.inf)
         s0 = start[0] if start else None
         if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
-            skipped.append(f"bounds of parameter {v.name!r} ignored: start {format_number(s0)} is outside "
-                           f"[{format_number(bounds[0])}, {format_number(bounds[1])}]")
+            skipped.append(f"bounds of parameter {v.name!r} ignored: start {format_value(s0, v.type)} is outside "
+                           f"[{format_value(bounds[0], v.type)}, {format_value(bounds[1], v.type)}]")
             bounds = (-math.inf, math.inf)
         if kind == "boolean":
             bounds = (0.0, 1.0)

@@ -17,6 +17,13 @@ before that are the values just before the event (the master re-reads the output
 direct feedthrough after setting their inputs). A change of a discrete (integer/boolean) input is
 applied in event mode at once.
 
+Early return (FMI 3 Co-Simulation): the FMU is instantiated with ``earlyReturnAllowed``; an ``fmi3DoStep``
+that returns ``earlyReturn = true`` has stopped at ``lastSuccessfulTime`` (FMI 3.0, ``fmi3DoStep``). The
+runtime continues from there: the next ``fmi3DoStep`` starts at ``lastSuccessfulTime`` with the rest of
+the macro step (the inputs held, as over any macro step), until the step's end is reached (within 1e-9
+relative), so the master's results stay on its grid. At most :data:`MAX_EARLY_RETURNS` early returns per
+macro step, and a ``lastSuccessfulTime`` outside the step, are errors naming the FMU and the times.
+
 Termination: ``fmi2Discard`` from ``fmi2DoStep`` with ``fmi2GetBooleanStatus(fmi2Terminated)`` true,
 ``terminateSimulation`` from ``fmi3DoStep``, from the event iteration or from
 ``completedIntegratorStep`` raise :class:`~cpgsim.harness.errors.StopRequested` with the FMU's last
@@ -26,6 +33,7 @@ successful time; the outputs stay readable, and the master ends the run cleanly 
 from __future__ import annotations
 
 import collections
+import math
 from collections.abc import Mapping
 from ctypes import byref
 from pathlib import Path
@@ -46,6 +54,26 @@ _FMI3_GET = {"Float64": "getFloat64", "Float32": "getFloat32", "Int8": "getInt8"
 _FMI2_GET = {"Real": "getReal", "Integer": "getInteger", "Enumeration": "getInteger", "Boolean": "getBoolean"}
 _STATUS = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"]
 _ABANDONED: list = []  # instances that reported fmiFatal: not freed, library and logger kept alive
+MAX_EARLY_RETURNS = 1000
+"""Early returns from ``fmi3DoStep`` allowed within one macro step (an FMU that keeps returning early without
+reaching the step's end ends the run with an error instead of hanging it)."""
+
+
+def landing(t: float, target: float) -> float:
+    """The step size ``h`` with ``t + h == target`` in floating point (an FMU that adds the step to its time
+    lands exactly on ``target``; ``target - t`` alone can miss it by one unit in the last place)."""
+    h = target - t
+    for _ in range(8):
+        miss = target - (t + h)
+        if miss == 0:
+            break
+        h += miss
+    return h
+
+
+def reached(t: float, target: float) -> bool:
+    """Whether time ``t`` stands for ``target`` (within 1e-9 relative, the clocks' tolerance)."""
+    return t >= target - 1e-9 * max(1.0, abs(target))
 
 
 class FmuRuntime:
@@ -78,6 +106,8 @@ class FmuRuntime:
                                  if p.kind != "real" or p.variability in ("discrete", "fixed", "tunable")}
         self._last_discrete: dict[str, np.ndarray] = {}
         self._time = 0.0
+        self.early_returns = 0  # fmi3DoStep early returns in this run (FMI 3 CS)
+        self._early_in_step = 0
         self._in_event_mode = False
         self._next_event: float | None = None
         self._last_set: dict[str, np.ndarray] = {}
@@ -104,7 +134,12 @@ class FmuRuntime:
         elif status == 3 and self._state == "running":  # fmiError: only freeInstance is allowed
             self._state = "instantiated"
         tail = f"; FMU log: {one_line(' | '.join(list(self.log)[-3:]), 240)}" if self.log else ""
-        return FmuRuntimeError(f"{self._where(what)} failed: {one_line(exc)}{tail}")
+        function = getattr(exc, "function", None)
+        if isinstance(status, int) and function:  # fmpy's FMICallException: the function (unless named) and status
+            name = _STATUS[status].lower() if 0 <= status < 6 else "illegal return code"
+            call = "" if function in what else f" in {function}"
+            return FmuRuntimeError(f"{self._where(what)} failed{call} with status {status} ({name}){tail}")
+        return FmuRuntimeError(f"{self._where(what)} failed: {one_line(exc).rstrip('.')}{tail}")
 
     def _log2(self, env, instance, status, category, message) -> None:  # FMI 2 logger (via fmpy's proxy)
         self.log.append(f"[{_STATUS[status] if 0 <= status < 6 else status}] {_dec(message)}")
@@ -179,7 +214,10 @@ class FmuRuntime:
                 self._state = "instantiated"
                 self.fmu.setupExperiment(startTime=float(t0))
             else:
-                self.fmu.instantiate(loggingOn=True, logMessage=self._log3, **self._instantiate_options())
+                options = self._instantiate_options()
+                if self.kind == "cs":
+                    options.setdefault("earlyReturnAllowed", True)  # handled: see the module docstring
+                self.fmu.instantiate(loggingOn=True, logMessage=self._log3, **options)
                 self._state = "instantiated"
             for name, value in (params or {}).items():
                 vspec = self.desc.value_parameters.get(name)
@@ -258,6 +296,7 @@ class FmuRuntime:
                 if self.desc.fmi_version == 2:
                     self._do_step2(float(t), float(dt))
                 else:
+                    self._early_in_step = 0
                     self._do_step3(float(t), float(dt))
             else:
                 self._me_step(float(t), float(dt))
@@ -291,11 +330,29 @@ class FmuRuntime:
             self._stop(min(max(last, t), t + dt), "fmi2DoStep returned fmi2Discard with fmi2Terminated")
 
     def _do_step3(self, t: float, dt: float) -> None:
-        self._fmi3_do_step(t, dt)
+        """``fmi3DoStep`` from ``t`` to ``t + dt``, continued from ``lastSuccessfulTime`` after an early return."""
+        end, cur, h = t + dt, t, dt
+        while True:
+            _event, early_at = self._fmi3_do_step(cur, h)  # no event mode here: eventHandlingNeeded is not used
+            if early_at is None:
+                return
+            self._early_return(t, end, early_at)
+            cur = self._time = early_at
+            h = landing(cur, end)
 
-    def _fmi3_do_step(self, t: float, dt: float) -> bool:
+    def _early_return(self, t: float, end: float, at: float) -> None:
+        """Count an early return at ``at`` within the macro step ``[t, end]``; too many end the run."""
+        self.early_returns += 1
+        self._early_in_step += 1
+        if self._early_in_step > MAX_EARLY_RETURNS:
+            raise FmuRuntimeError(self._where(
+                f"fmi3DoStep returned early (earlyReturn = true) {MAX_EARLY_RETURNS} times in the macro step from "
+                f"t={t:.9g} to t={end:.9g}, the last at t={at:.17g}: the step cannot be completed"))
+
+    def _fmi3_do_step(self, t: float, dt: float) -> tuple[bool, float | None]:
         """``fmi3DoStep`` called directly (fmpy raises on fmi3Discard and loses ``terminateSimulation``);
-        returns the FMU's ``eventHandlingNeeded``."""
+        returns the FMU's ``eventHandlingNeeded`` and, after an early return that stopped short of ``t + dt``,
+        its ``lastSuccessfulTime`` (else None)."""
         from ctypes import byref as ref
 
         from fmpy import fmi3
@@ -310,7 +367,14 @@ class FmuRuntime:
         if terminate.value:
             t_last = float(last.value) if status == 2 or early.value else t + dt
             self._stop(min(max(t_last, t), t + dt), "fmi3DoStep returned terminateSimulation")
-        return bool(event.value)
+        if not early.value:
+            return bool(event.value), None
+        t_last, end = float(last.value), t + dt
+        if not (math.isfinite(t_last) and reached(t_last, t) and t_last <= end + 1e-9 * max(1.0, abs(end))):
+            raise FmuRuntimeError(self._where(
+                f"fmi3DoStep from t={t:.9g} to t={end:.9g} returned early at lastSuccessfulTime={t_last!r}, "
+                f"outside the step"))
+        return bool(event.value), (None if reached(t_last, end) else max(t_last, t))
 
     def _stop(self, t_last: float, why: str) -> None:
         self._terminated = True

@@ -37,6 +37,20 @@ _INT_RANGE = {"Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1)}
 _NARROW_INT = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32")
 
 
+def show(value: Any) -> str:
+    """A number as an error message prints it: an integer (a Python, numpy or integral float value) with every
+    digit, another float as its shortest repr (``2.5``, ``nan``); never a numpy repr (``np.float64(-1.0)``)."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return repr(value)
+    return str(int(f)) if math.isfinite(f) and f.is_integer() else repr(f)
+
+
 def kind_of(fmi_type: str) -> str | None:
     if fmi_type in REAL_TYPES:
         return "real"
@@ -114,7 +128,7 @@ def as_values(value: Any, fmi_type: str) -> np.ndarray:
             lo, hi = INT_RANGES[fmi_type]
             for v in arr:
                 if not (math.isfinite(v) and lo <= round(v) <= hi):
-                    raise ValueError(f"{v!r} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
+                    raise ValueError(f"{show(v)} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
         return arr
     # a list of Python ints stays ints: numpy would make [1, 2**63 + 1] a float64 array (and 2**63 + 1 2**63)
     arr = np.atleast_1d(value if isinstance(value, np.ndarray) else np.asarray(value, dtype=object)).ravel()
@@ -126,7 +140,7 @@ def as_values(value: Any, fmi_type: str) -> np.ndarray:
         for v in arr:
             iv = int(v) if isinstance(v, (int, np.integer)) or float(v).is_integer() else None
             if iv is None or not lo <= iv <= hi:
-                raise ValueError(f"{v!r} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
+                raise ValueError(f"{show(v)} is not a {fmi_type} value (an integer in [{lo}, {hi}])")
             ints.append(iv)
         arr = np.array(ints, dtype=EXACT_INT[fmi_type])
     return arr

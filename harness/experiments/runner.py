@@ -104,7 +104,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         plots = False  # Ctrl-C / SIGTERM: end within a moment, no pictures of a partial run
     res.meta.update({"scenario": label, **setup.info})  # results.arrow was streamed during the run
     if save_results and csv:
-        res.to_csv(out / "results.csv")  # its sidecar is the stream's results.meta.json
+        res.save(out / "results.csv")  # with its own sidecar results.meta.json (results.arrow has its .arrow.meta.json)
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
     from cpgsim.harness.results.provenance import provenance

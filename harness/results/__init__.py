@@ -2,14 +2,16 @@
 
 ``.arrow`` (:mod:`cpgsim.harness.results.arrow`) is the primary format: an Arrow IPC stream, columnar and
 binary, with native int64/uint64 columns and the units in its schema, streamed batch by batch (readable
-after a kill), with a sidecar ``FILE.meta.json`` like CSV's. CSV header: ``time,<block>.<port>[<index>]``
+after a kill), with a sidecar ``FILE.arrow.meta.json``. CSV header: ``time,<block>.<port>[<index>]``
 (the index only for vector ports). The npz holds ``time``, ``data``, ``columns``, ``units``, ``complete``
 and ``message``; a CSV ``FILE.csv`` gets a sidecar ``FILE.meta.json`` with the same metadata, so a
-partial run is marked as such.
+partial run is marked as such. Each results file has its own sidecar (:func:`sidecar_path`): ``r.csv`` and
+``r.arrow`` side by side never share one (an Arrow file's sidecar was ``FILE.meta.json`` too; such an old
+sidecar is still read for ``FILE.arrow`` when no ``FILE.csv`` lies beside it).
 
 :class:`ResultsWriter` streams a run to disk while it runs (the simulator flushes it at least every
 simulated second or every ``flush_seconds`` of wall time): the CSV grows in whole rows and its
-``.meta.json`` says ``"complete": false`` until the run ends, so a run killed with SIGKILL leaves
+sidecar says ``"complete": false`` until the run ends, so a run killed with SIGKILL leaves
 readable partial results marked incomplete. An ``.npz`` target is streamed as ``FILE.partial.csv``
 and written (atomically) at the end.
 
@@ -113,7 +115,8 @@ class Results:
 
     # -- writing ------------------------------------------------------------------------------
     def save(self, path: str | Path) -> list[Path]:
-        """Write by suffix: ``.arrow`` or ``.csv`` (each plus ``.meta.json``), ``.npz``; returns the files written."""
+        """Write by suffix: ``.arrow`` or ``.csv`` (each plus its sidecar, :func:`sidecar_path`), ``.npz``; returns
+        the files written."""
         path = Path(path)
         if path.suffix == ".arrow":
             return [self.to_arrow(path), self._write_meta(path)]
@@ -168,8 +171,8 @@ class Results:
         atomic_write(path, write, text=False)
         return path
 
-    def _write_meta(self, csv_path: Path) -> Path:
-        meta_path = csv_path.with_suffix(".meta.json")
+    def _write_meta(self, path: Path) -> Path:
+        meta_path = sidecar_path(path)
         doc = {"columns": self.columns, "units": self.units, "complete": self.complete,
                "message": self.message, "rows": len(self.time), **csv_meta(self.meta)}
         atomic_write(meta_path, lambda f: json.dump(doc, f, indent=2), text=True)
@@ -192,7 +195,7 @@ class Results:
                 header = f.readline().strip().split(",")
             if not header or header[0] != "time":
                 raise ResultsError(f"{path}: first column must be 'time'")
-            meta_path = path.with_suffix(".meta.json")
+            meta_path = sidecar_path(path)
             meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
             text = path.read_text()
             if not text.endswith("\n"):  # a stream stopped in the middle of a row: keep whole rows
@@ -218,7 +221,9 @@ class Results:
         from cpgsim.harness.results.arrow import read_table
 
         doc = read_table(path)
-        meta_path = path.with_suffix(".meta.json")
+        meta_path = sidecar_path(path)
+        if not meta_path.exists() and not path.with_suffix(".csv").exists():
+            meta_path = path.with_suffix(".meta.json")  # written before Arrow had a sidecar of its own
         side = json.loads(meta_path.read_text()) if meta_path.exists() else {}
         meta = {**doc["meta"], **side}
         for key in ("units", "columns", "rows", "integer_columns"):
@@ -332,13 +337,24 @@ def atomic_write(path: Path, writer, text: bool) -> None:
         raise
 
 
+def sidecar_path(path: str | Path) -> Path:
+    """The metadata sidecar of results file ``path``, one per file: ``FILE.csv`` -> ``FILE.meta.json`` (its
+    long-standing name), ``FILE.arrow`` -> ``FILE.arrow.meta.json``; so ``r.csv`` and ``r.arrow`` beside each
+    other have ``r.meta.json`` and ``r.arrow.meta.json``. A CSV whose stem ends in ``.arrow`` (``x.arrow.csv``)
+    gets ``x.arrow.csv.meta.json``, which keeps the names apart."""
+    path = Path(path)
+    if path.suffix == ".csv" and Path(path.stem).suffix != ".arrow":
+        return path.with_suffix(".meta.json")
+    return path.with_name(path.name + ".meta.json")
+
+
 def result_files(path: str | Path) -> list[Path]:
     """Every file a results target ``FILE.arrow`` / ``FILE.csv`` / ``FILE.npz`` consists of (existing or not)."""
     path = Path(path)
-    stem = path.with_suffix("")
     if path.suffix in (".csv", ".arrow"):
-        return [path, Path(f"{stem}.meta.json")]
-    return [path, Path(f"{stem}.partial.csv"), Path(f"{stem}.partial.meta.json")]
+        return [path, sidecar_path(path)]
+    partial = path.with_suffix(".partial.csv")
+    return [path, partial, sidecar_path(partial)]
 
 
 class ResultsWriter:
@@ -384,11 +400,11 @@ class ResultsWriter:
         self.columns, self.units, self.meta = list(columns), list(units), dict(meta or {})
         if self.path.suffix != ".npz" and self.path.exists():  # a rerun (--force): the old file stays till the end
             self.stream_path = self.path.with_suffix(".partial" + self.path.suffix)
-        for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+        for f in (self.stream_path, sidecar_path(self.stream_path)):
             if f != self.path and f.exists():
                 f.unlink()  # a stream of an earlier run that did not finish
-        if self.stream_path == self.path and self.path.with_suffix(".meta.json").exists():
-            self.path.with_suffix(".meta.json").unlink()  # a sidecar without its CSV
+        if self.stream_path == self.path and sidecar_path(self.path).exists():
+            sidecar_path(self.path).unlink()  # a sidecar without its CSV
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.path.parent)
         self._write_meta(False, "incomplete: the run had not finished when this file was last written", None)
@@ -410,7 +426,7 @@ class ResultsWriter:
     def _write_meta(self, complete: bool, message: str, rows: int | None) -> None:
         doc = {"columns": self.columns, "units": self.units, "complete": complete, "message": message,
                "rows": rows, **csv_meta(self.meta)}
-        atomic_write(self.stream_path.with_suffix(".meta.json"), lambda f: json.dump(doc, f, indent=2), text=True)
+        atomic_write(sidecar_path(self.stream_path), lambda f: json.dump(doc, f, indent=2), text=True)
 
     def append(self, time: np.ndarray, rows: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> None:
         """Add rows; ``exact`` maps a column index of ``rows`` to its exact 64-bit integers."""
@@ -457,22 +473,22 @@ class ResultsWriter:
         self._close_stream(ended=True)
         self.meta = {**self.meta, **results.meta}
         if self._rows == 0:
-            for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+            for f in (self.stream_path, sidecar_path(self.stream_path)):
                 if f.exists():
                     f.unlink()
             return []
         if self.path.suffix == ".npz":
             written = [results.to_npz(self.path)]
-            for f in (self.stream_path, self.stream_path.with_suffix(".meta.json")):
+            for f in (self.stream_path, sidecar_path(self.stream_path)):
                 if f.exists():
                     f.unlink()
             return written
         self._write_meta(results.complete, results.message, self._rows)
         if self.stream_path != self.path:  # the rerun is whole: it replaces the previous file and sidecar
             os.replace(self.stream_path, self.path)
-            os.replace(self.stream_path.with_suffix(".meta.json"), self.path.with_suffix(".meta.json"))
+            os.replace(sidecar_path(self.stream_path), sidecar_path(self.path))
             self.stream_path = self.path
-        return [self.path, self.path.with_suffix(".meta.json")]
+        return [self.path, sidecar_path(self.path)]
 
     def abandon(self) -> None:
         """Stop streaming without finishing (the files stay, marked incomplete)."""

@@ -9,8 +9,9 @@ so a run killed at any moment leaves every batch written before it whole: :func:
 batch cut in the middle (and at a missing end marker) and says so. Buffers are compressed with zstd,
 which Arrow readers decompress themselves (pyarrow, arrow-rs, Arrow C++, polars, DuckDB).
 
-Whether the run finished, and why not, is in the sidecar ``FILE.meta.json`` (as for CSV): the stream
-itself is written before the outcome is known.
+Whether the run finished, and why not, is in the sidecar ``FILE.arrow.meta.json`` (a CSV's is
+``FILE.meta.json``: each file has its own, :func:`cpgsim.harness.results.sidecar_path`): the stream itself is
+written before the outcome is known.
 """
 
 from __future__ import annotations

@@ -25,8 +25,9 @@ from cpgsim.harness.experiments.runner import run_scenario
 from cpgsim.harness.experiments.scenario import builtin_descriptions, load
 from cpgsim.harness.simulate import SimulationError
 
-RUN_FILES = ["results.arrow", "results.csv", "results.meta.json", "results.npz", "scenario.toml", "summary.json",
-             "gait.png", "feet_sagittal.png", "toe_forces.png", "body.png", "snapshots.png", "report.html"]
+RUN_FILES = ["results.arrow", "results.arrow.meta.json", "results.csv", "results.meta.json", "results.npz",
+             "scenario.toml", "summary.json", "gait.png", "feet_sagittal.png", "toe_forces.png", "body.png",
+             "snapshots.png", "report.html"]
 """The files a run may write (listed in a run being built, so a killed one can be replaced later)."""
 
 NAME = "run"

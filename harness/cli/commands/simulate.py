@@ -5,7 +5,8 @@ Graph, or an FMU or SSP file. Example: cpgsim simulate network --t-end 60 --dt 0
 
 The results are written while the run goes on (marked "complete": false in the metadata until it
 ends), so a run that is killed keeps what it recorded. An existing results file is refused unless
---force is given, which replaces it (and its sidecar files) as a whole. --t-end must be a whole number
+--force is given, which replaces it (and its sidecar: FILE.arrow.meta.json for FILE.arrow, FILE.meta.json for
+FILE.csv, one per file) as a whole. --t-end must be a whole number
 of --dt steps.
 
 FMUs that cpgsim did not build (their generationTool is not cpgsim) run in a child process by
@@ -13,6 +14,9 @@ default; --isolate runs every FMU so, --no-isolate none. An isolated FMU runs un
 that takes longer than --fmu-timeout seconds, or a child that is stopped, ends the run with an error
 naming the FMU and the call (the results recorded so far are kept). An FMU run in-process that ends
 the process (exit) or crashes it (SIGSEGV, SIGABRT ...) is reported on one line with exit status 1.
+Exit status (the CLI's policy, cpgsim.harness.cli.main): 2 for bad input (an FMU that cannot be used: file,
+archive, description, binary, clocks), 1 for a run that failed (an FMU call such as doStep returning
+fmiError or fmiDiscard, a crash, a timeout: the results recorded so far are kept, marked incomplete).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Results as Arrow IPC streams: what pyarrow and pandas read back, a stream cut at any byte (a kill)
-readable up to its last whole batch and marked incomplete, and ``cpgsim results`` converting to CSV."""
+"""Results as Arrow IPC files: what pyarrow, pandas and polars read back without cpgsim, a file cut at any byte
+(a kill) readable up to its last whole batch and marked incomplete, and ``cpgsim results`` converting to CSV."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def _results(n: int = 7) -> Results:
 def test_other_readers_get_the_types_units_and_values(tmp_path):
     res = _results()
     res.save(tmp_path / "r.arrow")
-    table = pa.ipc.open_stream(pa.OSFile(str(tmp_path / "r.arrow"))).read_all()
+    table = pa.ipc.open_file(pa.OSFile(str(tmp_path / "r.arrow"))).read_all()  # an Arrow IPC file (Feather V2)
     assert table.column_names == ["time", "a.x", "a.v[0]", "b.n"]
     assert table.schema.field("b.n").type == pa.uint64() and table.schema.field("a.x").type == pa.float64()
     assert table.schema.field("a.v[0]").metadata[b"unit"] == b"m/s"
@@ -39,6 +39,36 @@ def test_other_readers_get_the_types_units_and_values(tmp_path):
     back = Results.load(tmp_path / "r.arrow")
     assert back.complete and back["b.n"].dtype == np.uint64 and int(back["b.n"][0]) == BIG
     assert back.unit("a.v[0]") == "m/s" and back.meta["scenario"] == "s"
+
+
+def test_pandas_and_polars_read_a_results_file_as_documented(tmp_path):
+    """Found from outside: pd.read_feather("results.arrow") failed ("Not a Feather V1 or Arrow IPC file"): the
+    file was an IPC stream. A finished file is an Arrow IPC file: the readers people use open it by name, with
+    the recorded float64 values exactly."""
+    pd = pytest.importorskip("pandas")
+    res = _results()
+    res.save(tmp_path / "r.arrow")
+    frame = pd.read_feather(tmp_path / "r.arrow")
+    assert list(frame.columns) == ["time", "a.x", "a.v[0]", "b.n"]
+    np.testing.assert_array_equal(frame["a.x"].to_numpy(), res["a.x"])
+    assert int(frame["b.n"].iloc[0]) == BIG
+    pl = pytest.importorskip("polars")
+    lf = pl.read_ipc(tmp_path / "r.arrow")
+    np.testing.assert_array_equal(lf["a.v[0]"].to_numpy(), res["a.v[0]"])
+    assert lf["b.n"].to_list() == [BIG - k for k in range(7)]
+
+
+def test_a_killed_runs_file_is_readable_without_cpgsim_as_the_stream_it_holds(tmp_path):
+    path = tmp_path / "s.arrow"
+    w = ResultsWriter(path).open(["a.x"], ["m"], {})
+    t = np.arange(20) * 1e-3
+    w.append(t, np.sin(t)[:, None])
+    w.flush()
+    data = path.read_bytes()  # killed now: the magic and whole batches, no footer
+    assert data[:8] == b"ARROW1\0\0"
+    table = pa.ipc.open_stream(pa.py_buffer(data[8:])).read_next_batch()
+    np.testing.assert_array_equal(table.column(1).to_numpy(), np.sin(t))
+    w.abandon()
 
 
 def test_a_stream_cut_anywhere_keeps_its_whole_batches_and_says_incomplete(tmp_path):

@@ -1,6 +1,6 @@
 """Simulation results: named, unit-tagged columns, written atomically as Arrow, CSV, npz and JSON metadata.
 
-``.arrow`` (:mod:`cpgsim.harness.results.arrow`) is the primary format: an Arrow IPC stream, columnar and
+``.arrow`` (:mod:`cpgsim.harness.results.arrow`) is the primary format: an Arrow IPC file (Feather V2), columnar and
 binary, with native int64/uint64 columns and the units in its schema, streamed batch by batch (readable
 after a kill), with a sidecar ``FILE.arrow.meta.json``. CSV header: ``time,<block>.<port>[<index>]``
 (the index only for vector ports). The npz holds ``time``, ``data``, ``columns``, ``units``, ``complete``
@@ -127,7 +127,7 @@ class Results:
         raise ResultsError(f"unknown results format {path.suffix!r} for {path} (use .arrow, .csv or .npz)")
 
     def to_arrow(self, path: str | Path) -> Path:
-        """Write the table as an Arrow IPC stream (:mod:`cpgsim.harness.results.arrow`), atomically."""
+        """Write the table as an Arrow IPC file (:mod:`cpgsim.harness.results.arrow`), atomically."""
         from cpgsim.harness.results.arrow import write_table
 
         path = Path(path)

@@ -1,17 +1,23 @@
-"""Results as Apache Arrow IPC streams (``.arrow``): columnar, binary, typed, streamed and readable after a kill.
+"""Results as Apache Arrow IPC files (``.arrow``, Feather V2): columnar, binary, typed, streamed and readable
+after a kill.
 
-One file is an Arrow IPC *stream* (the format ``pyarrow.ipc.open_stream`` reads; its schema first, then
-record batches, then an end-of-stream marker): column ``time`` (float64, s) and one column per recorded
-signal, float64, or int64/uint64 for FMI 3 Int64/UInt64 outputs (exact, no float column beside them).
-Each field carries its unit in its metadata (``unit``); the schema carries the run's metadata at the
-start of the run as JSON (``cpgsim``). A writer appends one record batch per flush and fsyncs the file,
-so a run killed at any moment leaves every batch written before it whole: :func:`read_table` stops at a
-batch cut in the middle (and at a missing end marker) and says so. Buffers are compressed with zstd,
-which Arrow readers decompress themselves (pyarrow, arrow-rs, Arrow C++, polars, DuckDB).
+A finished run's file is an Arrow IPC *file* (what ``pandas.read_feather``, ``polars.read_ipc``,
+``pyarrow.feather.read_table`` and ``pyarrow.ipc.open_file`` read; DuckDB and arrow-rs too): column ``time``
+(float64, s) and one column per recorded signal, float64, or int64/uint64 for FMI 3 Int64/UInt64 outputs
+(exact, no float column beside them). Each field carries its unit in its metadata (``unit``); the schema
+carries the run's metadata at the start of the run as JSON (``cpgsim``). Buffers are compressed with zstd,
+which Arrow readers decompress themselves.
 
-Whether the run finished, and why not, is in the sidecar ``FILE.arrow.meta.json`` (a CSV's is
-``FILE.meta.json``: each file has its own, :func:`cpgsim.harness.results.sidecar_path`): the stream itself is
-written before the outcome is known.
+Streamed and readable after a kill: the IPC file format is the 8-byte magic ``ARROW1\\0\\0``, then an IPC
+stream (the schema, then record batches), then a footer written at the end. The writer appends one record
+batch per flush and fsyncs the file, so a run killed at any moment leaves the magic and every batch written
+before the kill whole, without the footer. :func:`read_table` reads such a file as the stream it holds (from
+byte 8), stops at a batch cut in the middle and says so (``ended`` False); outside cpgsim,
+``pyarrow.ipc.open_stream(pyarrow.py_buffer(data[8:]))`` reads it. Files of earlier versions (a plain IPC
+stream, no magic) are read too.
+
+Whether the run finished, and why not, is in the sidecar ``FILE.arrow.meta.json``: the file itself is
+started before the outcome is known.
 """
 
 from __future__ import annotations
@@ -50,8 +56,12 @@ def schema(columns: Sequence[str], units: Sequence[str], integer_columns: Mappin
     return pa.schema(fields, metadata={"cpgsim": json.dumps(dict(meta), default=str)})
 
 
+MAGIC = b"ARROW1\0\0"
+"""The first 8 bytes of an Arrow IPC file (the stream it holds starts after them)."""
+
+
 class ArrowStream:
-    """Appends record batches to ``path`` (an open stream: schema written, no end marker until :meth:`close`)."""
+    """Appends record batches to the Arrow IPC file ``path`` (schema written at once, the footer at :meth:`close`)."""
 
     def __init__(self, path: Path, columns: Sequence[str], units: Sequence[str],
                  integer_columns: Mapping[str, str], meta: Mapping[str, Any]) -> None:
@@ -65,7 +75,7 @@ class ArrowStream:
         # (use_threads=False: a background writer must take one core at most, whatever the machine's load)
         self._sink = pa.output_stream(self._file, buffer_size=1 << 20)
         options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
-        self._writer = pa.ipc.new_stream(self._sink, self.schema, options=options)
+        self._writer = pa.ipc.new_file(self._sink, self.schema, options=options)
         self._sync()
 
     def _sync(self) -> None:
@@ -99,7 +109,7 @@ class ArrowStream:
         return pa.RecordBatch.from_arrays(arrays, schema=self.schema)
 
     def close(self) -> None:
-        """Write the end-of-stream marker and close the file."""
+        """Write the footer (the file is now a complete Arrow IPC file) and close it."""
         try:
             self._writer.close()
             self._sync()
@@ -108,7 +118,7 @@ class ArrowStream:
             self._file.close()
 
     def abandon(self) -> None:
-        """Close the file without the end marker (the batches written stay readable)."""
+        """Close the file without the footer (the batches written stay readable as a stream, module docstring)."""
         try:
             self._sink.flush()
         finally:
@@ -133,24 +143,45 @@ def write_table(path: Path, time: np.ndarray, columns: Sequence[str], units: Seq
 
 
 def read_table(path: Path) -> dict[str, Any]:
-    """Every whole batch of ``path``: ``{time, columns, units, data, exact, meta, ended}`` (``ended``: the
-    end-of-stream marker was read; False for a stream cut short, whose cut batch is left out)."""
+    """Every whole batch of ``path``: ``{time, columns, units, data, exact, meta, ended}`` (``ended``: the file
+    is complete, its footer (or an earlier version's end-of-stream marker) read; False for a file cut short,
+    whose cut batch is left out)."""
     pa = _pa()
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(MAGIC))
+    except OSError as exc:
+        raise ResultsError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    if head == MAGIC:
+        try:  # a complete file: its footer lists the batches
+            reader = pa.ipc.open_file(pa.memory_map(str(path), "r"))
+            batches = [reader.get_batch(i) for i in range(reader.num_record_batches)]
+            return _decoded(path, reader.schema, batches, ended=True)
+        except (pa.ArrowInvalid, OSError):
+            pass  # no footer: a run killed while writing; read the stream after the magic
+    source = pa.OSFile(str(path), "rb")
+    if head == MAGIC:
+        source.seek(len(MAGIC))
     batches = []
     ended = False
     try:
-        reader = pa.ipc.open_stream(pa.OSFile(str(path), "rb"))
+        reader = pa.ipc.open_stream(source)
     except (pa.ArrowInvalid, OSError) as exc:
-        raise ResultsError(f"{path}: not an Arrow IPC stream ({' '.join(str(exc).split())})") from None
+        raise ResultsError(f"{path}: not an Arrow IPC file ({' '.join(str(exc).split())})") from None
     while True:
         try:
             batches.append(reader.read_next_batch())
         except StopIteration:
-            ended = True
+            ended = head != MAGIC  # an end marker without the footer: a file still cut before its end
             break
         except (pa.ArrowInvalid, OSError):  # a batch cut by a kill: keep the whole ones before it
             break
-    sch = reader.schema
+    return _decoded(path, reader.schema, batches, ended)
+
+
+def _decoded(path: Path, sch: Any, batches: list, ended: bool) -> dict[str, Any]:
+    """The record batches of a results file as the table :func:`read_table` returns."""
+    pa = _pa()
     if not sch.names or sch.names[0] != "time":
         raise ResultsError(f"{path}: first column must be 'time'")
     table = pa.Table.from_batches(batches, schema=sch)

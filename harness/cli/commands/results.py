@@ -1,10 +1,10 @@
 """Show a results file (rows, columns, units, complete or not) and convert it to CSV, npz or Arrow.
 
-FILE is any results file cpgsim writes: FILE.arrow (the primary format: an Arrow IPC stream, read by
-pyarrow, pandas, polars, DuckDB; its sidecar FILE.arrow.meta.json), FILE.csv with its FILE.meta.json, or
-FILE.npz; a run's partial results (killed midway) read up to their last whole row or batch. --csv writes
-FILE.csv beside it (or -o OUT.csv / OUT.npz / OUT.arrow; each with its own sidecar, never over another's);
-an existing output is refused unless --force. Examples:
+FILE is any results file cpgsim writes: FILE.arrow (the primary format: an Arrow IPC file, Feather V2,
+read by pandas.read_feather, polars.read_ipc, pyarrow, DuckDB; its sidecar FILE.arrow.meta.json), FILE.csv
+with its FILE.meta.json, or FILE.npz; a run's partial results (killed midway) read up to their last whole
+row or batch. --csv writes FILE.csv beside it (or -o OUT.csv / OUT.npz / OUT.arrow; each with its own
+sidecar, never over another's); an existing output is refused unless --force. Examples:
 
     cpgsim results runs/step/results.arrow                # what it holds
     cpgsim results runs/step/results.arrow --csv          # runs/step/results.csv (+ .meta.json)

@@ -250,3 +250,19 @@ def test_a_conversion_inside_a_run_folder_is_cpgsims_own(tmp_path, capsys):
         assert {p.name for p in run.iterdir()} - {MANIFEST} <= listed
     assert "moved to" not in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+@pytest.mark.slow  # two short robot runs through the CLI (about 5 s)
+def test_the_readmes_run_then_convert_sequence_twice_keeps_one_folder(tmp_path, monkeypatch, capsys):
+    """The README's commands in sequence, twice: a run into runs/demo (`cpgsim demo` is `cpgsim run step -o
+    runs/demo`; a short flat run here), then `cpgsim results runs/demo/results.arrow --csv`. The second run
+    replaces the first with its CSV (listed in the manifest since the conversion) and nothing is moved aside."""
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):
+        assert main(["run", "flat", "-o", "runs/demo", "--t-end", "0.2", "--no-progress", "--set",
+                     "criteria.min_distance_m=0"]) == 0
+        assert main(["results", "runs/demo/results.arrow", "--csv"]) == 0
+        assert (tmp_path / "runs/demo/results.csv").exists()
+    err = capsys.readouterr().err
+    assert "moved to" not in err and "warning" not in err
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["demo"]

@@ -412,3 +412,40 @@ def test_an_unreadable_entry_is_a_reported_miss(tmp_path, monkeypatch, capsys):
     assert private_store.read_entry(path) is None
     assert "cannot be read (Permission denied)" in capsys.readouterr().err
     assert private_store._entry_reason(tmp_path / "missing") == "cannot be read (No such file or directory)"
+
+
+def test_a_push_is_a_frozen_value_with_its_impulse_and_defaults():
+    import dataclasses
+
+    push = disturbance.as_push({"start_s": 1.0, "duration_s": 0.25, "force_N": [4.0, -8.0, 2.0]})
+    assert push.point_m == (0.0, 0.0, 0.0)
+    assert push.impulse_Ns == (1.0, -2.0, 0.5)  # force x duration, per component
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        push.force_N = (0.0, 0.0, 0.0)  # shared by every trial of a suite: never changed in place
+
+
+def test_a_push_is_active_for_the_steps_that_start_in_its_window():
+    push = disturbance.Push(1.0, 0.5, (1.0, 0.0, 0.0))
+    assert [push.active(t) for t in (0.999, 1.0, 1.499, 1.5)] == [False, True, True, False]  # no step: exact
+    # with 10 ms steps each bound moves half a step earlier, so rounding in t cannot add or drop a step
+    assert [push.active(t, 0.01) for t in (0.994, 0.996, 1.49, 1.494, 1.496)] == [False, True, True, True, False]
+    assert disturbance.active_pushes([push], 1.2) == [push] and disturbance.active_pushes([push], 0.999) == []
+    assert disturbance.active_pushes([push], 0.996, 0.01) == [push]
+
+
+@pytest.mark.parametrize("force", [[1.0, 2.0], [1.0, 2.0, 3.0, 4.0], [True, 0.0, 0.0], [float("nan"), 0, 0],
+                                   [float("inf"), 0, 0], ["1", 0, 0], "123"])
+def test_a_push_vector_is_three_finite_numbers(force):
+    with pytest.raises(ParameterError, match="force_N"):
+        disturbance.as_push({"start_s": 0.0, "duration_s": 0.1, "force_N": force})
+
+
+@pytest.mark.parametrize("start, duration, ok", [(0.0, 0.5, True), (0.5, 0.001, True), (-0.1, 0.5, False),
+                                                 (0.0, 0.0, False), (0.0, -0.5, False), (True, 0.5, False)])
+def test_push_times_start_at_zero_or_later_and_last_a_positive_time(start, duration, ok):
+    spec = {"start_s": start, "duration_s": duration, "force_N": [1.0, 0.0, 0.0]}
+    if ok:
+        assert disturbance.as_push(spec).duration_s == duration
+    else:
+        with pytest.raises(ParameterError, match="expected a number"):
+            disturbance.as_push(spec)

@@ -418,7 +418,7 @@ def test_a_push_is_a_frozen_value_with_its_impulse_and_defaults():
     import dataclasses
 
     push = disturbance.as_push({"start_s": 1.0, "duration_s": 0.25, "force_N": [4.0, -8.0, 2.0]})
-    assert push.point_m == (0.0, 0.0, 0.0)
+    assert push.point_m == (0.0, 0.0, 0.0) == disturbance.Push(0.0, 1.0, (1.0, 0.0, 0.0)).point_m  # the body origin
     assert push.impulse_Ns == (1.0, -2.0, 0.5)  # force x duration, per component
     with pytest.raises(dataclasses.FrozenInstanceError):
         push.force_N = (0.0, 0.0, 0.0)  # shared by every trial of a suite: never changed in place

@@ -71,8 +71,7 @@ def adopt(files: list[Path]) -> Path | None:
                 continue
             if rel != MANIFEST and rel not in names:
                 names.append(rel)
-        if names != doc["files"]:
-            write_manifest(folder, complete=bool(doc.get("complete")), files=sorted(names))
+        write_manifest(folder, complete=bool(doc.get("complete")), files=sorted(names))
         return folder
     return None
 

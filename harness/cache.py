@@ -95,8 +95,6 @@ def load(key: str) -> dict[str, Any] | None:
         entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
         entry["feed"] = {p: {o: set(ins) for o, ins in d.items()} for p, d in entry["feed"].items()}
         return entry
-    except FileNotFoundError:
-        return None
     except Exception:  # noqa: BLE001 -- a damaged entry is recompiled and overwritten
         return None
 

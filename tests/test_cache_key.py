@@ -149,3 +149,51 @@ def test_editing_any_source_of_the_model_changes_its_key(tmp_path):
                    "components/yu/converter.py", "components/geometry.py"):
         assert needed in changed, needed
     assert all(changed.values()), [k for k, v in changed.items() if not v]
+
+
+def test_the_key_is_128_bits_of_hex():
+    key = model_key(_graph())
+    assert len(key) == 32 and int(key, 16) >= 0
+
+
+def test_a_class_without_source_is_never_shared():
+    """A block class defined where no source can be read (``type()`` in a module that is not loaded) gets a
+    key part unique to the process (its id), never a shared one."""
+    from cpgsim.harness import cache
+
+    dyn = type("Dyn", (), {"__module__": "no_such_module_anywhere"})
+    part = cache._class_source(dyn)
+    assert part == f"unhashable:{id(dyn)}"
+
+
+@pytest.mark.parametrize("damage", ["format+1", "format-1", "not-json", "bad-function"])
+def test_an_entry_of_another_format_or_damaged_is_a_miss(tmp_path, damage):
+    """Entries with a valid digest whose content is of another format, or damaged, are recompiled."""
+    from cpgsim.components import memo, private_store
+    from cpgsim.harness import cache
+
+    compile_graph(_graph())
+    key = model_key(_graph())
+    path = memo.cache_root() / "models" / f"{key}.json"
+    entry = json.loads(private_store.read_entry(path))
+    if damage == "format+1":
+        entry["format"] = cache.FORMAT + 1
+    elif damage == "format-1":
+        entry["format"] = cache.FORMAT - 1
+    elif damage == "bad-function":
+        entry["functions"] = {k: "garbage" for k in entry["functions"]}
+    payload = b"{not json" if damage == "not-json" else json.dumps(entry).encode()
+    private_store.write_entry(path, payload)
+    assert cache.load(key) is None
+    assert not compile_graph(_graph()).from_cache and compile_graph(_graph()).from_cache
+
+
+def test_an_unwritable_cache_only_costs_a_compile(monkeypatch):
+    from cpgsim.components import private_store
+    from cpgsim.harness import cache
+
+    def full(path, payload):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(private_store, "write_entry", full)
+    model = compile_graph(_graph())  # stores, fails quietly
+    assert not model.from_cache and cache.load(model_key(_graph())) is None

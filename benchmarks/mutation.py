@@ -60,7 +60,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "trust": ("fmus/trust.py", [QUICK, "tests/test_safety_properties.py", "tests/test_fmu_trust.py"]),
     "cache": ("harness/cache.py", [QUICK, "tests/test_cache_key.py", "tests/test_cache.py",
                                    "tests/test_cache_trust.py"]),
-    "sources": ("harness/sources.py", [QUICK, "tests/test_cache_key.py"]),
+    "sources": ("harness/sources.py", [QUICK, "tests/test_sources.py", "tests/test_cache_key.py"]),
     "rundir": ("harness/rundir.py", [QUICK, "tests/test_safety_properties.py", "tests/test_run_directory.py"]),
     "disturbance": ("robots/disturbance.py", [QUICK, "tests/test_safety_properties.py", "tests/test_disturbance.py"]),
     "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_archive_properties.py", "tests/test_fuzz.py",

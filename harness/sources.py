@@ -63,11 +63,9 @@ def _imported_names(path: Path, own: str | None) -> set[str]:
             if node.level:  # relative: resolve against this module's package
                 if own is None:
                     continue
-                pkg = own.split(".")
-                if path.name != "__init__.py":
-                    pkg = pkg[:-1]
-                pkg = pkg[: len(pkg) - (node.level - 1)] if node.level > 1 else pkg
-                base = ".".join([*pkg, base]) if base else ".".join(pkg)
+                pkg = own.split(".") if path.name == "__init__.py" else own.split(".")[:-1]
+                pkg = pkg[: len(pkg) - node.level + 1]  # one dot: this package; each more: one level up
+                base = ".".join([*pkg, base] if base else pkg)
             names.add(base)
             names.update(f"{base}.{a.name}" for a in node.names if a.name != "*")
     return names

@@ -70,7 +70,8 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "simulate-nonfinite": ("harness/simulate.py", [QUICK, "tests/test_nonfinite_signals.py",
                                                    "tests/test_input_limits.py", "tests/test_core_blocks.py",
                                                    "tests/test_cosim_master.py"]),
-    "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_archive_properties.py",
+    "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_description_checks.py",
+                                                            "tests/test_archive_properties.py",
                                                             "tests/test_fuzz.py", "tests/test_fmu_import.py",
                                                             "tests/test_fmu_defaults.py", "tests/test_fmu_types.py"]),
 }

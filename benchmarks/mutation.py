@@ -67,7 +67,8 @@ MODULES: dict[str, tuple[str, list[str]]] = {
                                              "tests/test_scratch_folders.py", "tests/test_fmu_import.py"]),
     # two large modules scored on their safety functions only (SCOPES): the rest is the engine and the
     # importer's plumbing, specified by other tests
-    "simulate-nonfinite": ("harness/simulate.py", [QUICK, "tests/test_nonfinite_signals.py",
+    "simulate-nonfinite": ("harness/simulate.py", [QUICK, "tests/test_simulate_checks.py",
+                                                   "tests/test_nonfinite_signals.py",
                                                    "tests/test_input_limits.py", "tests/test_core_blocks.py",
                                                    "tests/test_cosim_master.py"]),
     "description-checks": ("fmus/importer/description.py", [QUICK, "tests/test_description_checks.py",

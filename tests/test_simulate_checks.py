@@ -1,0 +1,134 @@
+"""The simulator's checks of what goes in and what comes out: non-finite or misshapen inputs and start values
+are refused naming them, a diverging state ends the run at its first non-finite step in both backends with the
+last finite state kept, a snapshot of another model is refused, and a recording that cannot fit in memory is
+refused before it starts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpgsim.components.basic import Integrator
+from cpgsim.components.core import Block, Equations, ModelError, ParameterError, Symbols
+from cpgsim.components.graph import Graph
+from cpgsim.components.library import damped_oscillator
+from cpgsim.harness import simulate as sim
+from cpgsim.harness.errors import SimulationDiverged
+from cpgsim.harness.simulate import Simulator
+
+
+class Square(Block):
+    """``dx/dt = x^2`` from ``x(0) = 1``: ``x = 1 / (1 - t)``, infinite at t = 1 s."""
+
+    def declare(self) -> None:
+        self.add_state("x", [1.0])
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        x = v.x["x"]
+        return Equations(derivatives={"x": x * x}, outputs={"y": x})
+
+
+def blowup() -> Graph:
+    g = Graph("blowup")
+    g.add(Square("q"))
+    return g
+
+
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+def test_a_diverging_state_ends_the_run_at_its_first_non_finite_step(backend):
+    with pytest.raises(SimulationDiverged) as info:
+        Simulator(blowup(), dt=1e-2, backend=backend).run(2.0)
+    res = info.value.results
+    assert res is not None and not res.complete
+    # RK4 at 10 ms follows 1 / (1 - t) to near the pole (t = 1 s: 8.2e2 against 1e2 exactly), then its steps
+    # overflow within a few steps (1.01: 1e13, 1.02: 5e173, 1.03: inf)
+    assert res.time[-1] == pytest.approx(1.02) and np.all(np.isfinite(res["q.y"]))
+    assert res["q.y"][-1] > 1e100  # the last finite state is kept
+    assert "state q.x became inf at t=1.03 s" in str(info.value)
+
+
+def test_both_backends_stop_at_the_same_step_with_the_same_last_state():
+    runs = []
+    for backend in ("native", "casadi"):
+        with pytest.raises(SimulationDiverged) as info:
+            Simulator(blowup(), dt=1e-2, backend=backend).run(2.0)
+        runs.append(info.value.results)
+    assert len(runs[0].time) == len(runs[1].time)
+    assert runs[0]["q.y"][-1] == pytest.approx(runs[1]["q.y"][-1], rel=1e-12)
+
+
+def integrator_graph(size: int = 2) -> Graph:
+    g = Graph("integ")
+    g.add(Integrator("i", size=size))
+    g.expose_input("u", "i.u")
+    return g
+
+
+def test_inputs_are_held_constants_series_or_functions_of_the_right_size():
+    s = Simulator(integrator_graph(), dt=0.1)
+    const = s.run(1.0, inputs={"u": [1.0, 2.0]})
+    np.testing.assert_allclose(const["i.y"][-1], [1.0, 2.0])
+    series = np.vstack([np.ones(11), np.zeros(11)])  # one column per step, 0 .. 1 s
+    assert s.run(1.0, inputs={"u": series})["i.y"][-1] == pytest.approx([1.0, 0.0])
+    fn = s.run(1.0, inputs={"u": lambda t: [t, -t]})
+    assert fn["i.y"][-1][0] == pytest.approx(0.5, abs=0.06)  # integral of t on a 0.1 s grid
+
+
+@pytest.mark.parametrize("value, phrase", [
+    ([1.0, 2.0, 3.0], "needs 2 element(s) per sample, got 3"),
+    (np.ones((2, 5)), "time series has 5 samples, need 11"),
+    ([1.0, float("nan")], "contains non-finite values"),
+    (lambda t: [1.0, float("inf")], "contains non-finite values"),
+    (lambda t: [1.0], "needs 2 element(s) per sample, got 1"),
+    (lambda t: 1 / 0, "the function raised ZeroDivisionError")])
+def test_bad_inputs_are_refused_naming_the_input(value, phrase):
+    with pytest.raises(ModelError) as info:
+        Simulator(integrator_graph(), dt=0.1).run(1.0, inputs={"u": value})
+    assert "input 'u'" in str(info.value) and phrase in str(info.value)
+
+
+def test_a_scalar_input_is_repeated_over_the_horizon():
+    res = Simulator(integrator_graph(1), dt=0.1).run(1.0, inputs={"u": 2.0})
+    assert float(np.ravel(res["i.y"])[-1]) == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("x0, phrase", [({"nope": 1.0}, "no state 'nope'"),
+                                         ({"pos.x": [1.0, 2.0]}, "must be 1 finite number(s)"),
+                                         ({"pos.x": float("nan")}, "must be 1 finite number(s)")])
+def test_bad_start_values_are_refused_naming_the_state(x0, phrase):
+    with pytest.raises(ParameterError, match=phrase.replace("(", r"\(").replace(")", r"\)")):
+        Simulator(damped_oscillator()).run(0.01, x0=x0)
+
+
+def test_a_start_value_is_used():
+    res = Simulator(damped_oscillator()).run(0.001, x0={"pos.x": 2.5})
+    assert float(np.ravel(res["pos.y"])[0]) == 2.5
+
+
+def test_a_snapshot_of_another_model_is_refused():
+    a = Simulator(damped_oscillator())
+    a.run(0.01)
+    snap = a.snapshot()
+    other = Simulator(blowup(), dt=1e-3)
+    with pytest.raises(ModelError, match="does not fit the model"):
+        other.run(0.02, resume=snap)
+    with pytest.raises(ModelError, match="does not fit the model"):
+        Simulator(damped_oscillator()).run(0.02, resume=snap.replace(z=np.zeros(snap.z.size + 1)))
+    resumed = Simulator(damped_oscillator()).run(0.02, resume=snap)
+    assert resumed.time[0] == pytest.approx(0.01)
+
+
+def test_a_recording_that_cannot_fit_is_refused_before_it_starts(monkeypatch):
+    monkeypatch.setattr(sim, "physical_memory", lambda: 2 ** 30)  # 1 GiB; half of it may be recorded
+    sim.check_memory(2 ** 23, 7)  # 2^23 rows x 8 float64 (time and 7 columns) = 512 MiB: exactly the limit
+    sim.check_memory(2 ** 26, 0)  # no column: the time alone, 8 bytes a row, 512 MiB
+    with pytest.raises(ModelError, match=r"recording 8388609 rows x 7 columns needs 0\.5 GiB, more than 50% of "
+                                         r"this machine's 1\.0 GiB"):
+        sim.check_memory(2 ** 23 + 1, 7)
+    with pytest.raises(ModelError, match="more than 25%"):
+        sim.check_memory(2 ** 23, 7, fraction=0.25)
+    monkeypatch.setattr(sim, "physical_memory", lambda: None)
+    sim.check_memory(10 ** 15, 100)  # the system does not say: no limit
+

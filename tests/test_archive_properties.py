@@ -7,6 +7,7 @@ from __future__ import annotations
 import stat
 import zipfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -112,3 +113,104 @@ def test_nesting_too_deep_anywhere_is_refused(tmp_path, where):
     ok = BODY.replace("<ModelVariables/>", "<ModelVariables/>" + "<a>" * (MAX_XML_DEPTH - 3)
                       + "</a>" * (MAX_XML_DEPTH - 3))
     _check_xml(ok.encode(), tmp_path / "m.fmu")  # within the limit: taken
+
+
+# -- the limits at their boundaries (on crafted directory entries: no gigabytes written) ---------------------
+
+def test_the_limits_are_the_documented_ones():
+    assert archive.MAX_MEMBERS == 20_000 and archive.MAX_MEMBER_BYTES == 2 ** 30
+    assert archive.MAX_TOTAL_BYTES == 2 ** 31 and archive.MAX_RATIO == 200 and archive.RATIO_SLACK == 4096
+    assert archive.TOTAL_RATIO_SLACK == 2 ** 20 and archive.MAX_XML_BYTES == 16 * 2 ** 20
+
+
+def _info(name: str, size: int, compressed: int | None = None, mode: int = 0o100644, flags: int = 0):
+    info = zipfile.ZipInfo(name)
+    info.file_size, info.compress_size = size, size if compressed is None else compressed
+    info.external_attr, info.flag_bits, info.compress_type = mode << 16, flags, zipfile.ZIP_DEFLATED
+    return info
+
+
+def test_member_size_ratio_and_flags_at_their_boundaries():
+    problem = archive._member_problem
+    assert problem(_info("a", archive.MAX_MEMBER_BYTES)) is None
+    assert "too large" in problem(_info("a", archive.MAX_MEMBER_BYTES + 1))
+    assert problem(_info("a", 200 * 10 + 4096, 10)) is None  # MAX_RATIO x compressed + slack: taken
+    assert "compression ratio" in problem(_info("a", 200 * 10 + 4097, 10))
+    assert "encrypted" in problem(_info("a", 10, flags=0x1)) and problem(_info("a", 10, flags=0x8)) is None
+    assert problem(_info("a", 10, mode=0)) is None  # no Unix mode recorded (a zip made on Windows)
+    assert problem(_info("d/", 0, mode=0o040755)) is None
+    assert "symbolic link" in problem(_info("a", 10, mode=0o120777))
+    assert "absolute path" in problem(_info("C:x", 1)) and problem(_info("ab:c", 1)) is None
+    unsupported = _info("a", 10)
+    unsupported.compress_type = 99
+    assert "unsupported compression method (99)" in problem(unsupported)
+
+
+def _listing(infos):
+    return SimpleNamespace(infolist=lambda: infos)
+
+
+def test_archive_totals_at_their_boundaries(monkeypatch):
+    monkeypatch.setattr(archive, "MAX_MEMBERS", 3)
+    archive.check_archive(_listing([_info(f"m{i}", 1) for i in range(3)]), "x.fmu")
+    with pytest.raises(UnsafeArchiveError, match=r"too many archive members \(4, limit 3\)"):
+        archive.check_archive(_listing([_info(f"m{i}", 1) for i in range(4)]), "x.fmu")
+    half = archive.MAX_TOTAL_BYTES // 2
+    archive.check_archive(_listing([_info("a", half), _info("b", half)]), "x.fmu")
+    with pytest.raises(UnsafeArchiveError, match="expands to more than"):
+        archive.check_archive(_listing([_info("a", half), _info("b", half - 1), _info("c", 2)]), "x.fmu")
+    # together: MAX_RATIO x compressed + TOTAL_RATIO_SLACK, each member within its own ratio
+    each = [_info(f"m{i}", 200 * 1000 + 4000, 1000) for i in range(3)]
+    total = sum(i.file_size for i in each)
+    limit = 200 * 3000 + archive.TOTAL_RATIO_SLACK
+    assert total <= limit
+    archive.check_archive(_listing(each), "x.fmu")
+    monkeypatch.setattr(archive, "MAX_MEMBERS", 20_000)
+    many = [_info(f"m{i}", 200 * 1000 + 4000, 1000) for i in range(300)]  # 300 x 4000 bytes over: > 1 MiB
+    with pytest.raises(UnsafeArchiveError, match="a zip bomb"):
+        archive.check_archive(_listing(many), "x.fmu")
+
+
+def test_read_member_refuses_more_than_its_limit(tmp_path):
+    path = _archive(tmp_path / "m.fmu", [("modelDescription.xml", b"x" * 100)])
+    with zipfile.ZipFile(path) as zf:
+        assert archive.read_member(zf, "modelDescription.xml", limit=100) == b"x" * 100
+        assert archive.read_member(zf, "missing.xml") is None
+        with pytest.raises(UnsafeArchiveError, match="too large"):
+            archive.read_member(zf, "modelDescription.xml", limit=99)
+
+
+def test_a_member_longer_than_its_header_is_refused_and_nothing_is_left(tmp_path, monkeypatch):
+    """The header's size is a claim: extraction counts what it writes."""
+    path = _archive(tmp_path / "m.fmu", [("resources/a.bin", b"y" * 5000)])
+    real = zipfile.ZipFile.infolist
+
+    def lying(self):
+        infos = real(self)
+        for i in infos:
+            i.file_size = 4000  # the directory says less than the data holds
+        return infos
+    monkeypatch.setattr(zipfile.ZipFile, "infolist", lying)
+    work = tmp_path / "work"
+    work.mkdir()
+    with pytest.raises((UnsafeArchiveError, archive.FmuFileError)):
+        archive.safe_extract(path, work)
+    assert list(work.iterdir()) == []  # the extraction folder is removed
+
+
+def test_extraction_writes_each_member_with_ordinary_modes(tmp_path):
+    import os
+    import stat as st
+
+    path = _archive(tmp_path / "m.fmu", GOOD + [("resources/empty/", b"")])
+    (tmp_path / "work").mkdir()
+    dest = archive.safe_extract(path, tmp_path / "work")
+    try:
+        for name, data in GOOD:
+            assert (dest / name).read_bytes() == data
+            assert st.S_IMODE(os.stat(dest / name).st_mode) == 0o644
+        assert (dest / "resources" / "empty").is_dir()
+    finally:
+        archive.remove_tree(dest)
+    assert not dest.exists()
+    archive.remove_tree(None)  # nothing to remove: no error

@@ -449,3 +449,16 @@ def test_push_times_start_at_zero_or_later_and_last_a_positive_time(start, durat
     else:
         with pytest.raises(ParameterError, match="expected a number"):
             disturbance.as_push(spec)
+
+
+def test_an_unwritable_cache_only_means_the_fmu_runs_isolated(tmp_path, monkeypatch):
+    lib = tmp_path / "m.so"
+    lib.write_bytes(b"\x7fELF exported library")
+    fmu = _fmu(tmp_path, lib.read_bytes())
+
+    def full(path, payload):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(private_store, "write_entry", full)
+    trust.record_export(lib, fmu)  # no error: the export itself succeeded
+    monkeypatch.undo()
+    assert not trust.exported_here(fmu, "binaries/linux64/m.so")

@@ -458,7 +458,8 @@ def test_an_unwritable_cache_only_means_the_fmu_runs_isolated(tmp_path, monkeypa
 
     def full(path, payload):
         raise OSError(28, "No space left on device")
+    real = private_store.write_entry
     monkeypatch.setattr(private_store, "write_entry", full)
     trust.record_export(lib, fmu)  # no error: the export itself succeeded
-    monkeypatch.undo()
+    monkeypatch.setattr(private_store, "write_entry", real)
     assert not trust.exported_here(fmu, "binaries/linux64/m.so")

@@ -64,7 +64,9 @@ def test_threaded_step_gives_bit_identical_results_and_stops_its_thread():
         threads[threaded] = _os_threads()  # after the first run's lazy library threads exist
         runs[threaded] = sim.run(3.0)
         assert type(sim._bound).__name__ == ("ThreadedStep" if threaded else "BoundStep")
-    assert _os_threads() == threads[True]
+    # no thread of the run outlives it (<=: a thread of an earlier test, e.g. a results writer or a library's
+    # pool, may end meanwhile; seen once in a fresh-clone CI run: 19 after, 20 before)
+    assert _os_threads() <= threads[True]
     a, b = runs[False], runs[True]
     assert a.columns == b.columns
     assert np.array_equal(a.data, b.data)

@@ -463,3 +463,29 @@ def test_an_unwritable_cache_only_means_the_fmu_runs_isolated(tmp_path, monkeypa
     trust.record_export(lib, fmu)  # no error: the export itself succeeded
     monkeypatch.setattr(private_store, "write_entry", real)
     assert not trust.exported_here(fmu, "binaries/linux64/m.so")
+
+
+def test_an_installed_file_with_a_digest_others_could_write_is_not_ok(tmp_path):
+    path = tmp_path / "lib.so"
+    private_store.install_file(b"library", path)
+    private_store.digest_file(path).chmod(0o666)  # the digest beside it could have been rewritten
+    assert "writable by group or others" in private_store.check_file(path)
+    private_store.digest_file(path).chmod(0o600)
+    path.chmod(0o666)
+    assert "writable by group or others" in private_store.check_file(path)
+
+
+def test_a_folder_that_cannot_be_synced_still_gets_the_entry(tmp_path, monkeypatch):
+    """The folder's fsync (making the rename durable) is best effort: a file system that refuses it still
+    gets the whole entry."""
+    path = _fresh(tmp_path, "entry.json")
+    real_open = os.open
+
+    def no_folder(p, flags, *args):
+        if Path(p) == path.parent and flags == os.O_RDONLY:
+            raise OSError(22, "Invalid argument")
+        return real_open(p, flags, *args)
+    monkeypatch.setattr(os, "open", no_folder)
+    private_store.write_entry(path, b"payload")
+    monkeypatch.setattr(os, "open", real_open)
+    assert private_store.read_entry(path) == b"payload"

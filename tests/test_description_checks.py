@@ -125,3 +125,24 @@ def test_check_binary_needs_the_platforms_library():
         check_binary(_desc([], sources=True), "cs")
     with pytest.raises(MissingBinaryError, match=r"this platform \(x86_64-linux\)"):
         check_binary(_desc([], version=3), "cs")
+
+
+def test_value_parameter_kinds_and_sizes_beyond_the_small_cases():
+    assert _param("".join(["Str", "ing"]), ()).check("x", "fmu") == "x"  # a type name read from XML, not a literal
+    big = 2 ** 64 - 1
+    assert _param("UInt64", ()).check(big, "fmu") == (big,)  # an unsigned integer, exactly
+    assert _param(shape=(1,)).check(5.0, "fmu") == (5.0,)  # a scalar for a one-element array
+    assert _param(shape=(300,)).check(list(range(300)), "fmu") == tuple(float(v) for v in range(300))
+    with pytest.raises(ParameterError, match=r"got shape \(4, 1\)"):
+        _param(shape=(2, 2)).check([[1], [2], [3], [4]], "fmu")
+
+
+def test_check_binary_names_the_platform_of_each_fmi_version():
+    with pytest.raises(MissingBinaryError, match=r"this platform \(linux64\)"):
+        check_binary(_desc([], version=2), "cs")
+
+
+def test_an_entity_without_a_doctype_is_refused_as_such():
+    xml = BODY.format("<ModelVariables/>").replace("<ModelVariables/>", "<ModelVariables/><!ENTITY e 'x'>")
+    with pytest.raises(ModelDescriptionError, match="declares a DTD or entities"):
+        _check_xml(xml.encode(), Path("m.fmu"))

@@ -214,3 +214,31 @@ def test_extraction_writes_each_member_with_ordinary_modes(tmp_path):
         archive.remove_tree(dest)
     assert not dest.exists()
     archive.remove_tree(None)  # nothing to remove: no error
+
+
+def test_the_total_ratio_limit_is_exact():
+    """256 members each 4096 bytes over MAX_RATIO x their compressed size: together exactly
+    MAX_RATIO x compressed + TOTAL_RATIO_SLACK (1 MiB), taken; one more member is over, refused."""
+    def members(n):
+        return [_info(f"m{i}", 200 * 1000 + 4096, 1000) for i in range(n)]
+    archive.check_archive(_listing(members(256)), "x.fmu")
+    with pytest.raises(UnsafeArchiveError, match="a zip bomb"):
+        archive.check_archive(_listing(members(257)), "x.fmu")
+
+
+@pytest.mark.filterwarnings("ignore:Duplicate name")
+def test_a_bad_member_after_a_repeated_one_is_still_refused(tmp_path):
+    path = _archive(tmp_path / "m.fmu", [*GOOD, GOOD[2], ("../escape.txt", b"x")])
+    with zipfile.ZipFile(path) as zf, pytest.raises(UnsafeArchiveError, match="escape.txt"):
+        archive.check_archive(zf, path)
+
+
+@pytest.mark.filterwarnings("ignore:Duplicate name")
+def test_a_folder_and_a_file_of_one_name_are_refused(tmp_path):
+    for order in (["resources/", "resources"], ["resources", "resources/"]):
+        path = tmp_path / f"m{len(order[0])}.fmu"
+        with zipfile.ZipFile(path, "w") as zf:
+            for name in order:
+                zf.writestr(name, b"" if name.endswith("/") else b"data")
+        with zipfile.ZipFile(path) as zf, pytest.raises(UnsafeArchiveError, match="appears twice"):
+            archive.check_archive(zf, path)

@@ -156,3 +156,43 @@ def test_the_casadi_loop_keeps_the_state_before_a_divergence_in_a_later_chunk():
         s.run(2.0)
     assert info.value.results.time[-1] == pytest.approx(1.02)
     assert info.value.results["q.y"][-1] > 1e100
+
+
+@pytest.mark.parametrize("chunk", [7, 103])  # 103: the divergence is the first step of the second chunk
+def test_a_divergence_at_any_place_in_a_chunk_keeps_the_state_before_it(chunk):
+    s = Simulator(blowup(), dt=1e-2, backend="casadi")
+    s.chunk = chunk
+    with pytest.raises(SimulationDiverged) as info:
+        s.run(2.0)
+    assert info.value.results.time[-1] == pytest.approx(1.02)
+    assert info.value.results["q.y"][-1] == pytest.approx(4.77517763e173, rel=1e-6)
+
+
+class Root(Block):
+    """``y = sqrt(x)`` of a state ``dx/dt = -1`` started at ``x0``: NaN from the start when ``x0 < 0``."""
+
+    def __init__(self, name: str, x0: float) -> None:
+        self._x0 = x0
+        super().__init__(name)
+
+    def declare(self) -> None:
+        self.add_state("x", [self._x0])
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        import casadi as ca
+
+        return Equations(derivatives={"x": ca.DM(-1.0)}, outputs={"y": ca.sqrt(v.x["x"])})
+
+
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+@pytest.mark.parametrize("x0, t_bad, kept", [(-1.0, 0.0, "no results kept"),
+                                             (0.0305, 0.04, "results kept up to t=0.03 s")])
+def test_a_non_finite_signal_is_found_at_its_row_even_the_first(backend, x0, t_bad, kept):
+    g = Graph("root")
+    g.add(Root("r", x0))
+    with pytest.raises(SimulationDiverged) as info:
+        Simulator(g, dt=1e-2, backend=backend).run(1.0)
+    msg = str(info.value)
+    assert f"signal r.y became nan at t={t_bad:g} s" in msg and kept in msg
+    assert len(info.value.results.time) == round(t_bad / 1e-2)

@@ -312,6 +312,8 @@ def recheck(session: Path, name: str, timeout: float) -> dict[str, object]:
                                  (ANNOTATION_NOTE,)).fetchone()[0]
         total -= con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
                              (SAMPLE_NOTE,)).fetchone()[0]  # a sampled session: its sample (and annotations)
+        total -= con.execute("SELECT COUNT(*) FROM work_results WHERE worker_outcome = 'SKIPPED' AND output = ?",
+                             (SCOPE_NOTE,)).fetchone()[0]  # a scoped module: the functions it is scored on
         killed0 = con.execute("SELECT COUNT(*) FROM work_results WHERE test_outcome IN ('KILLED', 'TIMEOUT')"
                               ).fetchone()[0]
     finally:

@@ -115,11 +115,11 @@ def read_entry(path: Path) -> bytes | None:
             raw = path.read_bytes()
         except OSError as exc:
             raw, reason = b"", f"cannot be read ({exc.strerror})"
-        head, _, payload = raw.partition(b"\n")
+        head, sep, payload = raw.partition(b"\n")
         if reason is None and not head.startswith(HEADER):
             return None  # written before entries carried digests: a plain miss
-        if reason is None and hashlib.sha256(payload).hexdigest().encode() == head[len(HEADER):]:
-            return payload
+        if reason is None and sep and hashlib.sha256(payload).hexdigest().encode() == head[len(HEADER):]:
+            return payload  # (an entry cut before its header line's end is not one, whatever its digest)
         reason = reason or "its content does not match its digest"
     warn_once(f"cache entry {path} not used: {reason}; rebuilding it")
     return None

@@ -94,6 +94,16 @@ def test_an_entry_without_a_digest_is_never_used(tmp_path_factory, content):
     assert got is None or content.partition(b"\n")[0] == header
 
 
+def test_an_empty_payload_cut_before_its_newline_is_not_an_entry(tmp_path):
+    """Found by the truncation property: an empty payload's entry cut by one byte (its newline) still matched its
+    digest (the digest of nothing) and read back as an entry."""
+    path = _fresh(tmp_path, "entry.json")
+    private_store.write_entry(path, b"")
+    assert private_store.read_entry(path) == b""
+    path.write_bytes(path.read_bytes()[:-1])
+    assert private_store.read_entry(path) is None
+
+
 def test_a_digest_of_other_bytes_is_never_used(tmp_path):
     path = _fresh(tmp_path, "entry.json")
     path.write_bytes(private_store.HEADER + hashlib.sha256(b"other").hexdigest().encode() + b"\n" + b"payload")

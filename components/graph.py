@@ -77,6 +77,7 @@ class Graph(_Declared):
         self.connections: dict[PortRef, PortRef] = {}  # destination input -> source output
         self.input_map: dict[str, list[PortRef]] = {}  # graph input -> internal inputs it drives
         self.output_map: dict[str, PortRef] = {}  # graph output -> internal output
+        self.clock_connections: dict[PortRef, PortRef] = {}  # FMI 3 input clock -> output clock
 
     # -- building ---------------------------------------------------------------------------
     def add(self, block: Node | Graph) -> Any:
@@ -115,8 +116,22 @@ class Graph(_Declared):
         return table[ref.port]
 
     def connect(self, source: str | PortRef, destination: str | PortRef) -> None:
-        """Wire output ``source`` ("block.port") to input ``destination``."""
+        """Wire output ``source`` ("block.port") to input ``destination``; an output clock to a triggered input
+        clock of FMU blocks is a clock connection (its ticks tick the input clock at the same instant)."""
         src, dst = parse_ref(source), parse_ref(destination)
+        s_clock = src.port in (getattr(self.block(src.block), "clock_outputs", None) or {})
+        d_clock = dst.port in (getattr(self.block(dst.block), "clock_inputs", None) or {})
+        if s_clock or d_clock:
+            if not (s_clock and d_clock):
+                a, b = ("an output clock", "not an input clock") if s_clock else ("not an output clock",
+                                                                                   "an input clock")
+                raise WiringError(f"graph {self.name!r}: {src} is {a} but {dst} is {b}: clocks connect only to "
+                                  f"clocks")
+            if dst in self.clock_connections:
+                raise WiringError(f"graph {self.name!r}: input clock {dst} has two sources: "
+                                  f"{self.clock_connections[dst]} and {src}")
+            self.clock_connections[dst] = src
+            return
         sp, dp = self._port(src, "out"), self._port(dst, "in")
         check_compatible(sp, dp, str(src), str(dst))
         if dst in self.connections:
@@ -234,6 +249,8 @@ class Graph(_Declared):
         # local aliases: resolve references into sub-graphs to leaf ports
         for dst, src in self.connections.items():
             flat.raw_edges.append((_leaf(self, dst, prefix, "in"), _leaf(self, src, prefix, "out")))
+        for dst, src in self.clock_connections.items():
+            flat.clock_edges.append((f"{prefix}{src}", f"{prefix}{dst}"))
         flat.aliases_in.update({f"{prefix}{n}": [_leaf(self, r, prefix, "in") for r in refs]
                                 for n, refs in self.input_map.items()})
         flat.aliases_out.update({f"{prefix}{n}": _leaf(self, r, prefix, "out") for n, r in self.output_map.items()})
@@ -293,6 +310,8 @@ class FlatGraph:
         self.output_sources: dict[str, str] = {}
         # leaf input -> (source, its unit, the input's unit, conversion block path) for converted wires
         self.conversions: dict[str, tuple[str, str, str, str]] = {}
+        self.clock_edges: list[tuple[str, str]] = []  # (output clock, input clock) of FMU blocks, by leaf path
+        self.clock_order: list[str] = []  # co-simulation blocks with clock sources before their destinations
 
     def _resolve_out(self, name: str) -> str:
         seen = set()
@@ -326,6 +345,40 @@ class FlatGraph:
         for name in self.outputs:
             self.output_sources[name] = self._resolve_out("@" + name)
         self._insert_conversions()
+        self._wire_clocks()
+
+    def _wire_clocks(self) -> None:
+        """Clock connections: each FMU block learns its targets; a cycle is an error naming the loop; blocks are
+        ordered so that a clock's source steps before its destinations (its ticks reach them in time)."""
+        cs = [p for p, b in self.blocks.items() if hasattr(b, "check_clock_wiring")]
+        for p in cs:
+            self.blocks[p].reset_clock_wiring()
+        succ: dict[str, list[str]] = {}
+        for src, dst in self.clock_edges:
+            spath, sport = src.rsplit(".", 1)
+            dpath, dport = dst.rsplit(".", 1)
+            self.blocks[spath].add_clock_target(sport, self.blocks[dpath], dport, src, dst)
+            succ.setdefault(spath, []).append(dpath)
+        for p in cs:
+            self.blocks[p].check_clock_wiring(p)
+        order: list[str] = []
+        state: dict[str, int] = {}
+
+        def visit(p: str, stack: list[str]) -> None:
+            if state.get(p) == 2:
+                return
+            if state.get(p) == 1:
+                loop = stack[stack.index(p):] + [p]
+                raise WiringError(f"clock connections form a loop: {' -> '.join(loop)}")
+            state[p] = 1
+            for q in succ.get(p, []):
+                visit(q, stack + [p])
+            state[p] = 2
+            order.append(p)
+
+        for p in succ:
+            visit(p, [])
+        self.clock_order = order[::-1]
 
     def _insert_conversions(self) -> None:
         """A :class:`~cpgsim.components.basic.UnitConversion` block on every wire whose ends carry different
@@ -366,7 +419,11 @@ class FlatGraph:
         return {p: b for p, b in self.blocks.items() if isinstance(b, Block)}
 
     def cosim_blocks(self) -> dict[str, CoSimBlock]:
-        return {p: b for p, b in self.blocks.items() if isinstance(b, CoSimBlock)}
+        out = {p: b for p, b in self.blocks.items() if isinstance(b, CoSimBlock)}
+        if self.clock_order:  # clock sources step before their destinations
+            first = {p: out[p] for p in self.clock_order if p in out}
+            out = {**first, **{p: b for p, b in out.items() if p not in first}}
+        return out
 
 
 def as_graph(item: Block | CoSimBlock | Graph, expose: bool = True) -> Graph:

@@ -92,6 +92,12 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
     tmp = private_scratch("cpgsim_ssp_", workdir)
     try:
         members: dict[str, Path] = {}
+        clock_links = getattr(graph, "clock_connections", None) or {}
+        if clock_links:  # SSP 1.0 connectors are signals (Real, Integer, Boolean, String, Enumeration, Binary)
+            dst, src = next(iter(clock_links.items()))
+            raise SspError(f"graph {graph.name!r} connects FMI 3 clocks ({src} -> {dst}"
+                           f"{f' and {len(clock_links) - 1} more' if len(clock_links) > 1 else ''}): SSP 1.0 has no "
+                           f"clock connectors, so cpgsim does not write clock connections to an .ssd")
         comps: dict[str, _Comp] = {}
         for name, blk in graph.blocks.items():
             comps[name] = _component(name, blk, tmp, kind, fmi)

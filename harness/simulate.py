@@ -190,12 +190,16 @@ class Simulator:
                 rec.finish(exc.results)
                 self.written = getattr(rec, "files", [])
             raise
+        ticks = {f"{p}.{port}": list(v) for p, b in cs.items()
+                 for port, v in (getattr(b, "clock_ticks", None) or {}).items()}
         if stop is None:
             res = rec.results(complete=True, message="")
         else:
             res = rec.results(complete=True, message=f"stopped at t={rec.last_time():.9g} s: block {stop.path!r} "
                                                      f"asked to end the run ({stop.message})")
             res.meta["stopped_by"] = stop.as_meta()
+        if ticks:  # FMI 3 output clocks: the exact tick times (their columns show 1 at the rows where they ticked)
+            res.meta["clock_ticks"] = ticks
         if rec.writer is not None:
             rec.finish(res)
         self.written = getattr(rec, "files", [])

@@ -356,7 +356,7 @@ def test_unsupported_clocks_are_refused_naming_the_clock(tmp_path, change, kind,
     assert "\n" not in str(info.value)
 
 
-def test_inspect_lists_output_clocks_and_run_refuses_them(tmp_path, capsys):
+def test_inspect_lists_output_clocks_and_run_accepts_them(tmp_path, capsys):
     from cpgsim.harness.cli.main import main
 
     md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="9" causality="output" '
@@ -368,21 +368,25 @@ def test_inspect_lists_output_clocks_and_run_refuses_them(tmp_path, capsys):
     assert "output clock 'done' (vr 9) triggered, clocks attribute 5" in out
     from cpgsim.fmus.importer.clocked import check_clocks
 
-    for kind in ("cs", "me"):
-        with pytest.raises(ClockError, match=r"output clock 'done' \(triggered\) is not supported"):
-            check_clocks(describe_fmu(fmu), kind)
+    for kind in ("cs", "me"):  # output clocks are read now (tests/test_fmu_clock_io.py)
+        check_clocks(describe_fmu(fmu), kind)
 
 
 @pytest.mark.slow
-def test_a_block_with_an_output_clock_is_refused_when_built(clock_fmus, tmp_path):
+def test_an_output_clock_the_fmu_cannot_report_fails_naming_fmi3GetClock(clock_fmus, tmp_path):
+    """The Hold FMU declares an output clock but has no fmi3GetClock (its stub returns fmi3Error): the block
+    is built (the clock is an output port) and the run fails at the first event, naming the call."""
     from cpgsim.fmus.importer.block import FmuBlock
+    from cpgsim.harness.simulate import CoSimulationError, simulate
 
     md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="9" causality="output" '
                          'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
     fmu = _with_md(clock_fmus["hold"], tmp_path / "out_clock.fmu", md)
     for kind in ("cs", "me"):
-        with pytest.raises(ClockError, match=r"out_clock\.fmu: output clock 'done' \(triggered\) is not supported"):
-            FmuBlock("h", fmu, kind=kind)
+        blk = FmuBlock("h", fmu, kind=kind)
+        assert blk.outputs["done"].kind == "boolean"
+        with pytest.raises(CoSimulationError, match=r"out_clock\.fmu.*fmi3GetClock of the output clocks failed"):
+            simulate(blk, t_end=0.1, dt=0.01, inputs={"u": lambda t: t})
 
 
 @pytest.mark.slow

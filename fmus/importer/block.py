@@ -20,8 +20,11 @@ at every macro step.
   blocks: the coupling to the rest of the graph is sampled at the macro step, as for a CS FMU.
 - ``kind="se"``: an FMI 3 Scheduled Execution FMU: each model partition is activated at its input
   clock's ticks (:mod:`cpgsim.fmus.importer.clocked`). FMI 3 CS (with event mode) and ME FMUs with
-  time-based input clocks have them ticked the same way; unsupported clocks are refused when the block
-  is built (:class:`~cpgsim.fmus.importer.clocks.ClockError`).
+  time-based input clocks have them ticked the same way; triggered input clocks tick at ``clocks={name:
+  [t1, t2]}`` or from a connected output clock (``g.connect("a.out_clock", "b.in_clock")``); output clocks are
+  boolean output ports (1 at the rows where they ticked; exact times in ``clock_ticks`` and the results'
+  ``meta["clock_ticks"]``); unsupported clocks are refused when the block is built
+  (:class:`~cpgsim.fmus.importer.clocks.ClockError`).
 - ``kind="auto"`` (default): CS if the FMU has it, else ME, else SE.
 - ``isolate=True``: the FMU runs in a child process (:mod:`cpgsim.fmus.importer.isolation`); a crash there
   (segmentation fault, abort) becomes an :class:`~cpgsim.fmus.errors.FmuCrashedError`, which the
@@ -67,7 +70,7 @@ class FmuBlock(CoSimBlock):
                  isolate: bool = False, timeout: float | None = None, workdir: str | Path | None = None,
                  strict: bool = False, feedthrough: Mapping[str, Any] | None = None,
                  description: FmuDescription | None = None, solver: str = "rk4", rtol: float | None = None,
-                 atol: float | None = None, **params: Any) -> None:
+                 atol: float | None = None, clocks: Mapping[str, Any] | None = None, **params: Any) -> None:
         self.path = Path(path)
         self.info = description if description is not None else describe_fmu(self.path, strict=strict)
         if kind == "auto":
@@ -80,7 +83,8 @@ class FmuBlock(CoSimBlock):
         if self.info.clocks or kind == "se":
             from cpgsim.fmus.importer.clocked import check_clocks
 
-            check_clocks(self.info, kind)
+            check_clocks(self.info, kind, driven=True)  # triggered clocks: checked when the graph is wired
+        self._clock_setup(name, clocks)
         if int(substeps) != substeps or substeps < 1:
             raise ModelError(f"FMU block {name!r}: substeps must be a positive integer, got {substeps!r}")
         from cpgsim.fmus.importer.me import SOLVERS
@@ -104,6 +108,76 @@ class FmuBlock(CoSimBlock):
         self.value_values: dict[str, Any] = {}  # array and String parameters set by the user
         super().__init__(name, **params)
 
+    # -- clocks ----------------------------------------------------------------------------------------
+    def _clock_setup(self, name: str, clocks: Mapping[str, Any] | None) -> None:
+        """Output clocks become boolean output ports; triggered input clocks take a schedule (``clocks=``,
+        by FMI name or port name) or a clock connection (:meth:`check_clock_wiring`)."""
+        from cpgsim.fmus.importer.clocked import clock_ports
+
+        ports = clock_ports(self.info) if self.info.clocks else {}
+        self.clock_outputs = {ports[c.vr]: c for c in self.info.clocks if c.causality == "output"}
+        self.clock_inputs = {ports[c.vr]: c for c in self.info.clocks if c.causality == "input"}
+        self.schedules: dict[str, list[float]] = {}
+        for key, times in (clocks or {}).items():
+            self.schedule_clock(key, times, name)
+        self.clock_ticks: dict[str, list[float]] = {p: [] for p in self.clock_outputs}
+        self.reset_clock_wiring()
+
+    def schedule_clock(self, key: str, times: Any, name: str | None = None) -> None:
+        """Tick the triggered input clock ``key`` (FMI name or port name) at ``times`` (seconds)."""
+        name = self.name if name is None else name
+        spec = self.clock_inputs.get(key) or next((c for c in self.clock_inputs.values() if c.name == key), None)
+        if spec is None or spec.variability != "triggered":
+            have = ", ".join(p for p, c in self.clock_inputs.items() if c.variability == "triggered") or "none"
+            raise ModelError(f"FMU block {name!r}: clocks= names {key!r}, not a triggered input clock of "
+                             f"{self.path.name} (triggered input clocks: {have})")
+        try:
+            vals = sorted(float(t) for t in np.atleast_1d(np.asarray(times, dtype=float)))
+        except (TypeError, ValueError):
+            vals = [math.nan]
+        if not all(math.isfinite(t) for t in vals):
+            raise ModelError(f"FMU block {name!r}: clock {key!r}: tick times must be finite numbers, got {times!r}")
+        self.schedules[spec.name] = vals
+
+    def reset_clock_wiring(self) -> None:
+        self._clock_targets: dict[str, list[tuple[Any, str]]] = {}
+        self._clock_sources: dict[str, str] = {}
+        self._early_ticks: list[tuple[str, list[float]]] = []
+
+    def add_clock_target(self, out_port: str, dst: FmuBlock, in_port: str, src_name: str, dst_name: str) -> None:
+        """Wire output clock ``out_port`` to the triggered input clock ``in_port`` of ``dst`` (graph wiring)."""
+        from cpgsim.components.graph import WiringError
+
+        spec = dst.clock_inputs[in_port]
+        if spec.variability != "triggered":
+            raise WiringError(f"clock connection {src_name} -> {dst_name}: {dst_name} is a {spec.variability} input "
+                              f"clock (its ticks come from its interval); only triggered input clocks are connected")
+        self._clock_targets.setdefault(out_port, []).append((dst, in_port))
+        dst._clock_sources[in_port] = src_name
+
+    def check_clock_wiring(self, path: str) -> None:
+        """A triggered input clock with neither a schedule nor a clock connection is refused (nothing ticks it)."""
+        from cpgsim.fmus.importer.clocks import ClockError
+
+        for port, spec in self.clock_inputs.items():
+            if spec.variability == "triggered" and spec.name not in self.schedules and port not in self._clock_sources:
+                raise ClockError(f"FMU {self.path.name}: input clock {spec.name!r} (triggered) of block {path!r} is "
+                                 f"ticked by nothing: give FmuBlock(clocks={{{port!r}: [t1, t2]}}) (CLI: --clock "
+                                 f"{port}=T1,T2) or connect an output clock to {path}.{port}")
+
+    def _push_ticks(self) -> None:
+        """The output clock ticks of the last call: recorded, and handed to the connected input clocks."""
+        take = getattr(self._runtime, "take_ticks", None)
+        if take is None:
+            return
+        for port, times in take().items():
+            self.clock_ticks.setdefault(port, []).extend(times)
+            for dst, in_port in self._clock_targets.get(port, []):
+                if dst._runtime is None:  # not set up yet (the master sets up sources first): handed in at its setup
+                    dst._early_ticks.append((dst.clock_inputs[in_port].name, list(times)))
+                else:
+                    dst._runtime.add_ticks(dst.clock_inputs[in_port].name, times)
+
     # -- declaration ------------------------------------------------------------------------------
     def declare(self) -> None:
         d = self.info
@@ -111,6 +185,8 @@ class FmuBlock(CoSimBlock):
             self.add_input(p.name, p.shape, p.unit, p.kind, p.description, default=p.default)
         for p in d.outputs.values():
             self.add_output(p.name, p.shape, p.unit, p.kind, p.description)
+        for port, c in self.clock_outputs.items():
+            self.add_output(port, 1, "1", "boolean", f"output clock {c.name}: 1 at the rows where it ticked")
         for q in d.parameters.values():
             default = q.start if q.start is not None else (0.0 if q.bounds[0] <= 0.0 <= q.bounds[1] else q.bounds[0])
             if q.kind == "integer" and not float(default).is_integer():
@@ -173,6 +249,9 @@ class FmuBlock(CoSimBlock):
         args = dict(path=str(self.path), kind=self.kind, instance_name=self.name,
                     workdir=None if self.workdir is None else str(self.workdir), substeps=self.substeps,
                     strict=self.strict, solver=self.solver, rtol=self.rtol, atol=self.atol)
+        if self.schedules:
+            args["schedules"] = dict(self.schedules)
+        self.clock_ticks = {p: [] for p in self.clock_outputs}
         if self.isolate:
             from cpgsim.fmus.importer.isolation import IsolatedRuntime
 
@@ -184,6 +263,11 @@ class FmuBlock(CoSimBlock):
         self._runtime = rt
         self._finalizer = weakref.finalize(self, _close, rt)
         rt.setup(float(t0), self.changed_parameters(), {})
+        early, self._early_ticks = self._early_ticks, []
+        for clock, times in early:
+            rt.add_ticks(clock, times)
+        if self.clock_outputs:
+            self._push_ticks()
 
     def _rt(self):
         if self._runtime is None:
@@ -191,13 +275,20 @@ class FmuBlock(CoSimBlock):
         return self._runtime
 
     def get_outputs(self) -> dict[str, np.ndarray]:
-        return self._rt().get_outputs()
+        out = self._rt().get_outputs()
+        if self.clock_outputs:
+            self._push_ticks()
+        return out
 
     def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
         self._rt().set_inputs(values)
+        if self.clock_outputs:
+            self._push_ticks()
 
     def do_step(self, t: float, dt: float) -> None:
         self._rt().do_step(t, dt)
+        if self.clock_outputs:
+            self._push_ticks()
 
     def terminate(self) -> None:
         rt, self._runtime = self._runtime, None

@@ -27,18 +27,31 @@ first tick (at the start time, for a clock without shift: FMI 3.0's periodic clo
 k * interval``) therefore runs when the first inputs are set, and a run from 0 to T activates the ticks in
 [0, T) (plus the one at T if the FMU has no inputs).
 
+Output clocks (CS with event mode, ME): ``fmi3GetClock`` after every event iteration (still in event mode, the
+clocked inputs set before ``fmi3UpdateDiscreteStates``, the clocked outputs read after it); each tick is
+recorded (:attr:`ClockedRuntime.out_ticks`, :meth:`ClockedRuntime.take_ticks`) and shown by a boolean output
+port: 1 when the clock ticked since the row before (the reading before the last ``do_step``), else 0.
+
+Triggered input clocks tick at the times handed in (``schedules=`` by clock name, or
+:meth:`ClockedRuntime.add_ticks`: a schedule, or a connected output clock's ticks, see
+:meth:`cpgsim.fmus.importer.block.FmuBlock.add_clock_target`), exactly like the time-based ones; a tick
+between communication points needs a CS FMU with ``canHandleVariableCommunicationStepSize``.
+
 Refused (a :class:`~cpgsim.fmus.importer.clocks.ClockError` naming the FMU and the clock, when the block
-is built): ``triggered`` input clocks (cpgsim connects no clocks, nothing would tick them), output
-clocks (their ticks are not read), input clocks of a Co-Simulation FMU without ``hasEventMode``.
+is built): output clocks of Scheduled Execution FMUs (signalled through ``clockUpdate``, not handled), clocks
+of a Co-Simulation FMU without ``hasEventMode``; triggered input clocks nothing ticks (when the graph is wired).
 """
 
 from __future__ import annotations
 
 import collections
+from collections.abc import Mapping, Sequence
 from ctypes import c_int
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from cpgsim.fmus.errors import FmuRuntimeError
 from cpgsim.fmus.importer.clocks import ClockError, TickSchedule, from_float, tolerance
@@ -50,24 +63,43 @@ from cpgsim.harness.errors import StopRequested
 _CHANGED = 2  # fmi3IntervalChanged
 
 
-def check_clocks(desc: FmuDescription, kind: str) -> None:
-    """Refuse (one line naming the FMU and the clock) clocks this importer cannot drive as ``kind``."""
+def check_clocks(desc: FmuDescription, kind: str, driven: bool = False) -> None:
+    """Refuse (one line naming the FMU and the clock) clocks this importer cannot drive as ``kind``. ``driven``:
+    the caller ticks ``triggered`` input clocks (a schedule or a clock connection, checked when the graph is
+    wired: :meth:`cpgsim.fmus.importer.block.FmuBlock.check_clock_wiring`); else they are refused."""
     name = Path(desc.path).name
     for c in desc.clocks:
         what = f"FMU {name}: {c.causality} clock {c.name!r} ({c.variability})"
         if c.causality == "output":
-            raise ClockError(f"{what} is not supported: cpgsim does not read output clocks "
-                             f"({'of model partitions' if kind == 'se' else 'nothing consumes their ticks'})")
+            if kind == "se":
+                raise ClockError(f"{what} is not supported: cpgsim does not read output clocks of model "
+                                 f"partitions (Scheduled Execution signals them through clockUpdate)")
+            if kind == "cs" and not desc.event_mode:
+                raise ClockError(f"{what}: the CoSimulation interface has no event mode (hasEventMode is not "
+                                 f"true), so fmi3GetClock cannot be called; use its ModelExchange interface if it "
+                                 f"has one")
+            continue
         if c.causality != "input":
             continue
-        if c.variability == "triggered":
+        if c.variability == "triggered" and not driven:
             raise ClockError(f"{what} is not supported: a triggered input clock ticks only when another FMU's "
-                             f"output clock triggers it, and cpgsim connects no clocks")
+                             f"output clock triggers it or a schedule is given (FmuBlock(clocks=...), "
+                             f"--clock NAME=T1,T2)")
         if c.variability == "constant" and c.interval is None:
             raise ClockError(f"{what} declares no intervalDecimal (or intervalCounter and resolution)")
         if kind == "cs" and not desc.event_mode:
             raise ClockError(f"{what}: the CoSimulation interface has no event mode (hasEventMode is not "
                              f"true), so the clock cannot be ticked; use its ModelExchange interface if it has one")
+
+
+def clock_ports(desc: FmuDescription) -> dict[int, str]:
+    """The block port name of each clock (by value reference): its FMI name as an identifier, unused by the
+    signal ports. Output clocks are boolean output ports (1 at the rows where the clock ticked); input clocks
+    are the ends of clock connections (``g.connect("a.tick", "b.trigger")``)."""
+    from cpgsim.fmus.importer.description import identifier
+
+    taken = set(desc.inputs) | set(desc.outputs)
+    return {c.vr: identifier(c.name, taken) for c in desc.clocks}
 
 
 def make_runtime(path: str | Path, kind: str, instance_name: str, desc: FmuDescription | None = None,
@@ -81,17 +113,33 @@ def make_runtime(path: str | Path, kind: str, instance_name: str, desc: FmuDescr
 class ClockedRuntime(FmuRuntime):
     """An FMU instance whose input clocks cpgsim ticks (module docstring)."""
 
-    def __init__(self, *args: Any, **kw: Any) -> None:
+    def __init__(self, *args: Any, schedules: Mapping[str, Sequence[float]] | None = None, **kw: Any) -> None:
         super().__init__(*args, **kw)
-        check_clocks(self.desc, self.kind)
+        check_clocks(self.desc, self.kind, driven=True)
         self.clocks = [c for c in self.desc.clocks if c.causality == "input"]
         self.by_vr = {c.vr: c for c in self.clocks}
+        self.by_name = {c.name: c for c in self.clocks}
+        self.triggered = {c.vr for c in self.clocks if c.variability == "triggered"}
+        self.schedules = {k: [float(t) for t in v] for k, v in (schedules or {}).items()}
+        for k in self.schedules:
+            if k not in self.by_name or self.by_name[k].variability != "triggered":
+                raise ClockError(self._where(f"has no triggered input clock {k!r} to schedule"))
         self.schedule: TickSchedule | None = None
         self.activations: collections.Counter[str] = collections.Counter()  # clock name -> ticks activated
         self._cs_event_mode = False
         self._cs_next: Fraction | None = None  # CS: the next time event the FMU announced
         self._after_tick_pending: list[tuple[int, Fraction]] = []  # ME: ticks set, counted after the iteration
         self._t_start = 0.0
+        self._extra: list[tuple[int, Fraction]] = []  # ticks handed in before the schedule exists
+        # output clocks: read with fmi3GetClock after every event iteration (module docstring)
+        ports = clock_ports(self.desc)
+        self.out_clocks = [(c.vr, ports[c.vr]) for c in self.desc.clocks if c.causality == "output"]
+        self.out_ticks: dict[str, list[float]] = {p: [] for _vr, p in self.out_clocks}
+        self._new_ticks: list[tuple[str, float]] = []
+        self._n_ticks: collections.Counter[str] = collections.Counter()
+        self._row_base: dict[str, int] = {}
+        self._last_read: dict[str, int] = {}
+        self._tick_time: float | None = None  # the input tick an event iteration runs for (its exact float)
 
     def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
         self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
@@ -99,7 +147,71 @@ class ClockedRuntime(FmuRuntime):
         self.schedule = None
         self.activations.clear()
         self._cs_next = None
+        self._extra = [(self.by_name[k].vr, from_float(t)) for k, ts in self.schedules.items() for t in ts]
+        self.out_ticks = {p: [] for _vr, p in self.out_clocks}
+        self._new_ticks = []
+        self._n_ticks.clear()
+        self._row_base, self._last_read = {}, {}
         return super().setup(t0, params, inputs)
+
+    # -- triggered input clocks: ticks from a schedule or a connected output clock ---------------------------
+    def add_ticks(self, name: str, times: Sequence[float]) -> None:
+        """Tick the triggered input clock ``name`` at ``times`` (not before the FMU's current time)."""
+        c = self.by_name.get(name)
+        if c is None or c.variability != "triggered":
+            raise ClockError(self._where(f"has no triggered input clock {name!r}"))
+        now = self._due(inclusive=False)
+        for t in times:
+            at = from_float(float(t))
+            if at < now:
+                raise FmuRuntimeError(self._where(
+                    f"input clock {name!r}: a tick at t={float(t):.12g} arrived after the FMU passed it "
+                    f"(t={self._time:.12g})"))
+            if self.schedule is None:
+                self._extra.append((c.vr, at))
+            else:
+                self.schedule.add_once(c.vr, at)
+            if self.kind == "me" and self._state == "running":
+                tick = float(at)
+                if tick <= self._time + 1e-9 * max(1.0, abs(self._time)):
+                    if not self._in_event_mode:  # due now: the event iteration runs with the inputs at this time
+                        self.fmu.enterEventMode()
+                        self._in_event_mode = True
+                else:
+                    self._next_event = tick if self._next_event is None else min(self._next_event, tick)
+
+    # -- output clocks ----------------------------------------------------------------------------------
+    def _read_out_clocks(self, where: str) -> None:
+        """``fmi3GetClock`` on every output clock (in event mode, after the event iteration); a tick at the
+        current time is recorded."""
+        if not self.out_clocks:
+            return
+        from fmpy import fmi3
+
+        n = len(self.out_clocks)
+        refs = (fmi3.fmi3ValueReference * n)(*[vr for vr, _p in self.out_clocks])
+        vals = (fmi3.fmi3Clock * n)()
+        try:
+            self.fmu.fmi3GetClock(self.fmu.component, refs, n, vals)
+        except Exception as exc:  # noqa: BLE001
+            raise self._fail(f"{where}: fmi3GetClock of the output clocks", exc) from None
+        at = self._time if self._tick_time is None else self._tick_time  # at an input tick: its exact time
+        for k, (_vr, port) in enumerate(self.out_clocks):
+            if vals[k]:
+                self.out_ticks[port].append(at)
+                self._new_ticks.append((port, at))
+                self._n_ticks[port] += 1
+
+    def take_ticks(self) -> dict[str, list[float]]:
+        """The output clock ticks since the last call: ``{port: [times]}``."""
+        out: dict[str, list[float]] = {}
+        for port, t in self._new_ticks:
+            out.setdefault(port, []).append(t)
+        self._new_ticks = []
+        return out
+
+    def _event_iterated(self) -> None:
+        self._read_out_clocks(f"event at t={self._time:.12g}")
 
     def _instantiate_options(self) -> dict[str, Any]:
         return {"eventModeUsed": True} if self.kind == "cs" else {}
@@ -131,7 +243,7 @@ class ClockedRuntime(FmuRuntime):
         s = TickSchedule(self.clocks)
         t0 = from_float(self._t_start)  # periodic ticks count from the start time (FMI 3.0: t_0 = t_start + shift)
         for c in self.clocks:
-            if c.variability == "countdown":
+            if c.variability in ("countdown", "triggered"):
                 continue
             interval, shift = c.interval, c.shift
             if c.variability != "constant":
@@ -149,6 +261,9 @@ class ClockedRuntime(FmuRuntime):
             if interval is None or interval <= 0:
                 raise FmuRuntimeError(self._where(f"clock {c.name!r}: no positive interval ({interval})"))
             s.start(c.vr, interval, shift, t0)
+        for vr, at in self._extra:
+            s.add_once(vr, at)
+        self._extra = []
         self.schedule = s
         self._countdowns(from_float(self._time))
         return s
@@ -218,8 +333,12 @@ class ClockedRuntime(FmuRuntime):
             self.fmu.fmi3SetClock(self.fmu.component, refs, len(vrs), active)
         except Exception as exc:  # noqa: BLE001
             raise self._fail(f"{where}: fmi3SetClock", exc) from None
+        self._tick_time = float(at)
         if self.kind == "cs":
-            self._cs_update(where)
+            try:
+                self._cs_update(where)
+            finally:
+                self._tick_time = None
             for _t, vr in batch:
                 self._after_tick(vr, at)
         else:  # ME: counted once the caller's event iteration has run
@@ -241,6 +360,7 @@ class ClockedRuntime(FmuRuntime):
                     break
             else:
                 raise FmuRuntimeError(self._where(f"{where}: the event iteration did not converge"))
+            self._read_out_clocks(where)
             self.fmu.enterStepMode()
             self._cs_event_mode = False
         except (FmuRuntimeError, StopRequested):
@@ -256,7 +376,12 @@ class ClockedRuntime(FmuRuntime):
     def get_outputs(self) -> dict:
         if self._state == "running" and not self.desc.inputs and not self._terminated and self.kind != "me":
             self._run_due()
-        return super().get_outputs()
+        out = super().get_outputs()
+        for _vr, port in self.out_clocks:  # 1 if the clock ticked since the row before (module docstring)
+            n = self._n_ticks[port]
+            out[port] = np.array([1.0 if n > self._row_base.get(port, 0) else 0.0])
+            self._last_read[port] = n
+        return out
 
     def set_inputs(self, values: Any) -> None:
         super().set_inputs(values)
@@ -274,6 +399,7 @@ class ClockedRuntime(FmuRuntime):
             self._cs_event(f"time event at t={self._time:.12g}")
 
     def do_step(self, t: float, dt: float) -> None:
+        self._row_base = dict(self._last_read)  # the next row shows the ticks from the last reading on
         if self.kind != "se":
             return super().do_step(t, dt)
         t_end = float(t) + float(dt)
@@ -305,6 +431,7 @@ class ClockedRuntime(FmuRuntime):
                         continue
                     cur = self._time = tau
                 if at == nt:
+                    self._check_variable_step(nt, t, t_end)
                     self._fire(nt)
                 else:
                     self._cs_event(f"time event at t={tau:.12g}")
@@ -320,6 +447,18 @@ class ClockedRuntime(FmuRuntime):
         self._time = t_end
         if not self.desc.inputs:
             self._run_due()
+
+    def _check_variable_step(self, at: Fraction, t: float, t_end: float) -> None:
+        """A triggered clock's tick between communication points needs a shorter fmi3DoStep: refused for an FMU
+        without canHandleVariableCommunicationStepSize."""
+        if self.desc.variable_step or self.schedule is None:
+            return
+        names = [self.by_vr[vr].name for tt, vr in self.schedule.once if tt == at and vr in self.triggered]
+        if names and at > from_float(t) + tolerance(t):
+            raise ClockError(self._where(
+                f"input clock {names[0]!r} ticks at t={float(at):.12g}, between the communication points "
+                f"t={t:.12g} and t={t_end:.12g}, and the FMU cannot shorten a step (canHandleVariable"
+                f"CommunicationStepSize is not true): use a macro step the tick times fall on"))
 
     def _cs_event(self, where: str) -> None:
         """An event of the FMU's own (no clock ticks): event mode, iteration, step mode."""
@@ -363,7 +502,10 @@ class ClockedRuntime(FmuRuntime):
             while batch:  # every tick due now (a late one included): one event iteration for all
                 self._event_with_clocks(batch, batch[0][0])
                 batch = sched.pop_first(self._due())
-        super()._leave_event_mode()
+        try:
+            super()._leave_event_mode()
+        finally:
+            self._tick_time = None
         pending, self._after_tick_pending = self._after_tick_pending, []
         for vr, at in pending:
             self._after_tick(vr, at)

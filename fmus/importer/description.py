@@ -218,6 +218,8 @@ class FmuDescription:
     se_identifier: str | None = None
     clocks: list = field(default_factory=list)
     event_mode: bool = False
+    # CoSimulation canHandleVariableCommunicationStepSize (a triggered clock's tick off the grid needs it)
+    variable_step: bool = False
 
     @property
     def kinds(self) -> list[str]:
@@ -657,7 +659,8 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
         needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
         skipped=skipped, members=frozenset(members), value_parameters=value_params,
-        structural_parameters=structural, se_identifier=se)
+        structural_parameters=structural, se_identifier=se,
+        variable_step=bool(getattr(md.coSimulation, "canHandleVariableCommunicationStepSize", False)))
     return desc
 
 

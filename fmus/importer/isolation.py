@@ -198,6 +198,13 @@ class IsolatedRuntime:
         self._pending = {}
         self._time = float(t) + float(dt)
 
+    def take_ticks(self) -> dict[str, list[float]]:
+        """Output clock ticks the child reported with its last outputs (once)."""
+        return (self._outputs or {}).pop(_TICKS, None) or {}
+
+    def add_ticks(self, name: str, times: Any) -> None:
+        self._call("ticks", name, [float(t) for t in times], timeout=self.timeout)
+
     def terminate(self) -> None:
         if self.proc.poll() is None and not self.conn.closed:
             try:
@@ -379,6 +386,16 @@ def _watch_lifeline(fd: int) -> None:
         os._exit(3)
 
 
+_TICKS = "__clock_ticks__"
+
+
+def _add_ticks(rt: Any, value: dict) -> None:
+    """Output clock ticks ride along with the outputs (taken once by :meth:`IsolatedRuntime.take_ticks`)."""
+    ticks = rt.take_ticks() if hasattr(rt, "take_ticks") else None
+    if ticks:
+        value[_TICKS] = ticks
+
+
 def _serve(fd: int) -> None:
     from cpgsim.fmus.errors import one_line
     from cpgsim.fmus.importer.clocked import make_runtime
@@ -399,11 +416,13 @@ def _serve(fd: int) -> None:
                 args, t0, params, inputs = payload
                 rt = make_runtime(**args)
                 value = rt.setup(t0, params, inputs)
+                _add_ticks(rt, value)
             elif what == "outputs":
                 assert rt is not None
                 if payload[0]:
                     rt.set_inputs(payload[0])
                 value = rt.get_outputs()
+                _add_ticks(rt, value)
             elif what == "step":
                 assert rt is not None
                 inputs, t, dt = payload
@@ -411,6 +430,11 @@ def _serve(fd: int) -> None:
                     rt.set_inputs(inputs)
                 rt.do_step(t, dt)
                 value = rt.get_outputs()
+                _add_ticks(rt, value)
+            elif what == "ticks":
+                assert rt is not None
+                rt.add_ticks(*payload)  # type: ignore[attr-defined]
+                value = None
             elif what == "terminate":
                 if rt is not None:
                     rt.terminate()

@@ -124,6 +124,9 @@ class FmuRuntime:
         """Extra arguments of fmpy's FMI 3 ``instantiate`` (the clocked runtime asks for event mode)."""
         return {}
 
+    def _event_iterated(self) -> None:
+        """After the event iteration converged, still in event mode (the clocked runtime reads output clocks)."""
+
     def _where(self, what: str) -> str:
         return f"FMU {self.path.name} (instance {self.instance_name!r}) {what}"
 
@@ -465,6 +468,7 @@ class FmuRuntime:
                 break
         else:
             raise FmuRuntimeError(f"{self._where('event iteration')} did not converge at t={self._time:g}")
+        self._event_iterated()
         self.fmu.enterContinuousTimeMode()
         self._in_event_mode = False
         self._need_reset = True

@@ -43,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {name} [{unit}]")
     if len(res.columns) > 8:
         print(f"  ... and {len(res.columns) - 8} more")
+    for name, ticks in (res.meta.get("clock_ticks") or {}).items():  # FMI 3 output clocks
+        shown = ", ".join(f"{t:.9g}" for t in ticks[:5]) + (", ..." if len(ticks) > 5 else "")
+        print(f"  clock {name}: {len(ticks)} tick(s){' at ' + shown if ticks else ''}")
     target = Path(args.output) if args.output else source.with_suffix(".csv") if args.csv else None
     if target is None:
         return 0

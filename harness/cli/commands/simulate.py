@@ -63,6 +63,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --isolate: the longest one FMU call may take (default "
                         f"{DEFAULT_CALL_TIMEOUT:g} s; instantiation and setup get {MIN_SETUP_TIMEOUT:g} s "
                         "or this, whichever is longer)")
+    p.add_argument("--clock", action="append", default=None, metavar="NAME=T1,T2,...",
+                   help="tick the triggered input clock NAME (or BLOCK.NAME) of an FMI 3 FMU at these times (s)")
     p.add_argument("--force", action="store_true", help="replace an existing results file")
     p.add_argument("--solver", choices=("rk4", "cvode"), default=None,
                    help="integrator of model-exchange FMUs: rk4 (fixed step, --substeps per macro step; default) "
@@ -129,6 +131,29 @@ def choose_experiment(args: argparse.Namespace, declared: dict[str, float]) -> d
     return chosen
 
 
+def schedule_clock(graph: object, spec: str) -> None:
+    """``--clock NAME=T1,T2`` (or ``BLOCK.NAME=...``): the tick times of a triggered input clock of an FMU block."""
+    from cpgsim.fmus.importer.block import fmu_blocks
+
+    name, sep, times = spec.partition("=")
+    try:
+        values = [float(t) for t in times.split(",") if t.strip()] if sep else []
+    except ValueError:
+        values = []
+    if not values:
+        raise CliError(f"--clock {spec!r}: expected NAME=T1,T2,... (tick times in seconds)")
+    block, _, clock = name.strip().rpartition(".")
+    blocks = [b for b in fmu_blocks(graph) if (not block or b.name == block)
+              and any(clock in (p, c.name) for p, c in getattr(b, "clock_inputs", {}).items())]
+    if len(blocks) != 1:
+        raise CliError(f"--clock {spec!r}: {'no' if not blocks else 'more than one'} FMU block has an input clock "
+                       f"{clock!r}{'' if blocks else ''}{' (name it BLOCK.' + clock + ')' if blocks else ''}")
+    try:
+        blocks[0].schedule_clock(clock, values)
+    except Exception as exc:  # noqa: BLE001 - a ModelError naming the clock
+        raise CliError(f"--clock {spec!r}: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     if args.list:
         for name in catalog.names():
@@ -156,6 +181,8 @@ def _run_into(args: argparse.Namespace, out: Path) -> int:
         raise CliError("--fmu-timeout does not apply with --no-isolate (in-process FMU calls cannot be interrupted)")
     graph = catalog.load_graph(args.graph)
     isolate_fmus(graph, args.isolate, args.fmu_timeout)
+    for spec in args.clock or []:
+        schedule_clock(graph, spec)
     if args.solver is not None or args.rtol is not None or args.atol is not None:
         from cpgsim.fmus.importer.block import set_solver
 

@@ -32,6 +32,13 @@ spike of one or two samples is ignored, a foot pushing on a step face or standin
 | ``raw_ob`` / ``raw_td`` | out | 1 | thresholded, not debounced |
 | ``support`` / ``raw_sup`` | out | 1 | foothold-like contact (debounced / raw) |
 
+Sensing lag (a study option, off by default): ``tau_f`` (s, >= 0) puts a first-order low-pass on the
+toe force that Y8 reads (the obstacle flag; Y9 and support read the force as it is), sampled at the macro
+step: ``F_f += (1 - exp(-dt/tau_f)) (F - F_f)`` with ``dt`` the time since the last sample (``F_f = F`` at
+the first; a discrete state, so the filter does not depend on the step size); ``tau_f = 0`` (default)
+passes the force through unchanged. It models a filtered force sensor (the prototype's "filter-like
+threshold", Yu Sec. 6.2) for docs/fidelity.md open item 2. ``force_f`` outputs the filtered force.
+
 Parameters: ``Fcx``, ``Fcy``, ``Fcz`` (N, >= 0; Yu simulation 10, 10, 2 N, prototype 30 N),
 ``debounce`` (s, >= 0), ``support_ratio`` (>= 0). ``lambda_td`` and ``support`` start at 1 (standing),
 ``lambda_ob`` at 0.
@@ -65,6 +72,9 @@ class YuSensoryNeurons(Block):
         self.add_parameter("debounce", 0.005, "s", (0, math.inf), "a flag follows the raw value after this long")
         self.add_parameter("support_ratio", 0.5, "1", (0, math.inf),
                            "support: horizontal force below this times the vertical one")
+        self.add_parameter("tau_f", 0.0, "s", (0, math.inf), "low-pass time constant on the toe force (0: off)")
+        self.add_discrete_state("force_f", (0.0, 0.0, 0.0), "N", "low-passed toe force (tau_f > 0)")
+        self.add_discrete_state("t_f", -1.0, "s", "time of the last filter sample (< 0: none yet)")
         self.add_input("toe_force", 3, "N", description="ground force on the foot (Fx lateral, Fy forward, Fz up)")
         self.add_discrete_state("lambda_ob", 0.0, description="debounced obstacle flag")
         self.add_discrete_state("lambda_td", 1.0, description="debounced touchdown flag")
@@ -78,18 +88,25 @@ class YuSensoryNeurons(Block):
         self.add_output("raw_td", unit="1", description="Y9 without debounce")
         self.add_output("support", unit="1", description="foothold-like contact (Fz > Fcz, within 45 deg), debounced")
         self.add_output("raw_sup", unit="1", description="support without debounce")
+        self.add_output("force_f", 3, "N", description="toe force as the thresholds read it (low-passed if tau_f > 0)")
 
     def define(self, v: Symbols) -> Equations:
-        f, p, z = v.u["toe_force"], v.p, v.z
+        f_in, p, z = v.u["toe_force"], v.p, v.z
+        on = p["tau_f"] > 0
+        a = ca.if_else(ca.logic_and(on, z["t_f"] >= 0),
+                       1 - ca.exp(-(v.t - z["t_f"]) / ca.fmax(p["tau_f"], 1e-12)), 1)  # first sample: F_f = F
+        f = ca.if_else(on, z["force_f"] + a * (f_in - z["force_f"]), f_in)
         raw_ob = ca.if_else(ca.logic_or(ca.fabs(f[0]) > p["Fcx"], ca.fabs(f[1]) > p["Fcy"]), 1, 0)
-        raw_td = ca.if_else(ca.fabs(f[2]) > p["Fcz"], 1, 0)
+        raw_td = ca.if_else(ca.fabs(f_in[2]) > p["Fcz"], 1, 0)
         ob, t_ob = debounced(z["lambda_ob"], z["t_ob"], raw_ob, v.t, p["debounce"])
         td, t_td = debounced(z["lambda_td"], z["t_td"], raw_td, v.t, p["debounce"])
-        raw_sup = ca.if_else(ca.logic_and(f[2] > p["Fcz"], f[0] ** 2 + f[1] ** 2 < (p["support_ratio"] * f[2]) ** 2),
+        raw_sup = ca.if_else(ca.logic_and(f_in[2] > p["Fcz"],
+                                          f_in[0] ** 2 + f_in[1] ** 2 < (p["support_ratio"] * f_in[2]) ** 2),
                              1, 0)
         sup, t_sup = debounced(z["support"], z["t_sup"], raw_sup, v.t, p["debounce"])
         return Equations(
             outputs={"lambda_ob": z["lambda_ob"], "lambda_td": z["lambda_td"], "raw_ob": raw_ob, "raw_td": raw_td,
-                     "support": z["support"], "raw_sup": raw_sup},
-            updates={"lambda_ob": ob, "t_ob": t_ob, "lambda_td": td, "t_td": t_td, "support": sup, "t_sup": t_sup},
+                     "support": z["support"], "raw_sup": raw_sup, "force_f": f},
+            updates={"force_f": f, "t_f": v.t, "lambda_ob": ob, "t_ob": t_ob, "lambda_td": td, "t_td": t_td,
+                     "support": sup, "t_sup": t_sup},
         )

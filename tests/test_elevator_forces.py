@@ -1,0 +1,54 @@
+"""The sensing-lag option of the Yu sensory neurons (docs/fidelity.md open item 2): a first-order
+low-pass ``tau_f`` on the force that Y8 reads, off by default; scripted inputs on the block alone."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cpgsim.components.yu.sensors import YuSensoryNeurons
+from cpgsim.harness.simulate import simulate
+
+DT = 0.001
+N = 101
+
+
+def run(fy_from: int = 20, fy: float = 20.0, fz: float = 5.0, **params) -> dict[str, np.ndarray]:
+    tf = np.zeros((3, N))
+    tf[2] = fz
+    tf[1, fy_from:] = fy
+    r = simulate(YuSensoryNeurons("s", **params), t_end=(N - 1) * DT, dt=DT, inputs={"toe_force": tf},
+                 backend="casadi")
+    return {k.split(".", 1)[-1]: np.asarray(r[k]) for k in r.columns}
+
+
+def test_without_a_time_constant_the_force_passes_unchanged():
+    r = run()
+    assert np.allclose(r["force_f[1]"][20:], 20.0) and np.allclose(r["force_f[1]"][:20], 0.0)
+    assert np.flatnonzero(r["raw_ob"] > 0.5)[0] == 20
+
+
+@pytest.mark.parametrize("tau", [0.005, 0.01, 0.04])
+def test_the_low_pass_follows_a_first_order_step_response_and_delays_the_obstacle_flag(tau):
+    r = run(tau_f=tau)
+    k = np.arange(20, N)
+    expect = 20.0 * (1 - np.exp(-(k - 19) * DT / tau))
+    assert np.allclose(r["force_f[1]"][20:], expect, rtol=1e-6, atol=1e-9)
+    cross = np.flatnonzero(r["force_f[1]"] > 10.0)[0]  # first sample the filtered force exceeds Fcy = 10 N
+    assert cross - 19 == pytest.approx(-tau * math.log(0.5) / DT, abs=1.0)
+    base = run()
+    lag = np.flatnonzero(base["lambda_ob"] > 0.5)[0] - 20  # the debounce alone
+    assert np.flatnonzero(r["lambda_ob"] > 0.5)[0] == cross + lag
+
+
+def test_the_low_pass_leaves_touchdown_and_support_on_the_raw_force():
+    a, b = run(fz=3.0, fy=0.0), run(fz=3.0, fy=0.0, tau_f=0.04)
+    for key in ("lambda_td", "support", "raw_td", "raw_sup"):
+        assert np.array_equal(a[key], b[key])
+
+
+def test_the_first_sample_starts_the_filter_on_the_force():
+    r = run(fy_from=0, tau_f=0.04)
+    assert r["force_f[1]"][0] == pytest.approx(20.0)

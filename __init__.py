@@ -10,13 +10,15 @@ The public face of the package. The names below are loaded on first use (``cpgsi
     study = cpgsim.simulate_batch(g, params={"z1.eps": [0.05, 0.1]}, t_end=20.0)
 
 Subpackages, lowest layer first: :mod:`cpgsim.components` (the block kit and each paper's blocks),
-:mod:`cpgsim.harness` (the engine; ``verify``, ``experiments`` and ``cli`` below it),
-:mod:`cpgsim.fmus` (FMU export and import, SSP) and :mod:`cpgsim.robots` (DART hexapod, terrains).
+:mod:`cpgsim.harness` (the engine), then beside each other :mod:`cpgsim.fmus` (FMU export and import,
+SSP), :mod:`cpgsim.robots` (the hexapod plant, its engines DART and MuJoCo, terrains) and
+:mod:`cpgsim.verify` (limit cycles, proofs); above them :mod:`cpgsim.experiments` (the papers' scenarios)
+and :mod:`cpgsim.cli` (the ``cpgsim`` command).
 """
 
 from importlib import import_module as _import_module
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 # public name -> module that defines it (relative to this package)
 _EXPORTS: dict[str, str] = {
@@ -33,8 +35,8 @@ _EXPORTS: dict[str, str] = {
     "simulate": "harness.simulate",
     "Simulator": "harness.simulate",
     "simulate_batch": "harness.batch",
-    "verify": "harness.verify.shooting",
-    "VerifyOptions": "harness.verify.result",
+    "verify": "verify.shooting",
+    "VerifyOptions": "verify.result",
     "export_fmu": "fmus.export.exporter",
     "FmuBlock": "fmus.importer.block",
     "Results": "harness.results",

@@ -1,6 +1,6 @@
 """MuJoCo batch benchmark: the terrain suite on MuJoCo as one batch in this process vs on Dask workers.
 
-Runs ``cpgsim.harness.experiments.bench.run_bench("terrain", sets={"robot.engine": "mujoco"})`` with
+Runs ``cpgsim.experiments.bench.run_bench("terrain", sets={"robot.engine": "mujoco"})`` with
 ``batch=True`` (``--workers`` C threads, cpgsim.robots.mujoco_batch) and ``batch=False`` (a Dask
 LocalCluster of ``--workers`` processes), alternately ``--repeat`` times, on ``--seeds`` seeds per cell
 (the suite has 5: 300 trials; 1 gives a 60-trial subset). Prints per mode the wall times (the suite's
@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpgsim.harness.experiments.bench import run_bench
+from cpgsim.experiments.bench import run_bench
 
 
 def _outcomes(doc: dict) -> dict:

@@ -31,7 +31,7 @@ CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
 import numpy  # noqa: F401  (the imports every start pays, timed apart)
-from cpgsim.harness.cli import catalog
+from cpgsim.cli import catalog
 from cpgsim.harness.simulate import Simulator
 t1 = time.perf_counter()
 name, grouping = sys.argv[1], sys.argv[2]
@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeat", type=int, default=1, help="cold+warm pairs per row (medians printed)")
     ap.add_argument("--json", help="also write the rows to this file")
     args = ap.parse_args(argv)
-    from cpgsim.harness.cli import catalog
+    from cpgsim.cli import catalog
 
     rows = []
     cases = [(name, "auto") for name in catalog.names()]

@@ -18,8 +18,8 @@ import statistics
 import tempfile
 import time
 
-from cpgsim.harness.experiments.runner import build_scenario, run_scenario
-from cpgsim.harness.experiments.setup import ENGINE_CONFIGS as CONFIGS
+from cpgsim.experiments.runner import build_scenario, run_scenario
+from cpgsim.experiments.setup import ENGINE_CONFIGS as CONFIGS
 
 
 def scenario_rtf(scenario: str, config: str, t_end: float) -> float:

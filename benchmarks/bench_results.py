@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpgsim.harness.experiments.runner import build_scenario
+from cpgsim.experiments.runner import build_scenario
 from cpgsim.harness.results import ResultsWriter
 from cpgsim.harness.simulate import Simulator
 

@@ -42,7 +42,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from cpgsim.harness.experiments.runner import build_scenario
+from cpgsim.experiments.runner import build_scenario
 from cpgsim.harness.simulate import Simulator
 from cpgsim.robots.plant import DartHexapod
 

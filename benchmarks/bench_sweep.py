@@ -1,6 +1,6 @@
 """Parallel efficiency of a sweep: N trials on a 2-worker dask LocalCluster vs the same trials serially.
 
-Both runs call the same :func:`cpgsim.harness.experiments.sweep.run_trial`
+Both runs call the same :func:`cpgsim.experiments.sweep.run_trial`
 (scenario ``fukuhara-gaits``, tripod setting by
 default, seeds S..S+N-1) and write the same files. Before timing, the serial process and every worker
 run one short warm-up trial (imports, DART, the controller's compiled C step), so the comparison is
@@ -28,7 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from cpgsim.harness.experiments.sweep import run_sweep, run_trial
+from cpgsim.experiments.sweep import run_sweep, run_trial
 
 
 def _warm(out: Path, t_end: float = 0.5) -> None:

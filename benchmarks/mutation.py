@@ -46,9 +46,9 @@ QUICK = "-m 'not slow'"
 # module (repository path) -> the tests that specify it (quick ones, no robot runs)
 MODULES: dict[str, tuple[str, list[str]]] = {
     "units": ("components/units.py", ["tests/test_units.py"]),
-    "outcomes": ("harness/experiments/outcomes.py", ["tests/test_outcome_rules.py"]),
+    "outcomes": ("experiments/outcomes.py", ["tests/test_outcome_rules.py"]),
     "importer-values": ("fmus/importer/values.py", ["tests/test_importer_values.py", "tests/test_exact_integers.py"]),
-    "scenario": ("harness/experiments/scenario.py", ["tests/test_scenario_rules.py"]),
+    "scenario": ("experiments/scenario.py", ["tests/test_scenario_rules.py"]),
     # the block reference (docs/blocks.md: constructor signature, parameter defaults and bounds, ports and
     # units) is part of a block's contract; it runs last, so it costs time only on the mutants that survive
     "fsm": ("components/yu/fsm.py", ["tests/test_yu_fsm_rules.py", BLOCKS_MD]),

@@ -13,7 +13,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hopf_block import build  # noqa: E402
 
 from cpgsim.harness.simulate import simulate  # noqa: E402
-from cpgsim.harness.verify.shooting import verify  # noqa: E402
+from cpgsim.verify.shooting import verify  # noqa: E402
 
 MU, OMEGA = 0.5, 2 * math.pi  # radius sqrt(0.5), period 1 s
 

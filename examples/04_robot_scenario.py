@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from cpgsim.harness.experiments.runner import run_scenario
-from cpgsim.harness.experiments.scenario import load
+from cpgsim.experiments.runner import run_scenario
+from cpgsim.experiments.scenario import load
 
 scenario = load("step", {"terrain.step.height": 0.03, "t_end": 6.0})  # any key of the TOML document
 print("terrain:", scenario.features())  # what runs (scenario.to_toml() is the whole document)

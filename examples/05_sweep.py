@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from cpgsim.harness.experiments.sweep import parse_vary, run_sweep
+from cpgsim.experiments.sweep import parse_vary, run_sweep
 
 # success here: no fall, no stall, tilt under 30 deg (a 3 s trial is too short to label a gait)
 doc = run_sweep("fukuhara-gaits", trials=2, seed=0, out="runs/sweep", vary=parse_vary("rule2=1,0"),

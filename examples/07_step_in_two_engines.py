@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cpgsim.harness.experiments.runner import run_scenario
-from cpgsim.harness.experiments.setup import ENGINE_CONFIGS  # dart, mujoco, mujoco-soft (its own friction)
+from cpgsim.experiments.runner import run_scenario
+from cpgsim.experiments.setup import ENGINE_CONFIGS  # dart, mujoco, mujoco-soft (its own friction)
 from cpgsim.harness.results import Results
 from cpgsim.robots.engines import mujoco_available
 

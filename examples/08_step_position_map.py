@@ -25,14 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-from cpgsim.harness.experiments.runner import run_scenario
-from cpgsim.harness.experiments.setup import ENGINE_CONFIGS as CONFIGS  # dart, mujoco, mujoco-soft
+from cpgsim.experiments.runner import run_scenario
+from cpgsim.experiments.setup import ENGINE_CONFIGS as CONFIGS  # dart, mujoco, mujoco-soft
 from cpgsim.harness.results import Results
 from cpgsim.robots.engines import mujoco_available
 
 STEP_H, FOOT_R = 0.04, 0.01  # the scenario's step height and the yu-sim foot radius (m)
 REACH_M = 0.001  # m: a foot's front this close to the riser has reached it
-SCENARIO_Y = 0.41  # m: where harness/experiments/scenarios/step.toml stands the step
+SCENARIO_Y = 0.41  # m: where experiments/scenarios/step.toml stands the step
 RIGHT = {"R1": 3, "R2": 4, "R3": 5}  # the right legs' indices (Yu's legs 4, 5, 6)
 LABELS = {"dart": "DART", "mujoco": "MuJoCo (Coulomb friction, default)",
           "mujoco-soft": "MuJoCo, its own soft friction"}

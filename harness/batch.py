@@ -16,7 +16,7 @@ Per variant the driver keeps, for the chosen signals (``record`` glob patterns, 
   ``period`` (mean interval between upward crossings of the window's midline (max + min) / 2, each
   crossing located by linear interpolation between samples) and ``crossings`` (how many). A crossing
   counts only after the signal went below ``midline - 0.1 (max - min)`` since the previous one (the
-  hysteresis of ``cpgsim.harness.verify.system.up_crossings``), so wiggles at the midline are not cycles.
+  hysteresis of ``cpgsim.verify.system.up_crossings``), so wiggles at the midline are not cycles.
 
 The midline needs the window's extremes before the first crossing can be counted. The driver keeps the
 window's samples of the reduced signals in a buffer per thread (``window_steps x n_signals`` doubles,

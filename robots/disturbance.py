@@ -1,6 +1,6 @@
 """External pushes on the robot's body: a force held constant over a time window.
 
-A scenario's ``[[disturbance]]`` tables (:mod:`cpgsim.harness.experiments.scenario`) become
+A scenario's ``[[disturbance]]`` tables (:mod:`cpgsim.experiments.scenario`) become
 :class:`Push` values handed to the plant (``disturbances=`` of :class:`~cpgsim.robots.plant.DartHexapod`
 and :class:`~cpgsim.robots.mujoco_plant.MujocoHexapod`), which applies each active push at every world
 step: the force ``force_N`` in the world frame, at ``point_m`` given in the body frame (default the body

@@ -4,9 +4,9 @@ Layers, lowest first (a module may import only from its own layer or a lower one
 
 0. ``cpgsim.components``              the block kit and each paper's blocks
 1. ``cpgsim.harness`` (its root)       the engine: compile, native, simulate, master, results, diagram, errors
-2. ``cpgsim.harness.verify``, ``cpgsim.fmus``, ``cpgsim.robots``   built on the engine, independent of each other
-3. ``cpgsim.harness.experiments``      the papers' robot experiments
-4. ``cpgsim.harness.cli``              the ``cpgsim`` command
+2. ``cpgsim.verify``, ``cpgsim.fmus``, ``cpgsim.robots``   built on the engine, independent of each other
+3. ``cpgsim.experiments``      the papers' robot experiments
+4. ``cpgsim.cli``              the ``cpgsim`` command
 5. ``cpgsim`` (the root ``__init__``)  the public face: names loaded on first use; nothing inside imports it
 
 The repository root is the package ``cpgsim`` (``package-dir`` in pyproject.toml), so a file's module name
@@ -24,7 +24,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("components", "harness", "fmus", "robots")
+PACKAGES = ("components", "harness", "fmus", "robots", "verify", "experiments", "cli")
+"""The top-level folders, each a subpackage of ``cpgsim``."""
 
 
 def module_name(path: Path) -> str:
@@ -113,7 +114,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 def layer(module: str) -> int:
     if module == "cpgsim":
         return 5
-    for prefix, level in (("cpgsim.harness.cli", 4), ("cpgsim.harness.experiments", 3), ("cpgsim.harness.verify", 2),
+    for prefix, level in (("cpgsim.cli", 4), ("cpgsim.experiments", 3), ("cpgsim.verify", 2),
                           ("cpgsim.fmus", 2), ("cpgsim.robots", 2), ("cpgsim.harness", 1), ("cpgsim.components", 0)):
         if module == prefix or module.startswith(prefix + "."):
             return level
@@ -122,7 +123,7 @@ def layer(module: str) -> int:
 
 def side(module: str) -> str:
     """Which of the independent layer-2 parts a module belongs to."""
-    return "cpgsim.harness.verify" if module.startswith("cpgsim.harness.verify") else ".".join(module.split(".")[:2])
+    return "cpgsim.verify" if module.startswith("cpgsim.verify") else ".".join(module.split(".")[:2])
 
 
 def test_cycle_finder_finds_a_planted_cycle():
@@ -155,6 +156,47 @@ def test_imports_point_down_the_layers():
     assert not wrong, "imports against the layers: " + ", ".join(sorted(wrong))
 
 
+FOLDER_DEPENDENCIES = {
+    "components": set(),
+    "harness": {"components"},
+    "fmus": {"harness", "components"},
+    "robots": {"harness", "components"},
+    "verify": {"harness", "components"},
+    "experiments": {"robots", "verify", "fmus", "harness", "components"},
+    "cli": {"experiments", "robots", "verify", "fmus", "harness", "components"},
+}
+"""What each top-level folder may import (issue 40's DAG): components/ none, harness/ only components/."""
+
+
+def folder_of(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "cpgsim"
+
+
+def folder_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    out: dict[str, set[str]] = {}
+    for module, deps in graph.items():
+        out.setdefault(folder_of(module), set()).update(folder_of(d) for d in deps if folder_of(d) != folder_of(module))
+    return out
+
+
+def test_top_level_folders_form_the_stated_dag():
+    folders = folder_graph(import_graph())
+    assert set(FOLDER_DEPENDENCIES) | {"cpgsim"} == set(folders), "a top-level folder without a stated place"
+    wrong = [f"{f}/ imports {d}/" for f, deps in folders.items() if f != "cpgsim"
+             for d in sorted(deps - FOLDER_DEPENDENCIES[f])]
+    assert not wrong, "; ".join(wrong)
+    assert not cycles(folders), cycles(folders)
+
+
+def test_folder_rule_refuses_an_upward_import():
+    # a planted engine -> application import must show as a folder edge the rule refuses
+    planted = folder_graph({"cpgsim.harness.simulate": {"cpgsim.experiments.runner"},
+                            "cpgsim.experiments.runner": {"cpgsim.harness.simulate"}})
+    assert "experiments" in planted["harness"] - FOLDER_DEPENDENCIES["harness"]
+    assert cycles(planted) == [["experiments", "harness"]]
+
+
 def test_engine_root_stays_small():
     root_modules = [p.stem for p in (ROOT / "harness").glob("*.py") if p.stem != "__init__"]
     # 14: the twelve of the engine plus rundir (which files a run may replace, one writer per output) and
@@ -170,16 +212,16 @@ def test_every_package_says_its_role(package):
 
 def test_layer_of_the_public_face_and_of_subpackages():
     # the rule the layer test relies on, checked on names it must place (and refuse)
-    assert layer("cpgsim") == 5 and layer("cpgsim.components.yu.fsm") == 0 and layer("cpgsim.harness.cli.main") == 4
+    assert layer("cpgsim") == 5 and layer("cpgsim.components.yu.fsm") == 0 and layer("cpgsim.cli.main") == 4
     assert side("cpgsim.fmus.importer.me") == "cpgsim.fmus"
-    assert side("cpgsim.harness.verify.sync") != side("cpgsim.robots")
+    assert side("cpgsim.verify.sync") != side("cpgsim.robots")
     with pytest.raises(AssertionError):
         layer("components.core")  # an old top-level name belongs to no layer
 
 
 def test_installed_packages_are_the_folders():
     """pyproject's explicit package list (a regular install copies only these) is every folder with an
-    ``__init__.py`` under the four top-level folders, as ``cpgsim.`` subpackages, plus ``cpgsim`` itself."""
+    ``__init__.py`` under the top-level folders, as ``cpgsim.`` subpackages, plus ``cpgsim`` itself."""
     import tomllib
 
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])

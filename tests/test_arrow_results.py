@@ -105,7 +105,7 @@ def test_a_finished_stream_is_complete_and_a_rerun_replaces_it_only_at_the_end(t
 
 
 def test_cli_results_converts_to_csv_that_a_csv_reader_gets_exactly(tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     _results().save(tmp_path / "r.arrow")
     assert main(["results", str(tmp_path / "r.arrow"), "--csv"]) == 0

@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.basic import Gain, Integrator
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.components.library import single_vdp
 from cpgsim.components.networks import leader_follower_network
 from cpgsim.harness.batch import REDUCTIONS, simulate_batch
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.simulate import Simulator
 
 OMEGA = 0.4 * math.pi
@@ -209,7 +209,7 @@ def test_unused_parameter_is_noted_and_progress_is_reported():
 def test_sweep_uses_the_batch_transients_as_guesses():
     """``cpgsim verify --sweep``: the batch's amplitude and period over the last cycles equal the shooting
     orbit's (1e-6: 400 s of transient leave ~1e-8, 1 ms sampling ~2e-7) and the verdict is unchanged."""
-    from cpgsim.harness.verify.report import sweep, sweep_markdown
+    from cpgsim.verify.report import sweep, sweep_markdown
 
     rows = sweep(eps_values=(0.5,), b_values=(4.0,))
     r = rows[0]

@@ -10,8 +10,8 @@ import pkgutil
 import subprocess
 import sys
 
-from cpgsim.harness.cli import commands
-from cpgsim.harness.cli.main import _declared_name_and_help, build_parser
+from cpgsim.cli import commands
+from cpgsim.cli.main import _declared_name_and_help, build_parser
 
 
 def _modules_after(code: str) -> set[str]:
@@ -22,24 +22,24 @@ def _modules_after(code: str) -> set[str]:
 
 
 def test_help_imports_no_command_and_no_numerical_library():
-    loaded = _modules_after("from cpgsim.harness.cli.main import build_parser\n"
+    loaded = _modules_after("from cpgsim.cli.main import build_parser\n"
                             "build_parser(['--help']).format_help()")
     heavy = {"numpy", "casadi", "matplotlib", "dartpy", "fmpy", "scipy"} & loaded
     assert not heavy, heavy
-    assert not [m for m in loaded if m.startswith("cpgsim.harness.cli.commands.")]
+    assert not [m for m in loaded if m.startswith("cpgsim.cli.commands.")]
 
 
 def test_a_command_imports_only_its_own_module():
-    loaded = _modules_after("from cpgsim.harness.cli.main import build_parser\nbuild_parser(['inspect', 'x.fmu'])")
-    assert [m for m in loaded if m.startswith("cpgsim.harness.cli.commands.")] == \
-        ["cpgsim.harness.cli.commands.inspect"]
+    loaded = _modules_after("from cpgsim.cli.main import build_parser\nbuild_parser(['inspect', 'x.fmu'])")
+    assert [m for m in loaded if m.startswith("cpgsim.cli.commands.")] == \
+        ["cpgsim.cli.commands.inspect"]
     assert "matplotlib" not in loaded
 
 
 def test_declared_names_and_help_match_the_modules():
     """The list ``cpgsim --help`` shows from the sources is what the modules say when imported."""
     for info in pkgutil.iter_modules(commands.__path__):
-        mod = importlib.import_module(f"cpgsim.harness.cli.commands.{info.name}")
+        mod = importlib.import_module(f"cpgsim.cli.commands.{info.name}")
         assert _declared_name_and_help(os.path.join(commands.__path__[0], f"{info.name}.py")) == (mod.NAME, mod.HELP)
     listed = build_parser(["--help"]).format_help()
     assert all(f"    {info.name} " in listed or f"    {info.name}\n" in listed

@@ -134,8 +134,8 @@ def test_block_listing_is_generated_from_the_declarations_and_docs_are_current()
     """`cpgsim blocks --markdown` lists every block with its ports and units; docs/blocks.md is that text."""
     from pathlib import Path
 
+    from cpgsim.cli.main import main
     from cpgsim.components.catalog import library, markdown
-    from cpgsim.harness.cli.main import main
 
     names = {e.name for e in library()}
     assert {"VanDerPolNeuron", "Gain", "YuConverter", "YuGaitFSM", "LimbModeController", "FootTrajectory"} <= names

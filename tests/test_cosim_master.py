@@ -10,10 +10,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from cpgsim.cli import catalog
 from cpgsim.components.basic import Gain, Integrator
 from cpgsim.components.core import CoSimBlock, ModelError
 from cpgsim.components.graph import Graph
-from cpgsim.harness.cli import catalog
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.native import NativeFunction
 from cpgsim.harness.simulate import SimulationDiverged, Simulator

@@ -77,7 +77,7 @@ def test_fused_dart_loop_equals_python_master(monkeypatch):
     """The controller + DART loop in C (the master's fast path) records what the Python master and the
     plant's Python loop record."""
     import cpgsim.harness.fused as fused
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
     from cpgsim.harness.simulate import Simulator
 
     runs, used = {}, {}

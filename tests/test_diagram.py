@@ -9,10 +9,10 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
+from cpgsim.cli import catalog
+from cpgsim.cli.main import main
 from cpgsim.components.basic import Gain, Integrator, Sum
 from cpgsim.components.graph import Graph
-from cpgsim.harness.cli import catalog
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.diagram import (
     Box,
     Layout,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cpgsim.components.core import ParameterError
-from cpgsim.harness.experiments.scenario import ScenarioError, load
+from cpgsim.experiments.scenario import ScenarioError, load
 from cpgsim.robots.disturbance import Push, as_pushes
 
 
@@ -90,7 +90,7 @@ def test_the_impulse_delivered_is_force_times_duration(engine):
 
 
 def test_a_suite_row_gives_its_pushes_to_every_controller():
-    from cpgsim.harness.experiments.bench import cell_sets, load_suite, markdown_table
+    from cpgsim.experiments.bench import cell_sets, load_suite, markdown_table
 
     suite = load_suite("push")
     base, sets = cell_sets(suite, "fukuhara", "back-40N-swing")
@@ -112,7 +112,7 @@ def test_a_push_that_throws_the_robot_over_fails_the_run(tmp_path):
     exit 1, the fall named, the push in the summary."""
     import json
 
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "run"
     code = main(["run", "flat", "--set", "t_end=8", "--set",

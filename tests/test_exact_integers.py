@@ -13,10 +13,10 @@ import csv
 import numpy as np
 import pytest
 
+from cpgsim.cli.common import CliError, parse_value
 from cpgsim.components.core import DeclarationError, Parameter, ParameterError, Port, exact_or_float
 from cpgsim.fmus.errors import ModelDescriptionError
 from cpgsim.fmus.importer.description import format_number, number_attribute
-from cpgsim.harness.cli.common import CliError, parse_value
 from cpgsim.harness.results import Results, ResultsWriter
 
 BIG = 2 ** 62 + 1  # float(BIG) == 2^62: the +1 is lost in a float64

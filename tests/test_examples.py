@@ -79,11 +79,11 @@ def check_printed_claims(name: str, out: str) -> None:
 
 
 def test_own_graph_and_own_scenario_from_the_command_line(tmp_path):
-    proc = _run([sys.executable, "-m", "cpgsim.harness.cli", "simulate", f"{ROOT}/examples/hopf_block.py:build",
+    proc = _run([sys.executable, "-m", "cpgsim.cli", "simulate", f"{ROOT}/examples/hopf_block.py:build",
                  "--t-end", "2", "--set", "osc.mu=0.25", "-o", "hopf.csv"], tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "hopf.csv").read_text().splitlines()[0].startswith("time,")
-    proc = _run([sys.executable, "-m", "cpgsim.harness.cli", "run", f"{ROOT}/examples/my_course.toml", "--show"],
+    proc = _run([sys.executable, "-m", "cpgsim.cli", "run", f"{ROOT}/examples/my_course.toml", "--show"],
                 tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "[terrain.ditch]" in proc.stdout and 'name = "my-course"' in proc.stdout

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from cpgsim.harness.cli.main import main
+from cpgsim.cli.main import main
 from cpgsim.harness.results import Results
 
 CLI = [sys.executable, "-c",
        "import signal, runpy, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-       "sys.argv[0] = 'cpgsim'; runpy.run_module('cpgsim.harness.cli.main', run_name='__main__')"]
-"""``python -m cpgsim.harness.cli.main`` with Python's own SIGINT handler put back first: a process started
+       "sys.argv[0] = 'cpgsim'; runpy.run_module('cpgsim.cli.main', run_name='__main__')"]
+"""``python -m cpgsim.cli.main`` with Python's own SIGINT handler put back first: a process started
 with SIGINT ignored (``nohup pytest ... &`` passes that on to every child) keeps it ignored, and Python then
 installs no KeyboardInterrupt handler, so the child would never end on the signal these tests send."""
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.library import single_vdp
-from cpgsim.harness.cli.main import main
 
 
 @pytest.fixture(params=[0o022, 0o027])

@@ -183,7 +183,7 @@ def test_off_grid_tick_without_variable_step_size_is_refused(trig_fmu, tmp_path)
 
 @pytest.mark.slow
 def test_cli_clock_schedule_and_results_show_the_ticks(trig_fmu, tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
     from cpgsim.harness.results import Results
 
     out = tmp_path / "r.arrow"

@@ -357,7 +357,7 @@ def test_unsupported_clocks_are_refused_naming_the_clock(tmp_path, change, kind,
 
 
 def test_inspect_lists_output_clocks_and_run_accepts_them(tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     md = HOLD_MD.replace('<Float64 name="y"', '<Clock name="done" valueReference="9" causality="output" '
                          'intervalVariability="triggered" clocks="5"/>\n    <Float64 name="y"')
@@ -471,7 +471,7 @@ def test_exported_clocked_gait_fsm_switches_when_the_simulator_does(tmp_path):
 
 
 def test_export_with_clocks_refuses_what_cannot_be_clocked(tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     assert main(["export", "vdp", "-o", str(tmp_path / "a.fmu"), "--clocks"]) == 2
     assert "--clocks needs FMI 3 (--fmi 3)" in capsys.readouterr().err
@@ -484,8 +484,8 @@ def test_export_with_clocks_refuses_what_cannot_be_clocked(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_failures_are_one_line_naming_the_fmu_the_clock_and_the_call(clock_fmus, tmp_path, capsys):
+    from cpgsim.cli.main import main
     from cpgsim.fmus.importer.block import FmuBlock
-    from cpgsim.harness.cli.main import main
     from cpgsim.harness.simulate import CoSimulationError, simulate
 
     # a partition the FMU does not know: fmi3ActivateModelPartition fails at the clock's first tick

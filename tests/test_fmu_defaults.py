@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from c_fmus import build_c_fmu
 
+from cpgsim.cli.main import main as cli_main
 from cpgsim.fmus.errors import ModelDescriptionError
-from cpgsim.harness.cli.main import main as cli_main
 
 pytestmark = pytest.mark.slow  # builds a C FMU
 

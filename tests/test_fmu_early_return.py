@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from c_fmus import build_c_fmu
 
+from cpgsim.cli.main import main
 from cpgsim.fmus.importer.block import FmuBlock
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.simulate import CoSimulationError, simulate
 
 DECAY_C = r"""
@@ -144,7 +144,7 @@ def test_an_fmu_that_returns_early_without_progress_ends_the_run_as_incomplete(d
 @pytest.mark.parametrize("fmi, mode, status", [(3, 4, "error"), (3, 5, "discard"), (2, 4, "error"),
                                                (2, 5, "discard")])
 def test_a_failing_do_step_exits_1_with_one_clean_line(decay, tmp_path, capsys, fmi, mode, status):
-    """docs/fmu_import.md and the CLI's policy (cpgsim.harness.cli.main): a run that failed exits 1 (bad input
+    """docs/fmu_import.md and the CLI's policy (cpgsim.cli.main): a run that failed exits 1 (bad input
     exits 2); the message is one line without a stray '.;'."""
     out = tmp_path / "r.csv"
     code = main(["simulate", str(decay[fmi]), "--set", f"Decay.mode={mode}", "--t-end", "1", "--dt", "0.1",

@@ -26,14 +26,14 @@ from fmpy.fmi2 import (
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
+from cpgsim.cli import catalog
+from cpgsim.cli.main import main as cli_main
 from cpgsim.components.core import Block, CoSimBlock, Equations
 from cpgsim.components.graph import Graph
 from cpgsim.components.neurons import VanDerPolNeuron
 from cpgsim.fmus.export.exporter import ExportError, export_fmu
 from cpgsim.fmus.export.host import build_host, extract_fmu, run_host
 from cpgsim.fmus.units import unit_definition
-from cpgsim.harness.cli import catalog
-from cpgsim.harness.cli.main import main as cli_main
 from cpgsim.harness.simulate import Simulator
 
 pytestmark = pytest.mark.slow  # FMU builds (gcc): the full suite only

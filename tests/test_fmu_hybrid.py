@@ -186,7 +186,7 @@ def test_solver_arguments_are_checked(c_fmus):
 
 
 def test_cli_simulate_with_cvode(c_fmus, tmp_path):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "ball.csv"
     assert main(["simulate", str(c_fmus["ball"]), "--t-end", "1", "--dt", "0.01", "--solver", "cvode",
@@ -309,7 +309,7 @@ def test_isolated_me_fmu_with_cvode_locates_the_bounces(c_fmus):
 
 
 def test_cli_stop_request_exits_0_with_a_message_and_metadata(stop_fmus, tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "stop.csv"
     assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "-o", str(out)]) == 0
@@ -358,7 +358,7 @@ def test_conflicting_duplicate_member_is_refused_naming_it(stop_fmus, tmp_path):
 
 def test_cli_solver_runs_a_cs_and_me_fmu_as_model_exchange(stop_fmus, tmp_path, capsys):
     """--solver on an FMU that offers both interfaces runs it as ME (here: the time event at 9 stops it)."""
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "s.csv"
     assert main(["simulate", str(stop_fmus[2]), "--t-end", "20", "--dt", "0.1", "--solver", "cvode",

@@ -450,7 +450,7 @@ def _leg_around(leg) -> Graph:
 @pytest.mark.parametrize("fmi,kind", [(2, "cs"), (3, "me")])
 def test_round_trip_leg_matches_native(tmp_path, fmi, kind):
     export = pytest.importorskip("cpgsim.fmus.export.exporter")
-    from cpgsim.harness.cli import catalog
+    from cpgsim.cli import catalog
 
     if "leg" not in catalog.BUILTIN:
         pytest.skip("no built-in 'leg' graph in the catalog yet")
@@ -646,7 +646,7 @@ def test_isolated_timeout(fmus2, tmp_path):
 # --------------------------------------------------------------------------------------------------
 def _cli(*args, cwd):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *map(str, args)], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "cpgsim.cli.main", *map(str, args)], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=120)
 
 

@@ -28,7 +28,7 @@ MD = """<?xml version="1.0" encoding="UTF-8"?>
 
 
 def test_inspect_prints_booleans_as_booleans_and_integers_exactly(tmp_path, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     fmu = tmp_path / "typed.fmu"
     with zipfile.ZipFile(fmu, "w") as zf:

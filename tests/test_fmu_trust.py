@@ -6,11 +6,11 @@ import zipfile
 
 import pytest
 
+from cpgsim.cli.commands.simulate import isolate_fmus
 from cpgsim.components.library import hexapod_network
 from cpgsim.fmus import trust
 from cpgsim.fmus.export.exporter import export_fmu
 from cpgsim.fmus.importer.block import FmuBlock
-from cpgsim.harness.cli.commands.simulate import isolate_fmus
 
 
 @pytest.fixture

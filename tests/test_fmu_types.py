@@ -175,7 +175,7 @@ def test_array_and_string_parameters_from_python(types_fmu):
 
 
 def test_array_parameters_from_the_cli(types_fmu, tmp_path):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "t.csv"
     assert main(["simulate", str(types_fmu), "--t-end", "0.2", "--dt", "0.1", "--set", "Types.A=[1,2;3,4]",
@@ -189,7 +189,7 @@ def test_array_parameters_from_the_cli(types_fmu, tmp_path):
 
 
 def test_inspect_lists_structural_array_string_and_binary(types_fmu, capsys):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     assert main(["inspect", str(types_fmu)]) == 0
     text = capsys.readouterr().out
@@ -291,7 +291,7 @@ def test_a_time_series_of_big_integers_is_refused_not_rounded(big_fmu):
 def test_cli_set_writes_exact_integers_that_pandas_reads_back(big_fmu, tmp_path, capsys):
     import pandas as pd
 
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     out = tmp_path / "r.csv"
     assert main(["simulate", str(big_fmu), "--t-end", "0.2", "--dt", "0.1", "-o", str(out),

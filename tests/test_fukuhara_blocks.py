@@ -22,9 +22,9 @@ from cpgsim.components.fukuhara.blocks import (
 from cpgsim.components.fukuhara.controller import fukuhara_controller, initial_joint_targets, set_initial
 from cpgsim.components.geometry import YU_SIM, leg_fk, leg_ik_plane
 from cpgsim.components.graph import Graph, as_graph
+from cpgsim.experiments.gait_classifier import classify, debounce, template
+from cpgsim.experiments.sweep import wilson_interval
 from cpgsim.harness.compile import compile_graph
-from cpgsim.harness.experiments.gait_classifier import classify, debounce, template
-from cpgsim.harness.experiments.sweep import wilson_interval
 from cpgsim.harness.simulate import simulate
 
 AEP, PEP = DEFAULTS["theta_AEP"], DEFAULTS["theta_PEP"]

@@ -2,7 +2,7 @@
 L2+R2 amputation walks, L1+R1 amputation falls, and the gap scenario runs and reports its outcome.
 
 The closed loops are simulated here without writing result files (``run_scenario`` adds the files and
-pictures; the scenario's own summary code, :func:`cpgsim.harness.experiments.fukuhara.scenarios.gait_summary`, is used).
+pictures; the scenario's own summary code, :func:`cpgsim.experiments.fukuhara.scenarios.gait_summary`, is used).
 Stated transient: the gait label is taken after the first 15 s, on ``[15, 30] s`` (tripod), ``[15, 40] s``
 (tetrapod) and ``[15, 45] s`` (wave), the scenario's defaults, from the default start (seed 0: random
 initial alpha, all legs in LateStance).
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import pytest
 
-from cpgsim.harness.experiments.fukuhara.scenarios import gait_summary, gap_outcome
-from cpgsim.harness.experiments.runner import build_scenario, fell_from
+from cpgsim.experiments.fukuhara.scenarios import gait_summary, gap_outcome
+from cpgsim.experiments.runner import build_scenario, fell_from
 from cpgsim.harness.simulate import Simulator
 
 pytestmark = pytest.mark.slow  # closed-loop robot runs: the full suite only

@@ -47,7 +47,7 @@ from test_fuzz_fmus import (
     zip_bytes,
 )
 
-from cpgsim.harness.cli.main import main
+from cpgsim.cli.main import main
 
 pytestmark = pytest.mark.slow  # FMU mutants through the CLI in subprocesses: the full suite only
 

@@ -333,7 +333,7 @@ class Outcome:
 
 
 def run_cli(args: list[str] | tuple[str, ...], folder: Path, timeout: float = 90.0) -> Outcome:
-    """``python -m cpgsim.harness.cli.main ARGS`` with ``folder`` as working directory, TMPDIR and HOME."""
+    """``python -m cpgsim.cli.main ARGS`` with ``folder`` as working directory, TMPDIR and HOME."""
     tmp = folder / "tmp"
     tmp.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONPATH=str(ROOT), TMPDIR=str(tmp), HOME=str(folder), CPGSIM_STEP_THREAD="0",
@@ -341,7 +341,7 @@ def run_cli(args: list[str] | tuple[str, ...], folder: Path, timeout: float = 90
     env.pop("CPGSIM_DEBUG", None)
     env["CPGSIM_CACHE"] = str(folder / "cache")
     t0 = time.monotonic()
-    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", *map(str, args)], cwd=folder, env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.cli.main", *map(str, args)], cwd=folder, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, errors="replace",
                             start_new_session=True)
     try:

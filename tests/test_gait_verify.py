@@ -15,12 +15,12 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hybrid_toys import BallCoordinates, KickedBall  # noqa: E402
 
+from cpgsim.cli.main import main  # noqa: E402
 from cpgsim.components.graph import Graph  # noqa: E402
-from cpgsim.harness.cli.main import main  # noqa: E402
 from cpgsim.harness.simulate import Simulator  # noqa: E402
-from cpgsim.harness.verify import return_map as rm  # noqa: E402
-from cpgsim.harness.verify.gait import GaitOptions, analyze  # noqa: E402
-from cpgsim.harness.verify.stride import Section, SectionError, StrideMap  # noqa: E402
+from cpgsim.verify import return_map as rm  # noqa: E402
+from cpgsim.verify.gait import GaitOptions, analyze  # noqa: E402
+from cpgsim.verify.stride import Section, SectionError, StrideMap  # noqa: E402
 
 G = 9.81
 
@@ -146,7 +146,7 @@ def test_a_section_never_crossed_is_a_one_line_error():
 
 @pytest.fixture(scope="module")
 def flat_loop():
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
 
     setup = build_scenario("flat")
     sim = Simulator(setup.graph, dt=1e-3, record=setup.record).prepare()
@@ -172,7 +172,7 @@ def test_hexapod_save_run_restore_run_is_bit_identical(flat_loop):
 
 
 def test_hexapod_coordinates_drop_heading_and_position(flat_loop):
-    from cpgsim.harness.experiments.gait_coords import HexapodCoordinates, body_pose, with_body_pose
+    from cpgsim.experiments.gait_coords import HexapodCoordinates, body_pose, with_body_pose
 
     setup, sim = flat_loop
     sim.run(1.0)
@@ -235,7 +235,7 @@ def test_cli_verify_gait_flat(tmp_path, capsys):
 def test_gait_study_over_the_fsm_period():
     """Yu's tripod FSM scales the whole network's clock by T_net/T_g (Y16, swing and stance alike for
     gamma = 2): the gait period follows T_g and the multipliers per stride do not change."""
-    from cpgsim.harness.experiments.gait_study import study
+    from cpgsim.experiments.gait_study import study
 
     rows = study("flat", {}, "controller.fsm.T_g", [4.0, 6.0])
     assert [r["value"] for r in rows] == [4.0, 6.0]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cpgsim.harness.cli.main import main
+from cpgsim.cli.main import main
 
 STAIRS = """name = "many"
 t_end = 1.0

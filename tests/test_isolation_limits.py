@@ -113,7 +113,7 @@ def test_sigkill_of_cpgsim_ends_the_isolated_child_and_what_it_started(tmp_path,
     c_fmu(tmp_path / "hang.fmu", library=hostile_library(tmp_path / "hang.so", "HANGSETSID"))
     env = dict(os.environ, CPGSIM_TEST_PIDFILE=str(pidfile), CPGSIM_CACHE=str(tmp_path / "cache"),
                PYTHONDONTWRITEBYTECODE="1")
-    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "hang.fmu", "--isolate",
+    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.cli.main", "simulate", "hang.fmu", "--isolate",
                              "--t-end", "1", "--dt", "0.01", "--fmu-timeout", "300", "-o", "o.csv"],
                             cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

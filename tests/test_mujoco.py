@@ -130,8 +130,8 @@ def test_servo_law_is_darts():
 
 
 def test_make_plant_and_scenario_engine():
-    from cpgsim.harness.experiments.runner import build_scenario
-    from cpgsim.harness.experiments.scenario import ScenarioError
+    from cpgsim.experiments.runner import build_scenario
+    from cpgsim.experiments.scenario import ScenarioError
 
     assert isinstance(make_plant("mujoco", "robot"), MujocoHexapod)
     assert isinstance(make_plant("dart", "robot"), DartHexapod)
@@ -146,7 +146,7 @@ def test_make_plant_and_scenario_engine():
 def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
     """``[robot.mujoco]`` values end up in MuJoCo's compiled model (read back from ``mjModel``, not from the
     MJCF text cpgsim writes), on every robot and terrain geom; the run's summary says which model ran."""
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
 
     sets = {"robot.engine": "mujoco", "robot.mujoco.noslip_iterations": 7, "robot.mujoco.cone": "pyramidal",
             "robot.mujoco.impratio": 4.0, "robot.mujoco.solref": [0.004, 0.9],
@@ -184,8 +184,8 @@ def test_scenario_contact_model_reaches_the_compiled_mujoco_model():
     ("impratoi", 2.0, r"unknown key 'robot\.mujoco\.impratoi'.*did you mean 'impratio'"),
 ])
 def test_scenario_contact_model_rejects_bad_values(key, value, message):
-    from cpgsim.harness.experiments.runner import build_scenario
-    from cpgsim.harness.experiments.scenario import ScenarioError
+    from cpgsim.experiments.runner import build_scenario
+    from cpgsim.experiments.scenario import ScenarioError
 
     with pytest.raises(ScenarioError, match=message):
         build_scenario("step", {"robot.engine": "mujoco", f"robot.mujoco.{key}": value})
@@ -194,8 +194,8 @@ def test_scenario_contact_model_rejects_bad_values(key, value, message):
 def test_scenario_contact_model_on_dart_is_an_error_and_its_fields_are_contactmodels():
     """A ``[robot.mujoco]`` table on a DART run would do nothing: an error naming both keys. The schema's
     keys are :class:`ContactModel`'s fields (one list of settable fields)."""
-    from cpgsim.harness.experiments.runner import build_scenario
-    from cpgsim.harness.experiments.scenario import MUJOCO_SCHEMA, ScenarioError
+    from cpgsim.experiments.runner import build_scenario
+    from cpgsim.experiments.scenario import MUJOCO_SCHEMA, ScenarioError
     from cpgsim.robots.mjcf import ContactModel
 
     with pytest.raises(ScenarioError, match=r"robot\.mujoco sets MuJoCo's contact model \(impratio\).*"
@@ -210,7 +210,7 @@ def test_scenario_contact_model_on_dart_is_an_error_and_its_fields_are_contactmo
 
 def test_report_names_the_engine_and_contact_model():
     """report.html's facts table says which engine ran and MuJoCo's contact settings."""
-    from cpgsim.harness.experiments.report import _summary_html
+    from cpgsim.experiments.report import _summary_html
 
     page = _summary_html({"scenario": "step", "engine": "mujoco", "reflexes": [],
                           "mujoco_contact": {"solref": [0.002, 1.0], "noslip_iterations": 20}})
@@ -243,7 +243,7 @@ def test_native_step_equals_python_step():
 def test_fused_closed_loop_equals_python_master(monkeypatch):
     """The controller + MuJoCo loop in C (harness/fused.py) records the same numbers as the Python master."""
     import cpgsim.harness.fused as fused
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
     from cpgsim.harness.simulate import Simulator
 
     runs, used = {}, {}
@@ -302,7 +302,7 @@ def test_fukuhara_amputation_runs_on_mujoco_with_the_cut_legs_touching_nothing()
     """Fukuhara 2022, Sec. 3.2: the middle legs (case 1: L2, R2) are taken out; on MuJoCo their geoms do not
     collide, so their toe force is exactly zero all run, while the four others carry the robot's weight
     (35.5 N) between them."""
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
     from cpgsim.harness.simulate import Simulator
 
     setup = build_scenario("fukuhara-amputation", {"robot.engine": "mujoco", "controller.case": 1})
@@ -321,8 +321,8 @@ def test_step_in_mujoco_elevates_r1_r2_r3_in_order_and_succeeds(tmp_path):
     succeeds. With MuJoCo's own soft friction (pyramidal cone, impratio 1) R3 arrives at the riser just
     above its top and slides onto it where a Coulomb foot is arrested: no R3 (docs/engines.md) -- the
     reason the MuJoCo default is Coulomb's cone."""
-    from cpgsim.harness.experiments.runner import run_scenario
-    from cpgsim.harness.experiments.setup import ENGINE_CONFIGS
+    from cpgsim.experiments.runner import run_scenario
+    from cpgsim.experiments.setup import ENGINE_CONFIGS
 
     summary = run_scenario("step", tmp_path / "run", sets={"robot.engine": "mujoco"}, progress=False,
                            plots=False)

@@ -9,8 +9,8 @@ import pytest
 
 pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
 
+from cpgsim.experiments.runner import build_scenario  # noqa: E402
 from cpgsim.harness.errors import SimulationError  # noqa: E402
-from cpgsim.harness.experiments.runner import build_scenario  # noqa: E402
 from cpgsim.harness.simulate import Simulator  # noqa: E402
 from cpgsim.robots.mujoco_batch import run_batch  # noqa: E402
 
@@ -70,7 +70,7 @@ def test_a_job_that_raises_is_returned_and_ctrl_c_is_raised_again():
 
 def test_sweep_batch_names_the_failed_trial(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
-    from cpgsim.harness.experiments.sweep import run_sweep
+    from cpgsim.experiments.sweep import run_sweep
 
     doc = run_sweep("flat", 1, 0, tmp_path / "s", sets=MJ, vary=("robot.kp", [95.9, 1e10]), t_end=0.4,
                     progress=False)
@@ -86,7 +86,7 @@ def test_sweep_batch_names_the_failed_trial(tmp_path, monkeypatch):
 
 def test_batch_refused_when_a_trial_is_not_mujoco(tmp_path):
     from cpgsim.components.core import ModelError
-    from cpgsim.harness.experiments.sweep import run_sweep
+    from cpgsim.experiments.sweep import run_sweep
 
     with pytest.raises(ModelError, match="--batch needs every trial on MuJoCo"):
         run_sweep("flat", 1, 0, tmp_path / "s", t_end=0.1, progress=False, batch=True)
@@ -105,7 +105,7 @@ def test_batch_of_different_controllers_equals_single_runs():
 
 def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
-    from cpgsim.harness.experiments.bench import run_bench
+    from cpgsim.experiments.bench import run_bench
 
     suite = tmp_path / "tiny.toml"
     suite.write_text('name = "tiny"\nseeds = 1\nt_end = 0.3\n[controllers.yu]\nscenario = "flat"\n'
@@ -123,7 +123,7 @@ def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path,
 def test_bench_on_dask_gives_the_batch_outcome(tmp_path, monkeypatch):
     # quick-tier cover: test_batch_results_are_bit_identical_to_single_runs (a batch trial = a single run)
     monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
-    from cpgsim.harness.experiments.bench import run_bench
+    from cpgsim.experiments.bench import run_bench
 
     suite = tmp_path / "tiny.toml"
     suite.write_text('name = "tiny"\nseeds = 1\nt_end = 0.3\n[controllers.yu]\nscenario = "flat"\n[terrains.flat]\n')

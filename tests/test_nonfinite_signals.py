@@ -12,10 +12,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.basic import Integrator
 from cpgsim.components.core import Block, Equations, Symbols
 from cpgsim.components.graph import Graph
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.errors import SimulationDiverged
 from cpgsim.harness.results import Results
 from cpgsim.harness.simulate import Simulator

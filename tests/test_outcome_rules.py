@@ -1,4 +1,4 @@
-"""The outcome rules of ``harness/experiments/outcomes.py`` on tiny hand-made traces, each expected value
+"""The outcome rules of ``experiments/outcomes.py`` on tiny hand-made traces, each expected value
 worked out by hand from the rule's definition (the module docstring and the ``[criteria]`` defaults of
 docs/scenarios.md). Times and positions are binary fractions (0.25 s, 0.5 m ...) so that every boundary
 case is exact: a rule written ``>`` and one written ``>=`` give different answers here.
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from cpgsim.harness.experiments.outcomes import (
+from cpgsim.experiments.outcomes import (
     SUPPORT_FORCE_N,
     crossing,
     end_state,

@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 import cpgsim
+from cpgsim.cli.main import main as cli_main
 from cpgsim.components import catalog as block_catalog
-from cpgsim.harness.cli.main import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,6 +58,18 @@ def test_old_top_level_names_get_the_new_name(tmp_path, capsys):
     assert "is now 'cpgsim.harness.simulate'" in capsys.readouterr().err
 
 
+def test_applications_moved_above_the_engine_get_the_new_name(tmp_path, capsys):
+    # cpgsim 0.3 moved harness/experiments, harness/verify and harness/cli to the top level
+    graph_file = tmp_path / "old_app.py"
+    graph_file.write_text("from cpgsim.harness.experiments.scenario import load_scenario\n\ndef build():\n"
+                          "    return None\n")
+    assert cli_main(["simulate", f"{graph_file}:build", "--t-end", "0.01", "-o", str(tmp_path / "o.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is now 'cpgsim.experiments" in err[0], err
+    assert cli_main(["export", "cpgsim.harness.verify.sync:x", "-o", str(tmp_path / "x.fmu")]) == 2
+    assert "is now 'cpgsim.verify.sync'" in capsys.readouterr().err
+
+
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
@@ -78,11 +90,11 @@ def test_wheel_installs_only_cpgsim(wheel):
     assert top == {"cpgsim", record.split("/")[0]}, top
     names = {row[0] for row in rows}
     # the data files and every subpackage came along
-    assert "cpgsim/harness/experiments/scenarios/step.toml" in names
+    assert "cpgsim/experiments/scenarios/step.toml" in names
     assert "cpgsim/fmus/export/templates/fmi3.c" in names
     assert "cpgsim/__init__.py" in names and "cpgsim/components/yu/fsm.py" in names
     assert not any(n.startswith(("cpgsim/tests/", "cpgsim/benchmarks/", "cpgsim/docs/")) for n in names)
-    assert "cpgsim = cpgsim.harness.cli.main:main" in entry_points
+    assert "cpgsim = cpgsim.cli.main:main" in entry_points
 
 
 @pytest.mark.slow

@@ -18,16 +18,16 @@ import numpy as np
 import pytest
 from flint import arb, arb_mat
 
+from cpgsim.cli.main import main
 from cpgsim.components.library import damped_oscillator, single_vdp
-from cpgsim.harness.cli.main import main
-from cpgsim.harness.verify.ball import (
+from cpgsim.verify.ball import (
     NotAnalytic,
     Tape,
     arb_ops,
     augmented_function,
     iv_taylor_coefficients,
 )
-from cpgsim.harness.verify.prove import (
+from cpgsim.verify.prove import (
     ProofOptions,
     exact_str,
     multiplier_enclosures,
@@ -36,9 +36,9 @@ from cpgsim.harness.verify.prove import (
     prove_system,
     system_of_graph,
 )
-from cpgsim.harness.verify.result import VerifyOptions
-from cpgsim.harness.verify.shooting import verify
-from cpgsim.harness.verify.taylor import Integrator, precision, taylor_coefficients
+from cpgsim.verify.result import VerifyOptions
+from cpgsim.verify.shooting import verify
+from cpgsim.verify.taylor import Integrator, precision, taylor_coefficients
 
 VDP_T_MU1 = "6.6632868593231301896996820305"  # classical x'' - mu (1 - x^2) x' + x = 0 at mu = 1
 FAST = VerifyOptions(compute_sync=False)

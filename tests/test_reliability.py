@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from test_fuzz_fmus import GUID, ROOT, c_fmu, compile_library, fmi3_array_xml, model_description, rezip, run_cli
 
-from cpgsim.harness.cli.main import main
+from cpgsim.cli.main import main
 from cpgsim.harness.results import Results, ResultsWriter, remove_stale_temporaries
 
 pytestmark = pytest.mark.slow  # subprocess and FMU fault runs: the full suite only
@@ -65,7 +65,7 @@ def test_error_policy_exit_codes_debug_and_internal_errors(monkeypatch, capsys, 
     err = capsys.readouterr().err
     assert err.strip().count("\n") == 0 and "argument --dt" in err
     # an unexpected error is named as internal, with the way to the traceback
-    from cpgsim.harness.cli.commands import graph as graph_cmd
+    from cpgsim.cli.commands import graph as graph_cmd
 
     monkeypatch.setattr(graph_cmd, "run", lambda args: 1 / 0)
     assert main(["graph", "vdp"]) == 1
@@ -246,7 +246,7 @@ def test_doctype_anywhere_in_any_encoding_is_refused(folder, lib, variant):
 @pytest.mark.parametrize("command", ["simulate", "graph", "export", "verify"])
 def test_broken_user_graph_module_is_one_line(tmp_path, monkeypatch, capsys, func, needle, command):
     if command == "verify":
-        pytest.importorskip("cpgsim.harness.verify.result")
+        pytest.importorskip("cpgsim.verify.result")
     monkeypatch.chdir(tmp_path)
     (tmp_path / "g.py").write_text("def raises():\n    return {}['nope']\n\nnotcallable = 3\n\n"
                                    "def needs(a, b=1):\n    return a\n")
@@ -284,7 +284,7 @@ def test_horizon_of_whole_steps_ends_exactly_at_t_end(tmp_path, monkeypatch, cap
 def test_sigkill_during_a_run_leaves_readable_partial_results(folder, lib):
     c_fmu(folder / "ok.fmu", library=lib["ok"])
     env = dict(os.environ, PYTHONPATH=str(ROOT), TMPDIR=str(folder))
-    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "ok.fmu", "--isolate",
+    proc = subprocess.Popen([sys.executable, "-m", "cpgsim.cli.main", "simulate", "ok.fmu", "--isolate",
                              "--t-end", "2000", "--dt", "0.01", "-o", "out.csv"], cwd=folder, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
@@ -385,7 +385,7 @@ def test_exported_fmu_gets_the_umask_mode(tmp_path, monkeypatch, capsys):
 def test_inspect_into_a_closed_pipe_is_quiet(folder, lib):
     c_fmu(folder / "many.fmu", n_outputs=5000, library=lib["ok"])  # a summary longer than a pipe buffer
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run(f"{sys.executable} -m cpgsim.harness.cli.main inspect many.fmu | head -1", shell=True,
+    r = subprocess.run(f"{sys.executable} -m cpgsim.cli.main inspect many.fmu | head -1", shell=True,
                        cwd=folder, env=env, capture_output=True, text=True, timeout=120, executable="/bin/bash")
     assert r.stdout.startswith("many.fmu: FMI 2 CS")
     assert "Broken pipe" not in r.stderr and "Traceback" not in r.stderr and r.stderr == ""

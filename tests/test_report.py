@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpgsim.harness.cli.main import main
-from cpgsim.harness.experiments.runner import run_scenario
+from cpgsim.cli.main import main
+from cpgsim.experiments.runner import run_scenario
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -117,7 +117,7 @@ def test_replay_follows_the_wall_clock(run_dir, tmp_path):
 def test_nan_in_what_is_drawn_becomes_a_gap_not_an_error():
     """Found from outside: `cpgsim run fukuhara-amputation` ended in an internal error when a signal had
     NaN samples (an amputated leg's trace): JSON has no NaN, so the page writer refused it."""
-    from cpgsim.harness.experiments.report import _json_safe, _page
+    from cpgsim.experiments.report import _json_safe, _page
 
     plots = {"data": [{"x": [0.0, 1.0], "y": [float("nan"), np.float64("inf")]}], "layout": {}}
     assert _json_safe(plots)["data"][0]["y"] == [None, None]
@@ -129,7 +129,7 @@ def test_the_gait_legend_names_only_the_styles_drawn():
     """Found from outside: gait.png's legend showed a "swing, held by the FSM" hatch that no bar used."""
     import numpy as np
 
-    from cpgsim.harness.experiments.plots import REFLEX_LABELS, gait_legend
+    from cpgsim.experiments.plots import REFLEX_LABELS, gait_legend
 
     stance = np.zeros((10, 6), dtype=bool)
     stance[:5] = True

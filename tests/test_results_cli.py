@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.basic import Gain, Integrator
 from cpgsim.components.graph import Graph
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.results import Results
 from cpgsim.harness.simulate import SimulationDiverged, simulate
 
@@ -99,7 +99,7 @@ def test_cli_graph_writes_svg(tmp_path):
     (["graph", "missing_file.py:build"], "does not exist"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *argv], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "cpgsim.cli.main", *argv], capture_output=True, text=True,
                           cwd=tmp_path, env={"PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1]),
                                              "PATH": "/usr/bin:/bin"})
     assert proc.returncode == 2, proc.stderr
@@ -143,7 +143,7 @@ def test_every_result_records_the_code_libraries_and_command_that_made_it(tmp_pa
     import numpy as np
 
     from cpgsim import __version__
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
     from cpgsim.harness.results import Results
 
     out = tmp_path / "r.csv"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpgsim.harness.cli.main import main
+from cpgsim.cli.main import main
 from cpgsim.harness.results import Results, result_files, sidecar_path
 
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from cpgsim.harness.cli.main import main
-from cpgsim.harness.experiments.scenario import ScenarioError, load
+from cpgsim.cli.main import main
+from cpgsim.experiments.scenario import ScenarioError, load
 from cpgsim.harness.results import ResultsError
 from cpgsim.harness.rundir import MANIFEST, lock_path, output_lock, partial_path, read_manifest, run_directory
 
@@ -201,7 +201,7 @@ def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
     before = out.read_bytes(), out.with_suffix(".meta.json").read_bytes()
     rng = random.Random(8)
     for _ in range(3):
-        proc = subprocess.Popen([sys.executable, "-m", "cpgsim.harness.cli.main", "simulate", "damped-oscillator",
+        proc = subprocess.Popen([sys.executable, "-m", "cpgsim.cli.main", "simulate", "damped-oscillator",
                                  "--t-end", "1e5", "--dt", "0.001", "-o", str(out), "--force"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         partial = tmp_path / "r.partial.csv"
@@ -221,7 +221,7 @@ def test_simulate_force_killed_mid_run_keeps_the_previous_results(tmp_path):
 def test_the_demo_follows_the_run_directory_rules(tmp_path, capsys):
     """`cpgsim demo` used to write straight into its folder (no manifest, a user's folder overwritten file by
     file); it is `cpgsim run` now: a folder cpgsim did not write is refused, untouched."""
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
 
     folder = tmp_path / "mine"
     folder.mkdir()

@@ -1,4 +1,4 @@
-"""The validation rules of ``harness/experiments/scenario.py``, each on a small document written here:
+"""The validation rules of ``experiments/scenario.py``, each on a small document written here:
 the schema of docs/scenarios.md (its defaults, what is required, the ranges it states), the TOML syntax
 of ``--set`` values (toml.io, v1.0.0), and the error messages' promise (the key, the file and line, or the
 ``--set`` that wrote it). Bounds that docs/scenarios.md does not spell out are the physical ones, with the
@@ -14,8 +14,8 @@ import tomllib
 
 import pytest
 
-from cpgsim.harness.experiments import scenario as sc
-from cpgsim.harness.experiments.scenario import (
+from cpgsim.experiments import scenario as sc
+from cpgsim.experiments.scenario import (
     SCHEMA,
     Field,
     Scenario,
@@ -394,7 +394,7 @@ def test_files_and_built_in_names(tmp_path):
         with pytest.raises(ScenarioError, match="does not exist"):
             load(spec)
     flat = load("flat")
-    assert flat.source.startswith("built-in scenario flat (cpgsim/harness/experiments/scenarios/flat.toml)")
+    assert flat.source.startswith("built-in scenario flat (cpgsim/experiments/scenarios/flat.toml)")
     assert sc.builtin_descriptions()["flat"] == flat.doc["description"]
 
 

@@ -10,11 +10,11 @@ import textwrap
 import numpy as np
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.graph import Graph
-from cpgsim.harness.cli.main import main
-from cpgsim.harness.experiments.outcomes import evaluate, stall
-from cpgsim.harness.experiments.runner import build_scenario
-from cpgsim.harness.experiments.scenario import ScenarioError, builtin_names, line_of, load, parse_value
+from cpgsim.experiments.outcomes import evaluate, stall
+from cpgsim.experiments.runner import build_scenario
+from cpgsim.experiments.scenario import ScenarioError, builtin_names, line_of, load, parse_value
 from cpgsim.harness.results import Results
 from cpgsim.robots import terrain as tr
 
@@ -224,7 +224,7 @@ def test_a_misspelt_bare_key_is_suggested_from_the_scenario_keys(scenario, key, 
     """Found from outside: `--set t_ned=5` was taken for a controller parameter and the suggestion pointed
     at 'controller.*.T_net'. A bare key that is neither a scenario key nor a controller parameter now gets
     the scenario key it was most likely meant for, and names what it is not."""
-    from cpgsim.harness.experiments.runner import build_scenario
+    from cpgsim.experiments.runner import build_scenario
 
     with pytest.raises(ScenarioError, match=re.escape(f"--set {key}: no scenario key or controller parameter "
                                                       f"{key!r}; did you mean {meant!r}?")):
@@ -257,7 +257,7 @@ KIND_SCENARIOS = {"yu": ("step", {}), "yu-open-loop": ("step", {"controller.kind
 def _judged(kind: str, criteria: dict, y, roll_deg=0.0):
     from types import SimpleNamespace
 
-    from cpgsim.harness.experiments.runner import judge
+    from cpgsim.experiments.runner import judge
 
     name, sets = KIND_SCENARIOS[kind]
     sc = load(name, {**sets, **{f"criteria.{k}": v for k, v in criteria.items()}})
@@ -295,7 +295,7 @@ def test_every_criterion_is_evaluated_for_every_controller_kind(kind, criterion,
 def test_crossing_a_step_by_hand():
     """Body at 0.02 m/s from y = 0: a step whose riser is at 0.5 m with a 0.25 m margin is crossed when the
     body reaches 0.75 m, at 37.5 s; within 20 s it is not."""
-    from cpgsim.harness.experiments.outcomes import crossing
+    from cpgsim.experiments.outcomes import crossing
 
     t = np.arange(5000) * 0.01
     out = crossing(_run(0.02 * t), "robot", far_edge=0.5, margin=0.25)
@@ -324,7 +324,7 @@ def test_expected_gait_is_refused_for_the_yu_controller():
 def test_cross_on_the_yu_controller_end_to_end(tmp_path):
     """The reproduction from outside: 3 s of the step scenario with criteria.cross = step (the riser is
     0.4-0.5 m ahead) cannot be a success: the body walks about 0.1 m."""
-    from cpgsim.harness.experiments.runner import run_scenario
+    from cpgsim.experiments.runner import run_scenario
 
     sc = load("step", {"t_end": 3.0, "criteria.cross": "step", "criteria.min_distance_m": 0.0})
     summary = run_scenario(sc, tmp_path / "run", progress=False, plots=False)
@@ -382,7 +382,7 @@ def test_support_at_the_end_needs_three_loaded_feet_around_the_body():
 
 
 def test_static_stability_by_hand():
-    from cpgsim.harness.experiments.outcomes import statically_stable
+    from cpgsim.experiments.outcomes import statically_stable
 
     tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     assert statically_stable(tri, np.array([0.2, 0.2])) and not statically_stable(tri, np.array([0.6, 0.6]))
@@ -399,7 +399,7 @@ def test_no_reflex_waits_to_count_is_said_as_none():
 
 
 def test_every_failed_criterion_line_names_value_and_limit():
-    from cpgsim.harness.cli.commands.run import failed_criteria
+    from cpgsim.cli.commands.run import failed_criteria
 
     t = np.arange(3500) * 0.01
     y = np.where(t < 32, 0.6 * t / 32, 0.6 - 0.08 * np.clip((t - 32) / 1.0, 0, 1))

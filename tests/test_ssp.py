@@ -186,7 +186,7 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
 
     def cli(*args):
-        return subprocess.run([sys.executable, "-m", "cpgsim.harness.cli.main", *map(str, args)], cwd=tmp_path, env=env,
+        return subprocess.run([sys.executable, "-m", "cpgsim.cli.main", *map(str, args)], cwd=tmp_path, env=env,
                               capture_output=True, text=True, timeout=120)
 
     r = cli("inspect", ssp)
@@ -197,7 +197,7 @@ def test_cli_simulate_and_inspect_ssp(tmp_path, integrator):
 
 
 def test_default_experiment_is_used_unless_the_cli_overrides_it(tmp_path, integrator):
-    from cpgsim.harness.cli.main import main
+    from cpgsim.cli.main import main
     from cpgsim.harness.results import Results
 
     ssp = export_ssp(_chain(integrator), tmp_path / "chain.ssp", dt=0.01, t_end=0.3)

@@ -10,8 +10,8 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from cpgsim.harness.cli.main import main
-from cpgsim.harness.experiments.sweep import parse_vary, run_sweep, run_trial
+from cpgsim.cli.main import main
+from cpgsim.experiments.sweep import parse_vary, run_sweep, run_trial
 from cpgsim.harness.results import Results
 
 SETS = {"setting": 1.0}
@@ -209,7 +209,7 @@ def test_identical_replicates_are_marked_and_failures_explained(tmp_path):
     hi = doc["groups"][1]
     assert hi["identical_replicates"] and hi["distinct_outcomes"] == 1 and "one experiment, not 2" in hi["note"]
     assert hi["failure_reasons"] == {"min_distance_m": 2}
-    lines = "\n".join(__import__("cpgsim.harness.experiments.sweep", fromlist=["x"]).report_lines(doc))
+    lines = "\n".join(__import__("cpgsim.experiments.sweep", fromlist=["x"]).report_lines(doc))
     assert "0/2 = successful" in lines and "not successful: min_distance_m (2)" in lines
 
 

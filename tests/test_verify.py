@@ -1,4 +1,4 @@
-"""Tests of ``cpgsim.harness.verify.shooting`` / ``cpgsim verify``: periodic orbits by shooting, Floquet
+"""Tests of ``cpgsim.verify.shooting`` / ``cpgsim verify``: periodic orbits by shooting, Floquet
 multipliers, phase lags, synchronisation time, exit codes.
 
 Every numeric check is against an analytic value (Yu Y4, the second-order Lindstedt-Poincare series
@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from cpgsim.cli.main import main
 from cpgsim.components.graph import Graph
 from cpgsim.components.library import damped_oscillator, searching_network, single_vdp
 from cpgsim.components.networks import leader_follower_network
 from cpgsim.components.neurons import VanDerPolNeuron
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.compile import compile_graph
-from cpgsim.harness.verify.result import VerifyInputError, VerifyOptions
-from cpgsim.harness.verify.shooting import verify
+from cpgsim.verify.result import VerifyInputError, VerifyOptions
+from cpgsim.verify.shooting import verify
 
 pytestmark = pytest.mark.slow  # periodic-orbit shooting: the full suite only
 

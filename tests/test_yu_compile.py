@@ -12,12 +12,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from cpgsim.cli.main import main
 from cpgsim.components.yu.converter import YuConverter
 from cpgsim.components.yu.fsm import YuGaitFSM
 from cpgsim.components.yu.leg import LegFK, hexapod_controller, leg
 from cpgsim.components.yu.reflexes import SettableVanDerPolNeuron, YuReflexLogic
 from cpgsim.components.yu.sensors import YuSensoryNeurons
-from cpgsim.harness.cli.main import main
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.simulate import Simulator
 

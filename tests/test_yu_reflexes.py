@@ -12,7 +12,7 @@ from cpgsim.components.geometry import YU_SIM
 from cpgsim.components.yu.converter import ELEV_FORWARD, ELEV_RETRACT, NOMINAL, RETURNING, SEARCHING
 from cpgsim.components.yu.leg import foot_positions, leg, nominal_targets
 from cpgsim.components.yu.sensors import YuSensoryNeurons
-from cpgsim.harness.experiments.yu.figures import elevator_force, hole_force
+from cpgsim.experiments.yu.figures import elevator_force, hole_force
 from cpgsim.harness.simulate import Simulator, simulate
 
 MM = 1e-3
@@ -214,7 +214,7 @@ def test_hit_window_is_the_contact_episode_around_the_trigger():
     """By hand: contact from sample 103 (an impact spike of 21 N) to 165 (the last sample >= 1 N), trigger at
     126; the window is [103, 167): up to and with the first sample below 1 N (166), whatever happens
     outside it (a later stance at 300 is another contact)."""
-    from cpgsim.harness.experiments.yu.scenarios import hit_window
+    from cpgsim.experiments.yu.scenarios import hit_window
 
     f = np.zeros(400)
     f[103], f[104:111], f[111:114] = 21.0, 6.0, 2.0  # impact spike, a 6 N rub, the foot still on the riser

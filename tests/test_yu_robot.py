@@ -2,7 +2,7 @@
 
 Each scenario is run once per test session (module-scoped fixtures) and its summary/results are
 checked against the paper's reported behaviour (Yu 2019, Sec. 6); scenario choices:
-``harness/experiments/yu/scenarios.py``.
+``experiments/yu/scenarios.py``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import pytest
 
 from cpgsim.components.yu.converter import converter_coefficients, locked_orbit
 from cpgsim.components.yu.leg import foot_positions, nominal_targets
-from cpgsim.harness.experiments.runner import run_scenario
-from cpgsim.harness.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
+from cpgsim.experiments.runner import run_scenario
+from cpgsim.experiments.yu.scenarios import CONTROLLER, LEGS, ROBOT, YU_RUN
 from cpgsim.harness.results import Results
 
 pytestmark = pytest.mark.slow  # closed-loop robot runs: the full suite only

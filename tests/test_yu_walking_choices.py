@@ -1,7 +1,7 @@
 """The Yu controller's additions for walking the DART robot, on scripted toe forces.
 
 Each test pins one choice documented in the blocks' docstrings (``components/yu/``) and used by
-the robot scenarios (``harness/experiments/yu/scenarios.py``); defaults stay Yu's behaviour.
+the robot scenarios (``experiments/yu/scenarios.py``); defaults stay Yu's behaviour.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from cpgsim.components.yu.fsm import STANCE
 from cpgsim.components.yu.leg import foot_positions, hexapod_controller, leg, nominal_targets
 from cpgsim.components.yu.reflexes import elevator_descent_rate
 from cpgsim.components.yu.sensors import YuSensoryNeurons
-from cpgsim.harness.experiments.yu.figures import elevator_force, hole_force
+from cpgsim.experiments.yu.figures import elevator_force, hole_force
 from cpgsim.harness.simulate import Simulator, simulate
 
 pytestmark = pytest.mark.slow  # scripted leg runs: the full suite only

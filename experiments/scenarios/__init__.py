@@ -1,0 +1,1 @@
+"""The built-in robot scenarios as TOML files (their schema: :mod:`cpgsim.experiments.scenario`)."""

@@ -1,1 +1,0 @@
-"""The built-in robot scenarios as TOML files (their schema: :mod:`cpgsim.harness.experiments.scenario`)."""

@@ -1,1 +1,0 @@
-"""Benchmark suites (controllers x terrains x seeds) for ``cpgsim bench`` (:mod:`cpgsim.harness.experiments.bench`)."""

@@ -49,35 +49,28 @@ MOVED_APPLICATIONS = ("experiments", "verify", "cli")
 """Subpackages of ``harness`` before cpgsim 0.3, now top-level folders above the engine."""
 
 
-def new_module_name(name: str) -> str:
-    """Where a module of an old layout lives now: ``components.x`` (before 0.2) -> ``cpgsim.components.x``;
-    ``cpgsim.harness.experiments.x`` or ``harness.experiments.x`` (before 0.3) -> ``cpgsim.experiments.x``."""
-    parts = name.split(".")
-    if parts[0] == "cpgsim":
-        parts = parts[1:]
-    if len(parts) > 1 and parts[0] == "harness" and parts[1] in MOVED_APPLICATIONS:
-        parts = parts[1:]
-    return ".".join(["cpgsim", *parts])
-
-
 def moved_name_hint(exc: BaseException, requested: str | None = None) -> str | None:
     """The one-line advice for code written against the names before cpgsim 0.2 (``components``, ``harness``,
     ``fmus``, ``robots`` were top-level packages; now they are ``cpgsim.components`` and so on) or before 0.3
-    (``cpgsim.harness.experiments``, ``.verify`` and ``.cli`` are now ``cpgsim.experiments`` and so on).
-    ``requested``: the full module name asked for, when known (the exception names only its first missing part)."""
+    (``harness.experiments``, ``.verify`` and ``.cli``, with or without ``cpgsim.``, are now
+    ``cpgsim.experiments`` and so on). ``requested``: the full module name asked for, when known (the exception
+    names only its first missing part)."""
     name = getattr(exc, "name", None) if isinstance(exc, ModuleNotFoundError) else None
     if not name:
         return None
     if requested and requested.startswith(name):
         name = requested
     parts = name.split(".")
-    old_top = parts[0] in OLD_TOP_LEVEL
-    old_app = (parts[:2] == ["cpgsim", "harness"] and len(parts) > 2 and parts[2] in MOVED_APPLICATIONS)
-    if not (old_top or old_app):
+    in_package = parts[0] == "cpgsim"
+    if in_package:
+        parts = parts[1:]
+    elif parts[0] not in OLD_TOP_LEVEL:
         return None
-    new = new_module_name(name)
-    release = "0.3 moved the applications above the engine" if new != f"cpgsim.{name}" or old_app else \
-        "0.2 installs one package, cpgsim"
+    moved_app = len(parts) > 1 and parts[0] == "harness" and parts[1] in MOVED_APPLICATIONS
+    if in_package and not moved_app:
+        return None  # a cpgsim name that never existed: no advice
+    new = ".".join(["cpgsim", *(parts[1:] if moved_app else parts)])
+    release = "0.3 moved the applications above the engine" if moved_app else "0.2 installs one package, cpgsim"
     return f"module {name!r} is now {new!r} (cpgsim {release}): write 'from {new} import ...'"
 
 

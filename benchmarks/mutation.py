@@ -65,7 +65,8 @@ MODULES: dict[str, tuple[str, list[str]]] = {
     "disturbance": ("robots/disturbance.py", [QUICK, "tests/test_safety_properties.py", "tests/test_disturbance.py"]),
     "archive": ("fmus/importer/archive.py", [QUICK, "tests/test_archive_properties.py", "tests/test_fuzz.py",
                                              "tests/test_scratch_folders.py", "tests/test_fmu_import.py"]),
-    "isolation": ("fmus/importer/isolation.py", [QUICK, "tests/test_isolation_limits.py", "tests/test_fmu_trust.py",
+    "isolation": ("fmus/importer/isolation.py", [QUICK, "tests/test_isolation_protocol.py",
+                                                 "tests/test_isolation_limits.py", "tests/test_fmu_trust.py",
                                                  "tests/test_fuzz.py"]),
     # two large modules scored on their safety functions only (SCOPES): the rest is the engine and the
     # importer's plumbing, specified by other tests

@@ -308,14 +308,6 @@ def _stopped(pid: int) -> bool:
     return state in (b"T", b"t")
 
 
-def _has_fileno(stream: Any) -> bool:
-    try:
-        stream.fileno()
-        return True
-    except (AttributeError, OSError, ValueError):
-        return False
-
-
 # -- the child ----------------------------------------------------------------------------------------
 _PR_SET_CHILD_SUBREAPER = 36
 

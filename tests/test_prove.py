@@ -269,7 +269,7 @@ def test_cli_prove_json_and_certificate_check(cli_cert) -> None:
     assert set(p) >= {"proved", "period", "section", "box", "multipliers", "method", "wall_time_s"}
     assert set(p["multipliers"][0]) >= {"abs", "re", "im"}
     assert (cert.parent / "o" / "proof.json").exists()
-    assert main(["verify", "--check-certificate", str(cert)]) == 0
+    assert main(["verify", "vdp", "--check-certificate", str(cert)]) == 0
 
 
 @pytest.mark.slow
@@ -280,7 +280,7 @@ def test_cli_tampered_certificates_fail(cli_cert, tmp_path) -> None:
 
     def check(bad: dict) -> int:
         path.write_text(json.dumps(bad))
-        return main(["verify", "--check-certificate", str(path)])
+        return main(["verify", "vdp", "--check-certificate", str(path)])
 
     # a period enclosure that misses the true period
     bad = copy.deepcopy(good)
@@ -300,6 +300,36 @@ def test_cli_tampered_certificates_fail(cli_cert, tmp_path) -> None:
     assert check(good) == 0
 
 
+@pytest.mark.slow  # uses the proved certificate of cli_cert (several seconds)
+def test_checking_a_certificate_runs_no_code_it_names(cli_cert, tmp_path, capsys) -> None:
+    """A certificate whose "graph" names a module that writes a marker file is checked against the graph
+    on the command line: the module is never imported (the marker stays absent)."""
+    _, _, cert = cli_cert
+    marker = tmp_path / "marker"
+    evil = tmp_path / "evil.py"
+    evil.write_text(f"open({str(marker)!r}, 'w').write('ran')\n"
+                    "from cpgsim.components.library import single_vdp\n"
+                    "def build():\n    return single_vdp(eps=1.0, b=1.0, omega=1.0)\n")
+    data = json.loads(cert.read_text())
+    data["graph"] = f"{evil}:build"
+    path = tmp_path / "sent.json"
+    path.write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["verify", "vdp", "--check-certificate", str(path)]) == 0
+    assert not marker.exists()
+    assert main(["verify", "--check-certificate", str(path)]) == 2  # no GRAPH: nothing is taken from the file
+    assert not marker.exists()
+    capsys.readouterr()
+    # another graph: exit 1 naming both digests (the certified one and the graph's own)
+    data["params"] = {"z.eps": 0.5, "z.b": 1.0, "z.omega": 1.0}
+    path.write_text(json.dumps(data))
+    assert main(["verify", "vdp", "--check-certificate", str(path)]) == 1
+    msg = capsys.readouterr().out.strip()
+    other, _ = system_of_graph(single_vdp(eps=0.5, b=1.0, omega=1.0))
+    assert "\n" not in msg and data["tape_sha256"] in msg and Tape(other).digest() in msg
+    assert not marker.exists()
+
+
 def test_cli_exit_codes_not_proved_and_bad_input(tmp_path, capsys) -> None:
     """Exit 1: nothing to prove (the damped oscillator converges to the origin); exit 2: bad input."""
     o = str(tmp_path / "o")
@@ -309,6 +339,6 @@ def test_cli_exit_codes_not_proved_and_bad_input(tmp_path, capsys) -> None:
     assert main(["verify", "vdp", "--certificate", str(tmp_path / "c.json"), "--no-plot", "-o", o]) == 2
     junk = tmp_path / "junk.json"
     junk.write_text("{}")
-    assert main(["verify", "--check-certificate", str(junk)]) == 2
+    assert main(["verify", "--check-certificate", str(junk)]) == 2  # no GRAPH
     assert main(["verify", "vdp", "--check-certificate", str(junk)]) == 2
     assert main(["verify", "gait", "flat", "--prove"]) == 2  # hybrid, co-simulated: not provable

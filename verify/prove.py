@@ -24,9 +24,9 @@ Given the numeric orbit of :func:`cpgsim.verify.shooting.verify` for a graph of 
    orbit is proved asymptotically stable when every enclosure lies inside the unit circle.
 
 A :class:`Certificate` holds the section, ``s_hat``, ``r``, ``C``, the step sizes and the claimed
-enclosures as exact binary numbers; :func:`check_certificate` re-derives ``f`` from the stored graph and
-parameters (compared with the stored tape digest), re-runs steps 4-6 and accepts only if the claims
-contain the recomputed enclosures.
+enclosures as exact binary numbers; :func:`check_certificate` re-derives ``f`` from the graph the user
+names and the stored parameters (compared with the stored tape digest; nothing the file names is run),
+re-runs steps 4-6 and accepts only if the claims contain the recomputed enclosures.
 """
 
 from __future__ import annotations
@@ -759,6 +759,8 @@ def prove_report(graph: Any, report: Any, inputs: Mapping[str, Any] | None = Non
 
 def write_certificate(res: ProofResult, path: Path, graph_spec: str, params: Mapping[str, Any],
                       inputs: Mapping[str, Any]) -> Path:
+    """Write the certificate of ``res`` with the graph spec (a label only: checking never imports it),
+    the ``--set`` parameters and the held inputs."""
     if res.certificate is None:
         raise ProofFailed("no certificate: the proof failed")
     cert = {**res.certificate, "graph": graph_spec, "params": dict(params), "inputs": dict(inputs)}
@@ -767,11 +769,14 @@ def write_certificate(res: ProofResult, path: Path, graph_spec: str, params: Map
     return path
 
 
-def check_certificate(path: Path, load_graph: Callable[[str], Any],
+def check_certificate(path: Path, graph: Any, graph_spec: str | None = None,
                       progress: Progress | None = None) -> tuple[bool, str]:
-    """Re-check a certificate file: re-derive ``f`` from its graph and parameters, re-run the interval tests.
+    """Re-check a certificate file against ``graph`` (named by the user, never by the file).
 
-    ``load_graph`` resolves the stored graph name (the CLI passes its catalogue's ``load_graph``).
+    A certificate is data: nothing it names is imported or run. Its parameter and input values (plain
+    JSON numbers) are set on ``graph``, ``f`` is re-derived as ``verify`` does, its tape digest must equal
+    the certified one (else ``(False, ...)`` naming both digests), then the interval tests are re-run
+    (:func:`check_system`). ``graph_spec`` only labels the message.
     """
     try:
         cert = json.loads(Path(path).read_text())
@@ -779,18 +784,29 @@ def check_certificate(path: Path, load_graph: Callable[[str], Any],
         raise VerifyInputError(f"cannot read certificate {path}: {exc}") from exc
     if not isinstance(cert, dict) or cert.get("format") != CERT_FORMAT:
         raise VerifyInputError(f"{path} is not a {CERT_FORMAT} certificate")
+    label = graph_spec or str(cert.get("graph", "the graph"))
     try:
-        graph = load_graph(cert["graph"])
-        for p, v in (cert.get("params") or {}).items():
-            if hasattr(graph, "set_param"):
-                graph.set_param(p, v)
-            else:
-                graph.set(**{p: v})
-        f, names = system_of_graph(graph, cert.get("inputs") or {})
+        params = cert.get("params") or {}
+        inputs = cert.get("inputs") or {}
+        if not isinstance(params, dict) or not isinstance(inputs, dict):
+            return False, "malformed certificate: 'params' and 'inputs' must be objects"
+        for p, v in params.items():
+            try:
+                if hasattr(graph, "set_param"):
+                    graph.set_param(p, v)
+                else:
+                    graph.set(**{p: v})
+            except Exception as exc:  # noqa: BLE001 - the graph rejects the certified parameter: not this graph
+                return False, f"graph {label} does not take the certified parameter {p} = {v!r}: {exc}"
+        f, names = system_of_graph(graph, inputs)
+        digest = Tape(f).digest()
+        if digest != cert["tape_sha256"]:
+            return False, (f"graph {label}: tape digest mismatch: the graph gives sha256 {digest}, the certificate "
+                           f"states {cert['tape_sha256']} (other equations or parameter values)")
         if names != cert["states"]:
             return False, "the graph's states differ from the certified ones"
         ok, msg = check_system(f, names, cert, progress)
-        what = f"graph {cert['graph']}" + (f" with {cert['params']}" if cert.get("params") else "")
+        what = f"graph {label}" + (f" with {params}" if params else "")
         return ok, f"{what}: {msg}"
     except (KeyError, TypeError, ValueError) as exc:
         return False, f"malformed certificate: {exc!r}"

@@ -13,7 +13,9 @@ DIR/gait.json and DIR/gait.png (default DIR verify_gait_<scenario>); --set then 
 `--prove` adds a computer-assisted proof in ball arithmetic (python-flint arb): a validated Taylor
 integration of the graph's own CasADi tape, the Krawczyk test on the Poincare map and enclosures of the
 Floquet multipliers; its exit status is 0 only if the cycle is proved and proved stable, 1 otherwise
-(the reason in one line). `--certificate FILE` writes the proof, `--check-certificate FILE` re-checks it.
+(the reason in one line). `--certificate FILE` writes the proof, `GRAPH --check-certificate FILE` re-checks
+it against the graph YOU name (the certificate is data: its "graph" field is never imported or run; the
+tape digest of GRAPH with the certificate's parameters must match the certified one).
 
 Exit status: 0 stable limit cycle; 1 no stable cycle (diverges, converges to an equilibrium, period not
 found, no common period, unstable orbit) with the reason; 2 bad input.
@@ -23,7 +25,7 @@ Examples:
   cpgsim verify vdp --set z.eps=0.5 --json
   cpgsim verify network --x0 z1.x=1          # legs 2, 4, 6 leader start [1, 0]
   cpgsim verify vdp --set z.eps=1 --set z.b=1 --set z.omega=1 --prove --certificate vdp.cert.json
-  cpgsim verify --check-certificate vdp.cert.json
+  cpgsim verify vdp --check-certificate vdp.cert.json
   cpgsim verify --sweep -o out/sweep          # eps x b table of docs/verification.md
   cpgsim verify gait flat -o out/gait         # the Yu tripod's walking gait (about 3 minutes)
   cpgsim verify gait flat --study controller.fsm.T_g=4,5,6 -o out/gait-study
@@ -76,8 +78,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--certificate", default=None, metavar="FILE",
                    help="with --prove: write the proof certificate (box, section, enclosures as exact numbers)")
     p.add_argument("--check-certificate", default=None, metavar="FILE",
-                   help="re-check a proof certificate (re-derives the equations from its graph, re-runs the "
-                        "interval tests); exit 0 if it holds")
+                   help="re-check a proof certificate against GRAPH (never imports anything the file names; "
+                        "GRAPH's tape digest must match the certified one; re-runs the interval tests); "
+                        "exit 0 if it holds")
     from cpgsim.cli import gait_command as _gait
 
     _gait.add_arguments(p)
@@ -99,8 +102,12 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario:
         raise CliError(f"unexpected argument {args.scenario!r} (a SCENARIO goes with 'verify gait')")
     if args.check_certificate:
-        if args.graph or args.prove or args.sweep:
-            raise CliError("--check-certificate takes no GRAPH, --prove or --sweep (the certificate names its graph)")
+        if args.prove or args.sweep or args.sets or args.inputs:
+            raise CliError("--check-certificate takes no --prove, --sweep, --set or --input (the certificate states "
+                           "its parameters and inputs)")
+        if not args.graph:
+            raise CliError("--check-certificate needs GRAPH, the graph the certificate is about (a built-in name or "
+                           "path/to/module.py:function): the certificate's own 'graph' field is never imported")
         return _check(args)
     if (args.certificate or args.precision != 192 or args.order != 32) and not args.prove:
         raise CliError("--certificate, --precision and --order go with --prove")
@@ -195,9 +202,11 @@ def _proof_text(proof) -> str:
 
 
 def _check(args: argparse.Namespace) -> int:
+    """``GRAPH --check-certificate FILE``: the graph comes from the command line, never from the file."""
     from cpgsim.verify.prove import check_certificate
 
-    ok, msg = check_certificate(Path(args.check_certificate), catalog.load_graph,
+    graph = catalog.load_graph(args.graph)
+    ok, msg = check_certificate(Path(args.check_certificate), graph, args.graph,
                                 progress=lambda m: print(m, file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({"certificate": str(args.check_certificate), "valid": ok, "message": msg}, indent=2))

@@ -12,6 +12,8 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
+from decimal import Decimal
 
 import casadi as ca
 import numpy as np
@@ -30,6 +32,7 @@ from cpgsim.verify.ball import (
 from cpgsim.verify.prove import (
     ProofOptions,
     exact_str,
+    interval_text,
     multiplier_enclosures,
     parse_exact,
     prove_report,
@@ -131,6 +134,47 @@ def test_multiplier_enclosures_of_known_matrices() -> None:
         assert mus[0]["inside_unit_circle"]
         big = arb_mat([[arb(1.0, 1e-6)]])
         assert not multiplier_enclosures(big)[0]["inside_unit_circle"]  # touches the unit circle
+        for tiny in (arb_mat([[arb(0, 1.344e-4)]]),  # a modulus is never negative, even of a ball around 0
+                     arb_mat([[arb(0, 1e-4), arb(0, 1e-4)], [arb(0, 1e-4), arb(0.5, 1e-9)]])):
+            for mu in multiplier_enclosures(tiny):
+                assert 0.0 <= mu["abs"][0] <= mu["abs"][1]
+        assert multiplier_enclosures(arb_mat([[arb(0, 1.344e-4)]]))[0]["abs"][1] >= 1.344e-4
+
+
+def _printed_intervals(text: str) -> list[tuple[Decimal, Decimal]]:
+    """Every ``[a, b]`` of numbers in ``text``, as exact decimals (read literally)."""
+    num = r"(-?[0-9.]+(?:e[-+]?[0-9]+)?)"
+    return [(Decimal(a), Decimal(b)) for a, b in re.findall(rf"\[{num}, {num}\]", text)]
+
+
+def _contains(printed: tuple[Decimal, Decimal], lo: float, hi: float) -> bool:
+    return printed[0] <= Decimal(lo) and Decimal(hi) <= printed[1]
+
+
+def test_interval_text_rounds_outward() -> None:
+    # 0.1 is the double 0.1000000000000000055...: rounding to nearest prints "0.1", which excludes it
+    lo, hi = (Decimal(x) for x in interval_text(0.1, 0.1, 3)[1:-1].split(", "))
+    assert lo <= Decimal(0.1) <= hi and hi > Decimal("0.1")
+    # the issue's period: the doubles around 7.0547221825750584... printed at 15 digits still contain it
+    lo, hi = (Decimal(x) for x in interval_text(7.054722182575058, 7.054722182575059, 15)[1:-1].split(", "))
+    assert lo <= Decimal("7.0547221825750584") <= hi
+    lo, hi = (Decimal(x) for x in interval_text(-1.344e-4, 2.5e-7, 2)[1:-1].split(", "))
+    assert lo <= Decimal(-1.344e-4) and Decimal(2.5e-7) <= hi
+
+
+def test_every_printed_interval_contains_the_json_one(vdp_proof) -> None:
+    from cpgsim.cli.commands.verify import _proof_text
+
+    _, _, res = vdp_proof
+    d = res.to_json()
+    text = _proof_text(res)
+    got = _printed_intervals(text)
+    want = [d["period"], d["period"]]  # the reason line, then the period line
+    for mu in d["multipliers"]:
+        want += [mu["abs"], mu["re"], mu["im"]]
+    assert len(got) == len(want), text
+    for printed, (lo, hi) in zip(got, want, strict=True):
+        assert _contains(printed, lo, hi), (printed, lo, hi)
 
 
 # -- proofs ----------------------------------------------------------------------------------------
@@ -260,7 +304,7 @@ def cli_cert(tmp_path_factory):
 
 
 @pytest.mark.slow  # several seconds (the quick tier proves the classical period)
-def test_cli_prove_json_and_certificate_check(cli_cert) -> None:
+def test_cli_prove_json_and_certificate_check(cli_cert, capsys) -> None:
     rc, out, cert = cli_cert
     assert rc == 0
     assert out["status"] == "stable-cycle" and "floquet_multipliers" in out  # the verify report is kept
@@ -269,7 +313,10 @@ def test_cli_prove_json_and_certificate_check(cli_cert) -> None:
     assert set(p) >= {"proved", "period", "section", "box", "multipliers", "method", "wall_time_s"}
     assert set(p["multipliers"][0]) >= {"abs", "re", "im"}
     assert (cert.parent / "o" / "proof.json").exists()
+    capsys.readouterr()
     assert main(["verify", "vdp", "--check-certificate", str(cert)]) == 0
+    printed = _printed_intervals(capsys.readouterr().out)  # the checker's recomputed period, read literally
+    assert len(printed) == 1 and printed[0][0] <= Decimal(VDP_T_MU1) <= printed[0][1]
 
 
 @pytest.mark.slow

@@ -31,6 +31,7 @@ re-runs steps 4-6 and accepts only if the claims contain the recomputed enclosur
 
 from __future__ import annotations
 
+import decimal
 import json
 import math
 import time
@@ -194,6 +195,38 @@ def float_up(v: arb) -> float:
 def interval_json(v: arb) -> list[float]:
     """``[lo, hi]`` as doubles rounded outward."""
     return [float_down(v), float_up(v)]
+
+
+def _decimal_text(d: decimal.Decimal) -> str:
+    """Plain decimal text of ``d`` (exponent form only for very large or small numbers)."""
+    if d.is_zero():
+        return "0"
+    text = f"{d:g}"
+    return text.replace("E", "e")
+
+
+def round_down(x: float, digits: int) -> str:
+    """``x`` rounded toward -inf to ``digits`` significant decimal digits: the printed number is ``<= x``."""
+    ctx = decimal.Context(prec=digits, rounding=decimal.ROUND_FLOOR)
+    return _decimal_text(ctx.plus(decimal.Decimal(x + 0.0)))
+
+
+def round_up(x: float, digits: int) -> str:
+    """``x`` rounded toward +inf to ``digits`` significant decimal digits: the printed number is ``>= x``
+    (for upper bounds such as ``|C G| <= ...``)."""
+    ctx = decimal.Context(prec=digits, rounding=decimal.ROUND_CEILING)
+    return _decimal_text(ctx.plus(decimal.Decimal(x + 0.0)))
+
+
+def interval_text(lo: float, hi: float, digits: int) -> str:
+    """``"[lo, hi]"`` rounded outward at ``digits`` significant digits (lower end down, upper end up), so
+    the printed interval, read literally, contains ``[lo, hi]``."""
+    return f"[{round_down(lo, digits)}, {round_up(hi, digits)}]"
+
+
+def ball_text(v: arb, digits: int) -> str:
+    """The ball ``v`` as an outward-rounded decimal interval (see :func:`interval_text`)."""
+    return interval_text(float_down(v), float_up(v), digits)
 
 
 def _mag(v: arb) -> float:
@@ -513,7 +546,10 @@ def _eigenvectors(DP: arb_mat) -> acb_mat:
 
 
 def _mult_entry(re: arb, im: arb, ab: arb, real: bool, cluster: int = 1) -> dict[str, Any]:
-    return {"abs": interval_json(ab), "re": interval_json(re), "im": interval_json(im), "real": real,
+    """One multiplier's JSON entry; the ``abs`` enclosure is clamped at 0 (a modulus is never negative:
+    ``abs`` of a ball around 0 has a negative lower end)."""
+    ab_lo, ab_hi = interval_json(ab)
+    return {"abs": [max(ab_lo, 0.0), ab_hi], "re": interval_json(re), "im": interval_json(im), "real": real,
             "cluster": cluster, "inside_unit_circle": bool(ab < 1)}
 
 
@@ -621,8 +657,8 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
             res.radius = arb(r_f)
             if not ok or box is None:
                 raise ProofFailed(f"Krawczyk test failed at box width {2 * r_f:.3g} (|I - C DG(X)| <= "
-                                  f"{info.get('contraction_norm', float('nan')):.3g}, |C G(s_hat)| <= "
-                                  f"{info.get('residual', float('nan')):.3g})")
+                                  f"{round_up(info.get('contraction_norm', math.nan), 3)}, |C G(s_hat)| <= "
+                                  f"{round_up(info.get('residual', math.nan), 3)})")
             # the fixed point lies in K(X) n X, far narrower than X: the period and the multipliers
             # are enclosed over that box (one more validated run)
             K_box = [arb(c.mid(), arb(info["K_radius"]) * 2) for c in center]
@@ -639,7 +675,7 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
             res.stable = all(mu["inside_unit_circle"] for mu in res.multipliers)
             if res.stable:
                 res.reason = (f"proved: a unique periodic orbit through the box, period in "
-                              f"[{float_down(res.period):.15g}, {float_up(res.period):.15g}] s; every non-trivial "
+                              f"{ball_text(res.period, 15)} s; every non-trivial "
                               "multiplier enclosure lies inside the unit circle: asymptotically stable")
             else:
                 res.reason = ("proved a periodic orbit, but a multiplier enclosure touches or leaves the unit circle "
@@ -696,7 +732,7 @@ def check_system(f: Any, names: Sequence[str], cert: Mapping[str, Any],
         ok, info = krawczyk(center, G, DGX, C, r)
         if not ok:
             return False, (f"Krawczyk test failed at box width {2 * float(r):.3g} "
-                           f"(|I - C DG(X)| <= {info['contraction_norm']:.3g})")
+                           f"(|I - C DG(X)| <= {round_up(info['contraction_norm'], 3)})")
         K_box = [arb(c.mid(), arb(info["K_radius"]) * 2) for c in center]
         if not all(X[j].contains(K_box[j]) for j in range(m)):
             K_box = X
@@ -723,7 +759,7 @@ def check_system(f: Any, names: Sequence[str], cert: Mapping[str, Any],
         if bool(claims["stable"]) != stable:
             return False, "the claimed stability does not follow from the recomputed multiplier enclosures"
         return True, (f"certificate checked: unique periodic orbit in the box, period in "
-                      f"[{float_down(box.time):.15g}, {float_up(box.time):.15g}] s"
+                      f"{ball_text(box.time, 15)} s"
                       + ("; asymptotically stable" if stable else ""))
 
 

@@ -188,15 +188,18 @@ def _prove(args: argparse.Namespace, graph, rep):
 
 
 def _proof_text(proof) -> str:
+    """The proof's lines; every interval is rounded outward at the digits shown (it contains the JSON one)."""
+    from cpgsim.verify.prove import interval_text, round_up
+
     lines = ["", f"proof: {proof.reason}" if proof.reason.startswith("not proved") else
              f"proof: {'PROVED' if proof.proved else 'not proved'} -- {proof.reason}"]
     if proof.proved and proof.period is not None:
         d = proof.to_json()
-        lines.append(f"  period in [{d['period'][0]!r}, {d['period'][1]!r}] s (width {d['period_width']:.3g} s)")
+        lines.append(f"  period in {interval_text(*d['period'], 17)} s (width <= {round_up(d['period_width'], 3)} s)")
         lines.append(f"  section {d['section']['definition']}; box radius {d['box']['radius']:.3g}")
         for mu in d["multipliers"]:
-            lines.append(f"  |mu| in [{mu['abs'][0]:.12g}, {mu['abs'][1]:.12g}]  re in [{mu['re'][0]:.12g}, "
-                         f"{mu['re'][1]:.12g}]  im in [{mu['im'][0]:.3g}, {mu['im'][1]:.3g}]")
+            lines.append(f"  |mu| in {interval_text(*mu['abs'], 12)}  re in {interval_text(*mu['re'], 12)}  "
+                         f"im in {interval_text(*mu['im'], 3)}")
         lines.append(f"  {d['taylor_steps']} Taylor steps, {d['wall_time_s']:.1f} s")
     return "\n".join(lines)
 

@@ -347,6 +347,56 @@ def test_cli_tampered_certificates_fail(cli_cert, tmp_path) -> None:
     assert check(good) == 0
 
 
+@pytest.mark.slow
+def test_every_stated_claim_is_checked(cli_cert, tmp_path, capsys) -> None:
+    """Each flag must agree with its own stated enclosure, and each enclosure contain the recomputed one:
+    a certificate is accepted only if everything it says is proved."""
+    _, _, cert = cli_cert
+    good = json.loads(cert.read_text())
+    assert good["claims"]["multipliers"][0]["real"] and good["claims"]["stable"]
+    path = tmp_path / "claims.json"
+
+    def check(edit) -> int:
+        bad = copy.deepcopy(good)
+        edit(bad["claims"], bad["claims"]["multipliers"][0])
+        path.write_text(json.dumps(bad))
+        return main(["verify", "vdp", "--check-certificate", str(path)])
+
+    def widened_inside(c, mu):  # |mu| in [0, 1.5] is not inside the unit circle, whatever the flag says
+        mu["abs"] = [0.0, 1.5]
+
+    def widened_honest(c, mu):  # the same enclosure with honest flags claims less, and all of it holds
+        mu["abs"], mu["inside_unit_circle"], c["stable"] = [0.0, 1.5], False, False
+
+    def stable_without_flags(c, mu):
+        mu["abs"], mu["inside_unit_circle"] = [0.0, 1.5], False
+
+    def real_with_imaginary_part(c, mu):  # real = true, but the stated im enclosure is not [0, 0]
+        mu["im"] = [-0.1, 0.1]
+
+    def flipped_flag(c, mu):
+        mu["inside_unit_circle"] = False
+
+    def wrong_cluster(c, mu):
+        mu["cluster"] = 2
+
+    def extra_claim(c, mu):  # a claim the checker does not check is not accepted
+        c["globally_attracting"] = True
+
+    def inverted_interval(c, mu):
+        mu["re"] = [mu["re"][1] + 1.0, mu["re"][0] - 1.0]
+
+    for edit in (widened_inside, stable_without_flags, real_with_imaginary_part, flipped_flag, wrong_cluster,
+                 extra_claim, inverted_interval):
+        capsys.readouterr()
+        assert check(edit) == 1, edit.__name__
+        assert "\n" not in capsys.readouterr().out.strip()
+    capsys.readouterr()
+    assert check(widened_honest) == 0
+    out = capsys.readouterr().out
+    assert "not claimed" in out and "asymptotically stable" not in out
+
+
 @pytest.mark.slow  # uses the proved certificate of cli_cert (several seconds)
 def test_checking_a_certificate_runs_no_code_it_names(cli_cert, tmp_path, capsys) -> None:
     """A certificate whose "graph" names a module that writes a marker file is checked against the graph

@@ -742,25 +742,65 @@ def check_system(f: Any, names: Sequence[str], cert: Mapping[str, Any],
         except ProofFailed as exc:
             return False, f"not proved: {exc}"
         claims = cert["claims"]
+        if not isinstance(claims, dict) or set(claims) != {"period", "multipliers", "stable"}:
+            return False, ("the certificate's claims must be exactly 'period', 'multipliers' and 'stable' "
+                           f"(got {sorted(claims) if isinstance(claims, dict) else type(claims).__name__})")
         claimed_T = ball_from_json(claims["period"])
         if not claimed_T.contains(box.time):
             return False, "the claimed period enclosure does not contain the recomputed one"
         _, DPX = pr.section_map(box, sec, True)
         assert DPX is not None
         mus = multiplier_enclosures(DPX) if m else []
-        cl = claims["multipliers"]
-        if len(cl) != len(mus):
-            return False, "the number of claimed multipliers is wrong"
-        for a, b in zip(mus, cl, strict=True):
-            for key in ("abs", "re", "im"):
-                if not (b[key][0] <= a[key][0] and a[key][1] <= b[key][1]):
-                    return False, f"a claimed multiplier enclosure ({key}) does not contain the recomputed one"
-        stable = all(mu["inside_unit_circle"] for mu in mus)
-        if bool(claims["stable"]) != stable:
-            return False, "the claimed stability does not follow from the recomputed multiplier enclosures"
+        bad = check_multiplier_claims(claims["multipliers"], mus)
+        if bad:
+            return False, bad
+        stable = all(bool(mu["inside_unit_circle"]) for mu in claims["multipliers"])
+        if claims["stable"] is not stable:
+            return False, (f"the certificate claims stable = {claims['stable']!r} but its multiplier flags say "
+                           f"{stable!r}")
         return True, (f"certificate checked: unique periodic orbit in the box, period in "
                       f"{ball_text(box.time, 15)} s"
-                      + ("; asymptotically stable" if stable else ""))
+                      + ("; asymptotically stable" if stable else "; stability not claimed"))
+
+
+MULTIPLIER_KEYS = {"abs", "re", "im", "real", "cluster", "inside_unit_circle"}
+
+
+def check_multiplier_claims(claimed: Any, recomputed: list[dict[str, Any]]) -> str | None:
+    """Check every stated multiplier claim against the recomputed enclosures (same order: by decreasing
+    ``|mu|``). ``None`` if all hold, else the one-line reason.
+
+    Each stated enclosure (``abs``, ``re``, ``im``) is an interval ``lo <= hi`` that contains the recomputed
+    one; ``inside_unit_circle`` agrees with the stated ``abs`` enclosure (true exactly when its upper end is
+    below 1); ``real: true`` needs a recomputed proof of a real eigenvalue and a stated ``im`` of ``[0, 0]``;
+    ``cluster`` (how many eigenvalues the union of discs holds) equals the recomputed count.
+    """
+    if not isinstance(claimed, list) or len(claimed) != len(recomputed):
+        return "the number of claimed multipliers is wrong"
+    for k, (b, a) in enumerate(zip(claimed, recomputed, strict=True), start=1):
+        where = f"claimed multiplier {k}"
+        if not isinstance(b, dict) or set(b) != MULTIPLIER_KEYS:
+            return f"{where} must state exactly {', '.join(sorted(MULTIPLIER_KEYS))}"
+        for key in ("abs", "re", "im"):
+            iv = b[key]
+            if (not isinstance(iv, list) or len(iv) != 2 or not all(isinstance(x, (int, float)) and
+                                                                    not isinstance(x, bool) for x in iv)
+                    or not iv[0] <= iv[1]):
+                return f"{where}: '{key}' is not an interval [lo, hi] of numbers with lo <= hi"
+            if not (iv[0] <= a[key][0] and a[key][1] <= iv[1]):
+                return f"{where}: the claimed {key} enclosure does not contain the recomputed one"
+        inside = b["abs"][1] < 1
+        if b["inside_unit_circle"] is not inside:
+            return (f"{where}: inside_unit_circle = {b['inside_unit_circle']!r} disagrees with its stated |mu| "
+                    f"enclosure [{b['abs'][0]!r}, {b['abs'][1]!r}]")
+        if not isinstance(b["real"], bool):
+            return f"{where}: 'real' must be true or false"
+        if b["real"] and not (a["real"] and b["im"] == [0, 0]):
+            return f"{where}: real = true is not proved (the recomputed enclosure does not isolate a real eigenvalue)"
+        if b["cluster"] != a["cluster"] or isinstance(b["cluster"], bool):
+            return (f"{where}: cluster = {b['cluster']!r} disagrees with the recomputed count of eigenvalues in "
+                    f"its discs ({a['cluster']})")
+    return None
 
 
 # -- graphs ----------------------------------------------------------------------------------------

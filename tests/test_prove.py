@@ -427,6 +427,38 @@ def test_checking_a_certificate_runs_no_code_it_names(cli_cert, tmp_path, capsys
     assert not marker.exists()
 
 
+@pytest.mark.parametrize("prove", [False, True])
+def test_damped_linear_oscillator_gets_a_verdict_not_an_internal_error(tmp_path, capsys, prove) -> None:
+    """x'' + 0.2 x' + 1.69 x = 0 (the issue's case) decays to the origin, eigenvalues -0.1 +- sqrt(1.68) i:
+    exit 1 with the equilibrium verdict, with or without --prove (it once crashed in _classify)."""
+    o = tmp_path / "o"
+    args = ["verify", "damped-oscillator", "--set", "damper.k=-0.2", "--set", "spring.k=-1.69", "--samples", "0",
+            "--no-plot", "-o", str(o)]
+    assert main(args + (["--prove"] if prove else [])) == 1
+    out, err = capsys.readouterr()
+    assert "internal error" not in err
+    assert out.splitlines()[0].endswith("no stable cycle: converges to an equilibrium")
+    rep = json.loads((o / "report.json").read_text())
+    assert rep["status"] == "equilibrium"
+    assert all(abs(v) < 1e-6 for v in rep["equilibrium"]["x"].values())
+    assert rep["equilibrium"]["stable"]
+    if prove:
+        assert err.strip().splitlines()[-1].startswith("not proved: no periodic orbit")
+
+
+def test_linear_centre_and_free_particle_get_verdicts(tmp_path, capsys) -> None:
+    """x'' + 1.69 x = 0 (a centre: a family of orbits, none isolated) and x'' = 0 (every state an
+    equilibrium, a structurally singular Jacobian): exit 1 with a verdict, never an internal error."""
+    o = str(tmp_path / "o")
+    base = ["verify", "damped-oscillator", "--samples", "0", "--no-plot", "-o", o, "--set", "damper.k=0"]
+    assert main([*base, "--set", "spring.k=-1.69"]) == 1
+    out, err = capsys.readouterr()
+    assert "internal error" not in err and "none is isolated" in out
+    assert main([*base, "--set", "spring.k=0"]) == 1
+    out, err = capsys.readouterr()
+    assert "internal error" not in err and "no stable cycle" in out.splitlines()[0]
+
+
 def test_cli_exit_codes_not_proved_and_bad_input(tmp_path, capsys) -> None:
     """Exit 1: nothing to prove (the damped oscillator converges to the origin); exit 2: bad input."""
     o = str(tmp_path / "o")

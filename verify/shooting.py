@@ -136,6 +136,12 @@ def verify(graph: Graph | Block, params: Mapping[str, Any] | None = None,
 
 # -- implementation --------------------------------------------------------------------------------
 
+def _is_linear(sysm: Any) -> bool:
+    """Whether ``f`` is affine in the state (its Jacobian does not depend on ``x``)."""
+    xs = ca.SX.sym("x", sysm.n)
+    return not ca.depends_on(ca.jacobian(sysm.f(xs), xs), xs)
+
+
 class _Diverged(Exception):
     pass
 
@@ -327,6 +333,8 @@ class _Verifier:
         if np.all(r2 <= 1e-9 * scale) or np.max(r2) <= 1e-7 * max_range:
             return "equilibrium", {"detail": "the state stopped moving"}
         osc = np.nonzero(r2 > 1e-6 * scale)[0]
+        if osc.size == 0:  # nothing moves by more than 1e-6 of its scale (e.g. a damped linear oscillator late on)
+            return "equilibrium", {"detail": "every state moves by less than 1e-6 of its scale"}
         change = (r2[osc] - r1[osc]) / r2[osc]
         info: dict[str, Any] = {"osc": osc, "detail": f"relative range change per half chunk "
                                                       f"{float(np.max(np.abs(change))):.2e}"}
@@ -352,10 +360,10 @@ class _Verifier:
         rep = self.report
         sysm = self.system
         xs = ca.SX.sym("x", sysm.n)
-        rf = ca.rootfinder("eq", "newton", ca.Function("g", [xs], [sysm.f(xs)]),
-                           {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False})
         t, X = tr.window(tr.chunk)
-        try:
+        try:  # a structurally singular Jacobian (e.g. x'' = 0: a continuum of equilibria) fails at init
+            rf = ca.rootfinder("eq", "newton", ca.Function("g", [xs], [sysm.f(xs)]),
+                               {"abstol": 1e-12, "max_iter": 50, "error_on_fail": False})
             xe = np.asarray(rf(X[:, -1])).ravel()
         except RuntimeError:
             xe = X[:, -1]
@@ -452,6 +460,9 @@ class _Verifier:
             rep.status, rep.reason = "stable-cycle", cyc.verdict()
         else:
             rep.status, rep.reason = "unstable-cycle", cyc.verdict()
+            if _is_linear(sysm):
+                rep.reason += (" -- the equations are linear: periodic orbits come in continuous families "
+                               "(a centre), none is isolated, so there is no limit cycle")
             n_one = int(np.sum(np.abs(cyc.multipliers - 1.0) < 1e-6))
             if len(subs) > 1 and n_one == len(subs):
                 rep.reason += (f" -- the {len(subs)} multipliers at 1 belong to {len(subs)} uncoupled primary "

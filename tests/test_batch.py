@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from cpgsim.cli.main import main
-from cpgsim.components.basic import Gain, Integrator
-from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
+from cpgsim.components.basic import Constant, Gain, Integrator
+from cpgsim.components.core import Block, CoSimBlock, Equations, ModelError, ParameterError, Symbols
 from cpgsim.components.graph import Graph
 from cpgsim.components.library import single_vdp
 from cpgsim.components.networks import leader_follower_network
@@ -273,3 +273,35 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, args, message):
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert len(err.splitlines()) == 1 and err.startswith("cpgsim batch: error:") and message in err, err
+
+
+class _Exp(Block):
+    """``y = exp(a u)``: overflows to +inf (never NaN) once ``a u`` passes log(DBL_MAX) = 709.78."""
+
+    def declare(self) -> None:
+        self.add_parameter("a", 1.0, description="rate")
+        self.add_input("u")
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        import casadi as ca
+
+        return Equations(outputs={"y": ca.exp(v.p["a"] * v.u["u"])})
+
+
+def test_an_infinite_signal_in_the_window_voids_its_reductions_and_is_named():
+    """u = t (an integrator of 1, finite throughout) and y = exp(a t): a = 1000 gives y = inf from t = 0.71 s,
+    inside the last 0.5 s of a 1 s run, so every reduction of y is NaN and the status names y; a = 1 stays
+    finite (final value e)."""
+    g = Graph("exp")
+    g.add(Constant("one", value=1.0, unit="1/s"))
+    g.add(Integrator("t", x0=0.0))
+    g.add(_Exp("e"))
+    g.connect("one.y", "t.u")
+    g.connect("t.y", "e.u")
+    res = simulate_batch(g, {"e.a": [1.0, 1000.0]}, t_end=1.0, reduce=["final", "max", "mean"], window=0.5)
+    assert res.status[0] == "ok"
+    assert res["e.y:final"][0] == pytest.approx(math.e, rel=1e-9)
+    assert res.status[1] == "non-finite in window: e.y"
+    assert all(np.isnan(res[f"e.y:{r}"][1]) for r in ("max", "mean"))
+    assert res["t.y:final"][1] == pytest.approx(1.0, rel=1e-12)  # the state itself stayed finite

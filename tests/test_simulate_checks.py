@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cpgsim.components.basic import Integrator
-from cpgsim.components.core import Block, Equations, ModelError, ParameterError, Symbols
+from cpgsim.components.core import Block, CoSimBlock, Equations, ModelError, ParameterError, Symbols
 from cpgsim.components.graph import Graph
 from cpgsim.components.library import damped_oscillator
 from cpgsim.harness import simulate as sim
@@ -196,3 +196,47 @@ def test_a_non_finite_signal_is_found_at_its_row_even_the_first(backend, x0, t_b
     msg = str(info.value)
     assert f"signal r.y became nan at t={t_bad:g} s" in msg and kept in msg
     assert len(info.value.results.time) == round(t_bad / 1e-2)
+
+
+class PassThrough(CoSimBlock):
+    """A co-simulation block ``y = u``, with direct feedthrough when ``feedthrough`` (the master then
+    evaluates the compiled step without its C commit and checks the new state itself)."""
+
+    def __init__(self, name: str, feedthrough: bool) -> None:
+        self._ft = feedthrough
+        super().__init__(name)
+
+    def declare(self) -> None:
+        self.add_input("u", default=0.0)
+        self.add_output("y")
+        if self._ft:
+            self.feedthrough = {"y": {"u"}}
+
+    def setup(self, t0: float) -> None:
+        self._u = 0.0
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        return {"y": np.array([self._u])}
+
+    def set_inputs(self, values) -> None:
+        self._u = float(np.asarray(values["u"]).ravel()[0])
+
+    def do_step(self, t: float, dt: float) -> None:
+        pass
+
+
+@pytest.mark.parametrize("feedthrough", [False, True])
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+def test_a_state_going_to_infinity_ends_a_co_simulation_at_that_step(backend, feedthrough):
+    """The co-simulation master stops at the first step whose new state is not finite, also when it is an
+    infinity (not a NaN), with and without a feedthrough block: the same step and last state as the
+    plain run above (1 / (1 - t) under RK4 at 10 ms: inf first at t = 1.03 s)."""
+    g = blowup()
+    g.add(PassThrough("p", feedthrough))
+    g.connect("q.y", "p.u")
+    with pytest.raises(SimulationDiverged) as info:
+        Simulator(g, dt=1e-2, backend=backend).run(2.0)
+    res = info.value.results
+    assert "state q.x became inf at t=1.03 s" in str(info.value), str(info.value)
+    assert not res.complete and res.time[-1] == pytest.approx(1.02)
+    assert np.all(np.isfinite(res["q.y"])) and res["q.y"][-1] > 1e100

@@ -19,6 +19,7 @@ remove it); only ``if TYPE_CHECKING:`` blocks are skipped, since they never run.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -67,11 +68,19 @@ def imported_modules(name: str, path: Path, modules: dict[str, Path]) -> set[str
         for child in ast.iter_child_nodes(node):
             visit(child)
 
-    visit(ast.parse(path.read_text(), filename=str(path)))
+    visit(parsed(path))
     return {m for m in found if m in modules and m != name}
 
 
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    """The syntax tree of a project file, parsed once per test session (several tests walk every file)."""
+    return ast.parse(path.read_text(), filename=str(path))
+
+
+@functools.cache
 def import_graph() -> dict[str, set[str]]:
+    """Each project module's imports of project modules (computed once; callers only read it)."""
     modules = project_modules()
     return {name: imported_modules(name, path, modules) for name, path in modules.items()}
 
@@ -242,7 +251,7 @@ def test_no_module_imports_an_old_top_level_name():
 
 def _absolute_imports(path: Path) -> set[str]:
     out: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(parsed(path)):
         if isinstance(node, ast.Import):
             out.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom) and not node.level and node.module:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cpgsim.cli.main import main
-from cpgsim.components.basic import Integrator
+from cpgsim.components.basic import Gain, Integrator
 from cpgsim.components.core import Block, Equations, Symbols
 from cpgsim.components.graph import Graph
 from cpgsim.harness.errors import SimulationDiverged
@@ -88,3 +88,34 @@ def test_cli_exit_1_complete_false_and_the_signal_named(tmp_path, monkeypatch, c
     assert "signal s.y became nan at t=1.01 s" in err
     res = Results.load(out)
     assert not res.complete and "non-finite: s.y" in res.message and np.isfinite(res.data).all()
+
+
+class ExpOf(Block):
+    """``y = exp(1000 u)``: +inf (never NaN) once ``u`` passes log(DBL_MAX) / 1000 = 0.70978."""
+
+    def declare(self) -> None:
+        self.add_input("u")
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        return Equations(outputs={"y": ca.exp(1000.0 * v.u["u"])})
+
+
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+def test_an_infinite_output_with_finite_states_fails_the_run_at_its_row(backend):
+    """u = t (an integrator of 1) and y = exp(1000 t): at dt = 0.01, y(0.70) = e^700 is finite and
+    y(0.71) = e^710 overflows, so the run ends naming y at t = 0.71 s and keeps the rows up to 0.70 s."""
+    g = Graph("inf_out")
+    g.add(MinusOne("m"))
+    g.add(Integrator("x", x0=0.0))
+    g.add(Gain("neg", k=-1.0, unit="1"))
+    g.add(ExpOf("e"))
+    g.connect("m.y", "x.u")
+    g.connect("x.y", "neg.u")
+    g.connect("neg.y", "e.u")
+    with pytest.raises(SimulationDiverged) as info:
+        Simulator(g, dt=0.01, backend=backend).run(2.0)
+    msg = str(info.value)
+    assert "signal e.y became inf at t=0.71 s" in msg, msg
+    res = info.value.results
+    assert not res.complete and np.isfinite(res.data).all() and res.time[-1] == pytest.approx(0.70)

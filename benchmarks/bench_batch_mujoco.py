@@ -1,7 +1,7 @@
 """MuJoCo batch benchmark: the terrain suite on MuJoCo as one batch in this process vs on Dask workers.
 
 Runs ``cpgsim.experiments.bench.run_bench("terrain", sets={"robot.engine": "mujoco"})`` with
-``batch=True`` (``--workers`` C threads, cpgsim.robots.mujoco_batch) and ``batch=False`` (a Dask
+``batch=True`` (``--workers`` C threads, cpgsim.robots.mujoco.batch) and ``batch=False`` (a Dask
 LocalCluster of ``--workers`` processes), alternately ``--repeat`` times, on ``--seeds`` seeds per cell
 (the suite has 5: 300 trials; 1 gives a 60-trial subset). Prints per mode the wall times (the suite's
 ``wall_time_s``: from the first trial's start to the last one's end, after the cells are checked), their

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from cpgsim.components.geometry import preset
-from cpgsim.robots.plant import DETECTORS, DartHexapod
+from cpgsim.robots.dart.plant import DETECTORS, DartHexapod
 
 
 def bench(preset_name: str = "yu-sim", detector: str = "dart", seconds: float = 5.0,

@@ -3,7 +3,7 @@ the harness's share of the wall time.
 
 The plant's ``world.step()`` is wrapped in a timing accumulator (a proxy around the DART world,
 installed right after the plant's ``setup``; when the plant steps DART from C,
-:mod:`cpgsim.robots.dart_native`, the C call times ``World::step`` itself and the two are added); "harness"
+:mod:`cpgsim.robots.dart.native`, the C call times ``World::step`` itself and the two are added); "harness"
 is everything else in the run: the
 co-simulation master loop, the controller's compiled C step, the plant's contact readout and
 outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
@@ -19,8 +19,8 @@ cProfile breakdown of one more run.
 
 ``--grouping`` instead compares the controller compiled grouped (the default, :mod:`cpgsim.harness.compiler`)
 and flat, both on the master thread. ``--native`` instead compares, interleaved on the master thread, the
-controller + DART loop in C (the default: :mod:`cpgsim.robots.dart_fused`), the plant's C step under the
-master's Python loop (:mod:`cpgsim.robots.dart_native`, the fast path refused) and everything in Python
+controller + DART loop in C (the default: :mod:`cpgsim.robots.dart.fused`), the plant's C step under the
+master's Python loop (:mod:`cpgsim.robots.dart.native`, the fast path refused) and everything in Python
 (``CPGSIM_DART_NATIVE=0``: the code before the C step), and prints the loop / ``world.step`` ratio of each
 (``--profile`` then profiles one run of each). ``--scenario`` picks the scenario (default ``flat``).
 
@@ -44,7 +44,7 @@ import numpy as np
 
 from cpgsim.experiments.runner import build_scenario
 from cpgsim.harness.simulate import Simulator
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.dart.plant import DartHexapod
 
 
 class TimedWorld:
@@ -149,9 +149,9 @@ def _keep_native_time(graph) -> None:
             terminate = blk.terminate
 
             def timed_terminate(blk=blk, terminate=terminate) -> None:
-                if blk._native is not None:
-                    blk._bench_native_time = blk._native.step_time()
-                    blk._bench_loop_time = blk._native.loop_time()
+                if blk.native_step is not None:
+                    blk._bench_native_time = blk.native_step.step_time()
+                    blk._bench_loop_time = blk.native_step.loop_time()
                 terminate()
             blk.terminate = timed_terminate
 

@@ -25,7 +25,7 @@ import numpy as np
 from cpgsim.experiments.runner import run_scenario
 from cpgsim.experiments.setup import ENGINE_CONFIGS  # dart, mujoco, mujoco-soft (its own friction)
 from cpgsim.harness.results import Results
-from cpgsim.robots.engines import mujoco_available
+from cpgsim.robots.registry import mujoco_available
 
 LEG = 4  # R2 (leg 5 in Yu's numbering)
 STEP_H, EDGE_Y = 0.04, 0.355  # the step's height and riser position here (m): R2 arrives at its apex

@@ -28,7 +28,7 @@ import numpy as np
 from cpgsim.experiments.runner import run_scenario
 from cpgsim.experiments.setup import ENGINE_CONFIGS as CONFIGS  # dart, mujoco, mujoco-soft
 from cpgsim.harness.results import Results
-from cpgsim.robots.engines import mujoco_available
+from cpgsim.robots.registry import mujoco_available
 
 STEP_H, FOOT_R = 0.04, 0.01  # the scenario's step height and the yu-sim foot radius (m)
 REACH_M = 0.001  # m: a foot's front this close to the riser has reached it

@@ -5,7 +5,7 @@ controller's continuous and discrete states, the DART plant's generalized positi
 servo targets and contact readings). Of it, :class:`HexapodCoordinates` perturbs and measures:
 
 - ``body.z``, ``body.roll``, ``body.pitch``: the body's height and tilt (``roll``, ``pitch`` of
-  :func:`~cpgsim.robots.plant.rpy_from_rotation`); the body's forward and lateral position and its
+  :func:`~cpgsim.robots.description.rpy_from_rotation`); the body's forward and lateral position and its
   yaw are the **removed neutral directions** (on flat ground the stride map does not depend on them);
 - ``body.w[0..2]``, ``body.v[0..2]``: the free joint's velocities (angular, linear), which DART expresses
   in the body frame, so they do not depend on the heading either;
@@ -30,7 +30,7 @@ import numpy as np
 
 from cpgsim.harness.compile import CompiledModel
 from cpgsim.harness.simulate import Snapshot
-from cpgsim.robots.plant import rotation_from_rpy, rpy_from_rotation
+from cpgsim.robots.description import rotation_from_rpy, rpy_from_rotation
 
 JOINTS = ("alpha", "beta", "gamma")
 STATE_SCALES = {"rad": 0.1, "N": 1.0}

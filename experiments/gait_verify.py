@@ -30,6 +30,7 @@ from cpgsim.experiments.runner import build_scenario
 from cpgsim.experiments.scenario import ScenarioError
 from cpgsim.experiments.setup import RunSetup
 from cpgsim.harness.simulate import Simulator
+from cpgsim.robots.plant_base import HexapodPlant
 from cpgsim.verify.gait import GaitOptions, GaitResult, analyze
 from cpgsim.verify.stride import Section, SectionError, Stride, StrideMap
 
@@ -101,9 +102,10 @@ def verify_gait(scenario: str, sets: Mapping[str, Any] | None = None, options: G
     record = [section_state, f"{robot}.toe_force", leg_state.format(i="*", leg="*").replace("[*]", ""),
               f"{robot}.body_rpy"]
     plant = setup.graph.blocks.get(robot)
-    if plant is not None and not hasattr(plant, "snapshot"):
-        raise ScenarioError(f"scenario {scenario!r}: the {type(plant).__name__} plant cannot save its exact state "
-                            "(only the DART plant can so far): use robot.engine = \"dart\"")
+    if isinstance(plant, HexapodPlant) and plant.engine != "dart":
+        raise ScenarioError(f"scenario {scenario!r}: the stride map's body coordinates (experiments/gait_coords.py) "
+                            f"are written for DART's free joint, not engine {plant.engine!r}: use "
+                            "robot.engine = \"dart\"")
     sim = Simulator(setup.graph, dt=1e-3, record=record).prepare()
     section = Section(section_state, 0.0, 1, min_time=0.5)
     coords = HexapodCoordinates(sim.model, robot, section_state, joints=joints)

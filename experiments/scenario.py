@@ -63,7 +63,7 @@ from cpgsim.components.core import ModelError, did_you_mean
 BUILTIN_PACKAGE = "cpgsim.experiments.scenarios"
 CONTROLLER_KINDS = ("yu", "yu-open-loop", "fukuhara")
 ROBOT_PRESETS = ("yu-sim", "yu-prototype")
-ROBOT_ENGINES = ("dart", "mujoco")  # cpgsim.robots.engines.ENGINES (this layer does not import robots)
+ROBOT_ENGINES = ("dart", "mujoco")  # cpgsim.robots.registry.ENGINES (this layer does not import robots)
 
 
 class ScenarioError(ModelError):
@@ -116,7 +116,7 @@ class Field:
 POSITIVE = {"lo": 0.0, "strict": True}
 GEOMETRY_KEYS = ("body_length", "body_width", "body_thickness", "body_mass", "height", "clearance", "stance_width")
 
-MUJOCO_SCHEMA: dict[str, Field] = {  # the fields of cpgsim.robots.mjcf.ContactModel, which checks the values
+MUJOCO_SCHEMA: dict[str, Field] = {  # the fields of cpgsim.robots.mujoco.mjcf.ContactModel, which checks the values
     "timestep": Field(float, **POSITIVE, doc="s, MuJoCo's step (the 1 ms control step a multiple of it)"),
     "solref": Field(list, doc="[time constant s, damping ratio] of every contact's spring-damper"),
     "solimp": Field(list, doc="[d0, dwidth, width m]: contact impedance"),

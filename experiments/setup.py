@@ -53,7 +53,7 @@ def contact_model(scenario: Scenario):
     with the ``[robot.mujoco]`` table's values (``None`` on DART). A ``[robot.mujoco]`` table on DART is an
     error, not ignored: its settings would silently do nothing."""
     from cpgsim.components.core import ParameterError
-    from cpgsim.robots.mjcf import ContactModel
+    from cpgsim.robots.mujoco.mjcf import ContactModel
 
     table = scenario.doc["robot"].get("mujoco") or {}
     engine = engine_of(scenario)

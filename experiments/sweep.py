@@ -15,7 +15,7 @@ Output directory::
     <group>/trial_<i>_seed<seed>/   the run's results.csv/npz, summary.json (and pictures with plots=True)
 
 MuJoCo: when every trial is on MuJoCo and no executor is given, the trials run as one batch in this process
-(:func:`run_in_batch`, :mod:`cpgsim.robots.mujoco_batch`): their fused C loops advanced together on threads,
+(:func:`run_in_batch`, :mod:`cpgsim.robots.mujoco.batch`): their fused C loops advanced together on threads,
 the same numbers as alone.
 
 Determinism: a trial is a deterministic function of (scenario, seed, sets, t_end) -- CasADi and DART
@@ -214,7 +214,7 @@ def check_groups(scenario: str, groups: Sequence[Group], seed: int) -> bool:
 
 
 def batchable(setup: Any) -> bool:
-    """A trial that a MuJoCo batch (:mod:`cpgsim.robots.mujoco_batch`) runs in C: a MuJoCo plant without
+    """A trial that a MuJoCo batch (:mod:`cpgsim.robots.mujoco.batch`) runs in C: a MuJoCo plant without
     pushes (pushes step in Python)."""
     doc = setup.scenario.doc if setup.scenario is not None else {}
     return doc.get("robot", {}).get("engine") == "mujoco" and not doc.get("disturbance")
@@ -234,10 +234,10 @@ def use_batch(batch: bool | None, all_mujoco: bool, serial: bool, scheduler: str
 def run_in_batch(jobs: dict[Any, tuple[Callable[..., dict[str, Any]], tuple, dict[str, Any]]], threads: int,
                  bar: Any, info: dict[str, Any]) -> dict[Any, dict[str, Any]]:
     """Run ``{key: (trial_fn, (scenario, seed, sets, out_dir, ...), kwargs)}`` in this process as one MuJoCo
-    batch (:func:`cpgsim.robots.mujoco_batch.run_batch`, ``threads`` C threads): each trial on a Python
+    batch (:func:`cpgsim.robots.mujoco.batch.run_batch`, ``threads`` C threads): each trial on a Python
     thread of its own, every chunk of their fused loops advanced together. A trial function that raises is
     recorded as failed, as on Dask. Returns ``{key: record}``; ``info`` gets the executor and the counters."""
-    from cpgsim.robots.mujoco_batch import run_batch
+    from cpgsim.robots.mujoco.batch import run_batch
 
     keys = list(jobs)
     records: dict[Any, dict[str, Any]] = {}

@@ -1,15 +1,17 @@
 """The master's fast path: a co-simulation block that runs the closed loop with the compiled step in C.
 
 When a graph has exactly one co-simulation block, no direct feedthrough, no free inputs and no 64-bit
-integer ports, and the block offers ``closed_loop(...)`` (the MuJoCo plant,
-:meth:`cpgsim.robots.mujoco_plant.MujocoHexapod.closed_loop`), the master hands it the bound compiled step
-(:class:`cpgsim.harness.native.BoundStep`) and lets it run chunks of macro steps in one C call each: the
+integer ports, and the block is a :class:`~cpgsim.harness.contracts.FusedLoopBlock` (both robot plants), the
+master hands it the bound compiled step (:class:`cpgsim.harness.native.BoundStep`) as a
+:class:`~cpgsim.harness.contracts.FusedRequest` and lets the loop it returns run chunks of macro steps in one
+C call each: the
 same order as the Python loop of :func:`cpgsim.harness.master.run_master` (block outputs -> ``u``, step
 with commit, record, block inputs from ``y``, block step), so the results are the same numbers. Between
 chunks the recorder streams, the progress bar moves and Ctrl-C is seen. The last row (``t_end``: no step)
-is left to the ordinary loop. Found by duck typing: this layer imports no robot. The runner's status 3 (the
+is left to the ordinary loop. The contract (:mod:`cpgsim.harness.contracts`) lives here, in the engine layer,
+and the robots implement it: this layer imports no robot. The runner's status 3 (the
 plant's own state diverged) is an error of the block, named as such. A runner made on a trial thread of
-:func:`cpgsim.robots.mujoco_batch.run_batch` advances its chunks together with the other trials' (one C call
+:func:`cpgsim.robots.mujoco.batch.run_batch` advances its chunks together with the other trials' (one C call
 per round, on threads): this loop does not change.
 """
 
@@ -19,6 +21,8 @@ import ctypes
 from typing import Any
 
 import numpy as np
+
+from cpgsim.harness.contracts import FusedLoop, FusedLoopBlock, FusedRequest
 
 CHUNK = 100
 """Macro steps per C call (0.1 s simulated at 1 kHz)."""
@@ -30,11 +34,10 @@ def fused_runner(plan: Any, cs: dict, step: Any, u: np.ndarray, y: np.ndarray, n
 
     if len(cs) != 1 or plan.ft_paths or plan.exact_to_u or plan.exact_rec or plan.free_to_u:
         return None
-    if type(step) is not BoundStep or isinstance(step, ThreadedStep) or not step._ctx:
+    if type(step) is not BoundStep or isinstance(step, ThreadedStep) or not step.context:
         return None
     (path, blk), = cs.items()
-    make = getattr(blk, "closed_loop", None)
-    if make is None:
+    if not isinstance(blk, FusedLoopBlock):
         return None
     inputs = {}
     for port, (kind, where) in plan.feeds[path]:
@@ -42,8 +45,7 @@ def fused_runner(plan: Any, cs: dict, step: Any, u: np.ndarray, y: np.ndarray, n
             return None
         inputs[port] = where
     u_map = [(sl, port) for sl, p, port in plan.cs_to_u if p == path]
-    commit_fn = ctypes.cast(step._commit, ctypes.c_void_p).value
-    return make(commit_fn, step._ctx, nx, nz, u, y, u_map, inputs, plan.yi, dt)
+    return blk.fused_loop(FusedRequest(step.commit_address, step.context, nx, nz, u, y, u_map, inputs, plan.yi, dt))
 
 
 class TimeGrid:
@@ -77,10 +79,10 @@ def column_runs(columns: np.ndarray) -> list[tuple[slice, slice]]:
             for a, b in zip(starts, stops, strict=True)]
 
 
-def run_fused(runner: Any, plan: Any, rec: Any, times: np.ndarray, n: int, progress_bar: Any,
+def run_fused(runner: FusedLoop, plan: Any, rec: Any, times: np.ndarray, n: int, progress_bar: Any,
               on_diverged, chunk: int = CHUNK) -> int:
     """Macro steps ``0 .. n-1`` through ``runner`` in chunks; returns ``n`` (the next row for the master)."""
-    slices = runner.plant.output_slices
+    slices = runner.output_slices
     y_runs = column_runs(plan.yj)
     k = 0
     while k < n:

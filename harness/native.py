@@ -340,6 +340,16 @@ class BoundStep:
         self._commit = lib.cpgsim_step_commit
         self._nx, self._nz = nx, nz
 
+    @property
+    def context(self) -> int | None:
+        """The C address of the bound context (None once closed): what a fused loop passes to the commit."""
+        return self._ctx
+
+    @property
+    def commit_address(self) -> int:
+        """The C address of ``cpgsim_step_commit(ctx, t, nx, nz)``, for a block's fused loop."""
+        return ctypes.cast(self._commit, ctypes.c_void_p).value
+
     def _rc(self, t: float, commit: bool) -> int:
         """Step at ``t``: 0 done, 1 not finite (commit only: nothing moved), other: evaluation error."""
         return self._commit(self._ctx, t, self._nx, self._nz) if commit else 2 * self._call(self._ctx, t)

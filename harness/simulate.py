@@ -28,6 +28,7 @@ from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.harness import prefault
 from cpgsim.harness.compile import CompiledModel, compile_graph
+from cpgsim.harness.contracts import ResumableBlock
 from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
 from cpgsim.harness.master import run_master
 from cpgsim.harness.results import Results
@@ -169,7 +170,7 @@ class Simulator:
                 for path, blk in cs.items():  # each block starts in its saved state (consumed by its setup)
                     if resume is not None:
                         blk.resume_from(resume.blocks[path])
-                    elif hasattr(blk, "resume_from"):
+                    elif isinstance(blk, ResumableBlock):
                         blk.resume_from(None)
                 stop = self._run_cosim(cs, times, x, z, p, u_free, picks, rec, progress)
             else:
@@ -214,9 +215,12 @@ class Simulator:
             raise SimulationError("no finished run to take a snapshot of")
         blocks = {}
         for path, blk in self._cosim_blocks.items():
-            snap = getattr(blk, "last_snapshot", None)
-            if snap is None:
+            if not isinstance(blk, ResumableBlock):
                 raise SimulationError(f"co-simulation block {path!r} ({type(blk).__name__}) cannot save its state")
+            snap = blk.last_snapshot
+            if snap is None:
+                raise SimulationError(f"co-simulation block {path!r} ({type(blk).__name__}) kept no state of the "
+                                      "last run")
             blocks[path] = snap
         return Snapshot(self._last_t, final[0].copy(), final[1].copy(), blocks)
 
@@ -227,7 +231,7 @@ class Simulator:
             raise ModelError(f"snapshot of {snap.x.size} + {snap.z.size} states does not fit the model "
                              f"({m.states.size} + {m.dstates.size})")
         for path, blk in self._cosim_blocks.items():
-            if path not in snap.blocks or not hasattr(blk, "resume_from"):
+            if path not in snap.blocks or not isinstance(blk, ResumableBlock):
                 raise ModelError(f"snapshot has no state for co-simulation block {path!r}")
         return float(snap.t)
 
@@ -491,7 +495,9 @@ class Simulator:
                                   rec.results(False, "interrupted")) from exc
         finally:
             bar.close()
-            if hasattr(step, "stop_thread"):
+            from cpgsim.harness.native import ThreadedStep
+
+            if isinstance(step, ThreadedStep):
                 step.stop_thread()  # a parked worker must not outlive the run
         self.final_state = (x, z)
         self._last_t = float(times[rec.n - 1]) if rec.n else float(times[0])

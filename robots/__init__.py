@@ -1,17 +1,16 @@
-"""DART models of the hexapod (Yu Tables 3 and 4), terrains and the plant as a co-simulation block.
+"""The hexapod robot: one engine-neutral description, and the physics engines as plug-ins.
 
-- :mod:`cpgsim.robots.hexapod`: :func:`build_hexapod` (skeleton from a geometry preset);
-- :mod:`cpgsim.robots.terrain`: :func:`flat`, :func:`step`, :func:`ditches`, :func:`gaps`;
-- :mod:`cpgsim.robots.plant`: :class:`DartHexapod` (the plant block: servo targets in, joint states, toe
-  forces and body pose out);
-- :mod:`cpgsim.robots.engines`: ``make_plant(engine, ...)``, ``"dart"`` or ``"mujoco"``; the MuJoCo plant
-  (:mod:`cpgsim.robots.mujoco_plant`, model from :mod:`cpgsim.robots.mjcf`, C loop in
-  :mod:`cpgsim.robots.mujoco_native`) needs the optional ``mujoco`` package and is not imported here.
+Engine-neutral (import no engine):
+
+- :mod:`cpgsim.robots.description`: the robot (links, joints, shapes, masses, servo gains, postures);
+- :mod:`cpgsim.robots.terrain`: terrains as boxes (:func:`~cpgsim.robots.terrain.flat`, ``step``,
+  ``ditches``, ``gaps``, ``compose``);
+- :mod:`cpgsim.robots.ports`: the plant block's parameters and ports, the same in every engine;
+- :mod:`cpgsim.robots.plant_base`: :class:`~cpgsim.robots.plant_base.HexapodPlant`, what every engine's
+  plant shares (inputs, sub-steps, readout, snapshots, the fused-loop request);
+- :mod:`cpgsim.robots.registry`: the engines, their declared capabilities, ``make_plant(engine, ...)``;
+- :mod:`cpgsim.robots.readout`, :mod:`cpgsim.robots.disturbance`: the compiled sensor readout, pushes.
+
+Engines (each a subpackage, imported only when it runs): :mod:`cpgsim.robots.dart` (dartpy) and
+:mod:`cpgsim.robots.mujoco` (the ``mujoco`` package). docs/architecture.md explains the contract.
 """
-
-from cpgsim.robots.hexapod import HexapodModel, build_hexapod
-from cpgsim.robots.plant import DartHexapod, default_gains, standing_posture
-from cpgsim.robots.terrain import Terrain, ditches, flat, gaps, step
-
-__all__ = ["DartHexapod", "HexapodModel", "Terrain", "build_hexapod", "default_gains", "ditches", "flat",
-           "gaps", "standing_posture", "step"]

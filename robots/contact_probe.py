@@ -50,7 +50,7 @@ def probe(engine: str, theta_deg: float, phi_deg: float = 0.0, force: float = 10
           friction: float = 1.0, radius: float = 0.01, duration: float = 0.2, time_step: float = 1e-3,
           contact=None) -> float:
     """Distance (mm) the sphere moves in the second half of ``duration`` in ``engine`` (``"dart"`` or
-    ``"mujoco"``; ``contact``: MuJoCo's :class:`~cpgsim.robots.mjcf.ContactModel`, default its defaults)."""
+    ``"mujoco"``; ``contact``: MuJoCo's :class:`~cpgsim.robots.mujoco.mjcf.ContactModel`, default its defaults)."""
     if not (0.0 < theta_deg < 90.0 and 0.0 <= phi_deg < 90.0):
         raise ParameterError(f"contact probe: theta must be in (0, 90) and phi in [0, 90) degrees, got "
                              f"{theta_deg!r}, {phi_deg!r}")
@@ -112,7 +112,7 @@ def _dart_path(theta, phi, force, mass, friction, radius, n, dt, contact) -> np.
 def _mujoco_path(theta, phi, force, mass, friction, radius, n, dt, contact) -> np.ndarray:
     import mujoco
 
-    from cpgsim.robots.mjcf import ContactModel, geom_contact, option_element
+    from cpgsim.robots.mujoco.mjcf import ContactModel, geom_contact, option_element
 
     contact = contact or ContactModel()
     if abs(contact.timestep - dt) > 1e-15:
@@ -134,7 +134,7 @@ def _mujoco_path(theta, phi, force, mass, friction, radius, n, dt, contact) -> n
 
 
 MUJOCO_OWN_DEFAULTS = {"cone": "pyramidal", "impratio": 1.0}
-"""MuJoCo's own friction settings, which cpgsim's :class:`~cpgsim.robots.mjcf.ContactModel` replaces: the probe
+"""MuJoCo's own friction settings, which cpgsim's :class:`~cpgsim.robots.mujoco.mjcf.ContactModel` replaces: the probe
 shows them releasing the sphere far inside Coulomb's cone (docs/engines.md)."""
 
 NOSLIP_MUJOCO = {"noslip_iterations": 50}
@@ -143,7 +143,7 @@ NOSLIP_MUJOCO = {"noslip_iterations": 50}
 
 def table(thetas=(20, 30, 36, 38, 40, 44, 46, 50, 60), masses=(0.05, 1.0)) -> list[dict]:
     """The probe's rows: for each mass and angle, Coulomb's verdict and each engine's slide (mm per 0.1 s)."""
-    from cpgsim.robots.mjcf import ContactModel
+    from cpgsim.robots.mujoco.mjcf import ContactModel
 
     settings = {"dart": ("dart", None), "mujoco (cpgsim: elliptic, impratio 100)": ("mujoco", None),
                 "mujoco + noslip 50": ("mujoco", ContactModel(**NOSLIP_MUJOCO)),

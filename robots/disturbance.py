@@ -1,8 +1,8 @@
 """External pushes on the robot's body: a force held constant over a time window.
 
 A scenario's ``[[disturbance]]`` tables (:mod:`cpgsim.experiments.scenario`) become
-:class:`Push` values handed to the plant (``disturbances=`` of :class:`~cpgsim.robots.plant.DartHexapod`
-and :class:`~cpgsim.robots.mujoco_plant.MujocoHexapod`), which applies each active push at every world
+:class:`Push` values handed to the plant (``disturbances=`` of :class:`~cpgsim.robots.dart.plant.DartHexapod`
+and :class:`~cpgsim.robots.mujoco.plant.MujocoHexapod`), which applies each active push at every world
 step: the force ``force_N`` in the world frame, at ``point_m`` given in the body frame (default the body
 frame's origin, the centre of the body box). A push is active for the world steps that start in
 ``[start_s, start_s + duration_s)`` (each bound less half a step, against rounding), so its impulse is

@@ -1,12 +1,12 @@
 """The plant's per-step sensor readout as one CasADi function (compiled to C by the plant).
 
 ``hexapod_readout(pos, vel, force_world, body_contact) -> out`` maps DART's raw state to the
-plant's output ports, concatenated in port order (``OUTPUT_PORTS``):
+plant's output ports, concatenated in port order (:data:`cpgsim.robots.ports.OUTPUT_PORTS`):
 
 - ``q``, ``qd``: the 18 leg joint coordinates and velocities (``pos[6:]``, ``vel[6:]``);
 - ``toe_force``: each leg's world-frame ground force rotated into the body frame, ``R^T f``;
 - ``body_position``, ``body_rpy``: the body frame's origin and ``(roll, pitch, yaw)`` with
-  ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (:func:`cpgsim.robots.plant.rpy_from_rotation`);
+  ``R = Rz(yaw) Rx(pitch) Ry(roll)`` (:func:`cpgsim.robots.description.rpy_from_rotation`);
 - ``foot_position``: foot sphere centres in the world, ``p + R (mount + leg_fk(q_leg))`` with the
   leg kinematics of :func:`cpgsim.components.geometry.leg_fk` (the plant's tests check them against
   DART's own body transforms);
@@ -24,10 +24,6 @@ from __future__ import annotations
 import casadi as ca
 
 from cpgsim.components.geometry import RobotGeometry, leg_fk
-
-OUTPUT_PORTS = (("q", 18), ("qd", 18), ("toe_force", 18), ("body_position", 3), ("body_rpy", 3),
-                ("foot_position", 18), ("body_contact", 1))
-"""The plant's output ports in the order of the readout vector, with their sizes."""
 
 
 def rotation_from_rotation_vector(w: ca.SX) -> ca.SX:

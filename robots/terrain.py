@@ -3,8 +3,9 @@ Fukuhara 2022; stairs, random blocks and slopes for the benchmarks).
 
 A terrain is a list of static boxes (axis-aligned, or turned about x for a slope) in the world frame
 (``x`` lateral right, ``y`` forward, ``z`` up; the undisturbed ground surface is ``z = 0`` and the robot
-starts at the origin facing ``+y``). :class:`Terrain` adds itself to a DART world as one immobile
-skeleton and answers ground-height queries (for plots, initial placement and tests) without DART.
+starts at the origin facing ``+y``). :class:`Terrain` answers ground-height queries (for plots, initial
+placement and tests); each engine builds the boxes itself (:func:`cpgsim.robots.dart.ground.add_terrain`,
+:func:`cpgsim.robots.mujoco.mjcf.mjcf`). This module imports no engine.
 
 Sides: ``'right'`` is ``x >= 0`` (legs 4, 5, 6 = R1..R3), ``'left'`` is ``x <= 0``, ``'both'``
 is the whole width. Yu 6.1.1 uses a 40 mm step on the right side; Yu 6.1.2 ditches of 18, 40
@@ -17,7 +18,6 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-import dartpy as dart
 import numpy as np
 
 from cpgsim.components.core import ParameterError
@@ -88,8 +88,7 @@ class Terrain:
     """A terrain description: named, built from parameters, made of :class:`GroundBox` es.
 
     ``height_at(x, y)`` is the highest box top over ``(x, y)``, or ``-inf`` over a bottomless gap
-    (or outside the modelled extent). ``add_to(world)`` builds the boxes as one immobile skeleton
-    with collision and dynamics aspects (Coulomb ``friction``).
+    (or outside the modelled extent). ``friction`` is the boxes' Coulomb coefficient.
     """
 
     name: str
@@ -104,29 +103,6 @@ class Terrain:
         for b in self.boxes:
             h = np.where(b.contains(xa, ya), np.maximum(h, b.top_at(ya)), h)
         return float(h) if h.ndim == 0 else h
-
-    def add_to(self, world: dart.simulation.World) -> dart.dynamics.Skeleton:
-        """Add the terrain to ``world`` as an immobile skeleton named ``terrain`` and return it."""
-        skel = dart.dynamics.Skeleton(f"terrain_{self.name}")
-        _, body = skel.createWeldJointAndBodyNodePair()
-        body.setName("ground")
-        for k, b in enumerate(self.boxes):
-            centre, size, angle = b.pose()
-            shape = dart.dynamics.BoxShape(size)
-            node = body.createShapeNode(shape, f"ground_{k}")
-            T = dart.math.Isometry3()
-            T.set_identity()
-            if angle:
-                c, s = math.cos(angle), math.sin(angle)
-                T.set_rotation(np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]))
-            T.set_translation(centre)
-            node.setRelativeTransform(T)
-            node.createVisualAspect().setColor(np.asarray(OBSTACLE_COLOR if b.obstacle else GROUND_COLOR))
-            node.createCollisionAspect()
-            node.createDynamicsAspect().setFrictionCoeff(self.friction)
-        skel.setMobile(False)
-        world.addSkeleton(skel)
-        return skel
 
     def describe(self) -> str:
         args = ", ".join(f"{k}={v}" for k, v in self.params.items())

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cpgsim.components.core import CoSimBlock
+from cpgsim.harness.contracts import ResumableBlock
 from cpgsim.harness.simulate import Snapshot
 
 
@@ -38,7 +39,7 @@ class BallSnapshot:
                                    v=self.v + tau * (other.v - self.v))
 
 
-class KickedBall(CoSimBlock):
+class KickedBall(CoSimBlock, ResumableBlock):
     """Outputs ``h`` (m), ``v`` (m/s), ``x`` (m); parameters ``e``, ``c`` (m/s), ``g`` (m/s^2), ``vx`` (m/s)."""
 
     def __init__(self, name: str = "ball", h0: float = 1.0, **params: float) -> None:
@@ -66,6 +67,9 @@ class KickedBall(CoSimBlock):
 
     def snapshot(self) -> BallSnapshot:
         return BallSnapshot(*self._state)
+
+    def restore(self, snap: BallSnapshot) -> None:
+        self._state = [snap.t, snap.x, snap.h, snap.v]
 
     def terminate(self) -> None:
         if self._state is not None:

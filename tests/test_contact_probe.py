@@ -48,7 +48,7 @@ def test_mujoco_default_follows_coulomb_to_one_degree(theta, held):
     """cpgsim's MuJoCo default (elliptic cone, impratio 100): held to 44 degrees, released at 46; with the
     noslip post-solver the creep that is left goes too."""
     pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
-    from cpgsim.robots.mjcf import ContactModel
+    from cpgsim.robots.mujoco.mjcf import ContactModel
 
     assert coulomb_holds(theta, 0, 1.0) is held
     slide = probe("mujoco", theta)
@@ -62,7 +62,7 @@ def test_mujoco_own_default_friction_slides_inside_the_cone():
     constraint, so a light sphere slides away at 20 and 30 degrees, well inside the cone, and a 1 kg one
     creeps (docs/engines.md)."""
     pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
-    from cpgsim.robots.mjcf import ContactModel
+    from cpgsim.robots.mujoco.mjcf import ContactModel
 
     soft = ContactModel(**MUJOCO_OWN_DEFAULTS)
     assert coulomb_holds(20, 0, 1.0) and coulomb_holds(30, 0, 1.0)

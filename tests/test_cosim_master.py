@@ -17,7 +17,7 @@ from cpgsim.components.graph import Graph
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.native import NativeFunction
 from cpgsim.harness.simulate import SimulationDiverged, Simulator
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.dart.plant import DartHexapod
 
 
 class Pulses(CoSimBlock):

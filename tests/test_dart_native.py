@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.dart.plant import DartHexapod
 
 
 def _walk(robot: DartHexapod, steps: int) -> np.ndarray:
@@ -26,14 +26,14 @@ def test_c_step_equals_python_step(monkeypatch, settle):
     monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
     slow = DartHexapod(settle=settle)
     a = _walk(slow, 1500)
-    assert slow._native is None
+    assert slow.native_step is None
     monkeypatch.setenv("CPGSIM_DART_NATIVE", "1")
     fast = DartHexapod(settle=settle)  # the settling steps in C too
     b = _walk(fast, 1500)
-    if fast._native is None:
+    if fast.native_step is None:
         pytest.skip("no C step here (no C compiler or a dartpy without DART's symbols)")
-    assert fast._native.checks_left == 0  # compared with the Python readout, then on its own
-    seconds, steps, _ = fast._native.step_time()
+    assert fast.native_step.checks_left == 0  # compared with the Python readout, then on its own
+    seconds, steps, _ = fast.native_step.step_time()
     assert steps == 1500 + round(settle * 1000) and seconds > 0
     np.testing.assert_array_equal(a, b)
     assert np.abs(a[:, :18]).max() > 0  # something moved
@@ -47,19 +47,19 @@ def test_c_step_equals_python_step(monkeypatch, settle):
 def test_a_readout_that_differs_switches_back_to_python(monkeypatch):
     robot = DartHexapod()
     robot.setup(0.0)
-    if robot._native is None:
+    if robot.native_step is None:
         pytest.skip("no C step here")
-    python_readout = robot._read_contacts
+    python_readout = robot.read_contacts
 
     def skewed() -> None:  # the Python readout sees another force than the C step
         python_readout()
         robot._force_world[2] += 1.0
-    monkeypatch.setattr(robot, "_read_contacts", skewed)
+    monkeypatch.setattr(robot, "read_contacts", skewed)
     with pytest.warns(RuntimeWarning, match="stays in Python"):
         for _ in range(5):
             robot.set_inputs({"q_target": robot.q0})
             robot.do_step(robot.time, 1e-3)
-    assert robot._native is None
+    assert robot.native_step is None
     robot.set_inputs({"q_target": robot.q0})
     robot.do_step(robot.time, 1e-3)  # the Python loop goes on
     assert robot.time == pytest.approx(0.006)
@@ -69,7 +69,7 @@ def test_native_step_off_by_environment(monkeypatch):
     monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
     robot = DartHexapod()
     robot.setup(0.0)
-    assert robot._native is None
+    assert robot.native_step is None
     robot.terminate()
 
 
@@ -109,10 +109,11 @@ def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
     import ctypes
 
     from cpgsim.components.core import ModelError
+    from cpgsim.harness.contracts import FusedRequest
 
     robot = DartHexapod()
     robot.setup(0.0)
-    if robot._native is None:
+    if robot.native_step is None:
         pytest.skip("no C step here")
     y, u, q0 = np.zeros(18), np.zeros(3), robot.q0.copy()
     calls: list[float] = []
@@ -123,8 +124,9 @@ def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
         y[:] = np.nan if len(calls) == 60 else q0
         return 0
 
-    loop = robot.closed_loop(ctypes.cast(commit, ctypes.c_void_p).value, 0, 0, 0, u, y,
-                             [(slice(0, 3), "body_position")], {"q_target": slice(0, 18)}, np.arange(3), 1e-3)
+    request = FusedRequest(ctypes.cast(commit, ctypes.c_void_p).value, 0, 0, 0, u, y,
+                           [(slice(0, 3), "body_position")], {"q_target": slice(0, 18)}, np.arange(3), 1e-3)
+    loop = robot.fused_loop(request)
     assert loop is not None
     times = np.arange(201) * 1e-3
     with pytest.raises(ModelError, match="not finite"):
@@ -137,7 +139,7 @@ def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
 
 def test_unverified_dartpy_keeps_the_python_loop(monkeypatch):
     """Another dartpy release: no C step (its object layouts were not checked), a warning, the same numbers."""
-    from cpgsim.robots import dart_native
+    from cpgsim.robots.dart import native as dart_native
 
     monkeypatch.setattr(dart_native.dart, "__version__", "6.99.0", raising=False)
     monkeypatch.setattr(dart_native, "_LIB", None)
@@ -147,4 +149,4 @@ def test_unverified_dartpy_keeps_the_python_loop(monkeypatch):
     robot = DartHexapod()
     with pytest.warns(RuntimeWarning, match="DART's step stays in Python"):
         robot.setup(0.0)
-    assert robot._native is None
+    assert robot.native_step is None

@@ -57,7 +57,7 @@ def test_scenario_files_take_disturbance_tables(tmp_path):
 
 def _flight(engine: str, pushes: list[dict]) -> tuple[float, np.ndarray, np.ndarray]:
     """(mass, linear momentum, yaw rate of the body) after 0.2 s of free flight with ``pushes``."""
-    from cpgsim.robots.engines import make_plant
+    from cpgsim.robots.registry import make_plant
 
     plant = make_plant(engine, "r", body_height=1.0, disturbances=pushes)
     plant.setup(0.0)

@@ -10,11 +10,12 @@ mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not install
 
 from cpgsim.components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM  # noqa: E402
 from cpgsim.robots import terrain as tr  # noqa: E402
-from cpgsim.robots.engines import make_plant  # noqa: E402
-from cpgsim.robots.hexapod import build_hexapod  # noqa: E402
-from cpgsim.robots.mjcf import mjcf  # noqa: E402
-from cpgsim.robots.mujoco_plant import MujocoHexapod  # noqa: E402
-from cpgsim.robots.plant import GRAVITY, DartHexapod, standing_posture  # noqa: E402
+from cpgsim.robots.dart.model import build_hexapod  # noqa: E402
+from cpgsim.robots.dart.plant import DartHexapod  # noqa: E402
+from cpgsim.robots.description import GRAVITY, standing_posture  # noqa: E402
+from cpgsim.robots.mujoco.mjcf import mjcf  # noqa: E402
+from cpgsim.robots.mujoco.plant import MujocoHexapod  # noqa: E402
+from cpgsim.robots.registry import make_plant  # noqa: E402
 
 
 def _mj_inertia(model, body_id: int) -> np.ndarray:
@@ -196,7 +197,7 @@ def test_scenario_contact_model_on_dart_is_an_error_and_its_fields_are_contactmo
     keys are :class:`ContactModel`'s fields (one list of settable fields)."""
     from cpgsim.experiments.runner import build_scenario
     from cpgsim.experiments.scenario import MUJOCO_SCHEMA, ScenarioError
-    from cpgsim.robots.mjcf import ContactModel
+    from cpgsim.robots.mujoco.mjcf import ContactModel
 
     with pytest.raises(ScenarioError, match=r"robot\.mujoco sets MuJoCo's contact model \(impratio\).*"
                                             r"robot\.engine = 'dart'"):
@@ -226,9 +227,9 @@ def test_native_step_equals_python_step():
         plant = MujocoHexapod(settle=0.1, native=native, time_step=5e-4,
                               terrain=tr.step(height=0.04, position_y=0.2, side="right"))
         plant.setup(0.0)
-        if native and plant._native is None:
+        if native and plant.native_step is None:
             pytest.skip("no C compiler or no libmujoco for the native step")
-        assert (plant._native is not None) == native
+        assert (plant.native_step is not None) == native
         for k in range(150):
             q = plant.q0.copy()
             q[9::3] += 0.3 * np.sin(0.02 * k)  # R-legs swing: contacts come and go

@@ -1,4 +1,4 @@
-"""MuJoCo batches (cpgsim.robots.mujoco_batch): trials advanced together on threads in one C call give the
+"""MuJoCo batches (cpgsim.robots.mujoco.batch): trials advanced together on threads in one C call give the
 numbers of the same trials run alone, a trial that diverges stops only itself and is reported as diverged,
 and the sweep and benchmark records name the trial that failed."""
 
@@ -12,7 +12,7 @@ pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip i
 from cpgsim.experiments.runner import build_scenario  # noqa: E402
 from cpgsim.harness.errors import SimulationError  # noqa: E402
 from cpgsim.harness.simulate import Simulator  # noqa: E402
-from cpgsim.robots.mujoco_batch import run_batch  # noqa: E402
+from cpgsim.robots.mujoco.batch import run_batch  # noqa: E402
 
 MJ = {"robot.engine": "mujoco"}
 STEP = {**MJ, "terrain.step.type": "step", "terrain.step.height": 0.045, "terrain.step.position_y": 0.19,

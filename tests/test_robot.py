@@ -12,8 +12,9 @@ import pytest
 from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_PROTOTYPE, YU_SIM, leg_fk
 from cpgsim.robots import terrain as tr
-from cpgsim.robots.hexapod import build_hexapod, foot_positions_body
-from cpgsim.robots.plant import DartHexapod, rotation_from_rpy, rpy_from_rotation, standing_posture
+from cpgsim.robots.dart.model import build_hexapod
+from cpgsim.robots.dart.plant import DartHexapod
+from cpgsim.robots.description import foot_positions_body, rotation_from_rpy, rpy_from_rotation, standing_posture
 
 G = 9.81
 
@@ -96,7 +97,7 @@ def test_readout_matches_dart_for_large_body_rotations():
         robot.model.set_body_pose([0.1, -0.2, 0.5], R_set)
         robot.model.set_joint_angles(robot.q0 + rng.uniform(-0.3, 0.3, 18))
         robot._force_world[:] = rng.normal(size=18)
-        robot._update_outputs()
+        robot.update_outputs()
         out = robot.get_outputs()
         R = robot.model.body.getWorldTransform().rotation()
         assert np.allclose(R, R_set, atol=1e-12)

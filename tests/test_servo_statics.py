@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from cpgsim.components.geometry import YU_SIM, leg_fk
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.dart.plant import DartHexapod
 
 pytestmark = pytest.mark.slow  # two 3 s standing runs
 
@@ -59,7 +59,7 @@ def _ratio(servo: np.ndarray, gravity: np.ndarray, contact: np.ndarray) -> np.nd
 
 def test_mujoco_servo_holds_the_static_load_by_its_law():
     mujoco = pytest.importorskip("mujoco", reason="the mujoco package is not installed (pip install 'cpgsim[mujoco]')")
-    from cpgsim.robots.mujoco_plant import MujocoHexapod
+    from cpgsim.robots.mujoco.plant import MujocoHexapod
 
     plant = MujocoHexapod(settle=1.0, friction=0.05)
     _stand(plant)

@@ -57,7 +57,7 @@ def test_an_angle_out_of_range_is_refused_naming_it(bad, message):
 def test_mujoco_builds_the_same_surface():
     mujoco = pytest.importorskip("mujoco")
     from cpgsim.components.geometry import YU_SIM
-    from cpgsim.robots.mjcf import mjcf
+    from cpgsim.robots.mujoco.mjcf import mjcf
 
     model = mujoco.MjModel.from_xml_string(mjcf(YU_SIM, _slope()))
     data = mujoco.MjData(model)
@@ -72,11 +72,12 @@ def test_mujoco_builds_the_same_surface():
 def test_dart_builds_the_same_surface():
     import dartpy as dart
 
-    from cpgsim.robots.plant import DETECTORS
+    from cpgsim.robots.dart.ground import add_terrain
+    from cpgsim.robots.dart.plant import DETECTORS
 
     world = dart.simulation.World()
     world.setCollisionDetector(DETECTORS["dart"]())  # the robot plant's default detector
-    _slope().add_to(world)
+    add_terrain(world, _slope())
     ball = dart.dynamics.Skeleton("ball")
     _, body = ball.createFreeJointAndBodyNodePair()
     r = 0.005

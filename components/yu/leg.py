@@ -20,7 +20,7 @@ Ports of ``hexapod_controller`` (leg-major vectors, legs 0..5 = L1, L2, L3, R1, 
 port         dir   shape unit   meaning
 ============ ===== ===== ====== ===================================================================
 toe_force    in    18    N      per leg ``(Fx lateral, Fy forward, Fz vertical)``, the ground's force
-                                on the foot, ``Fz > 0`` standing (``cpgsim.robots.plant.DartHexapod``'s
+                                on the foot, ``Fz > 0`` standing (``cpgsim.robots.dart.plant.DartHexapod``'s
                                 ``toe_force``); default 5 N everywhere: all feet in contact, no
                                 obstacle (the controller then walks its nominal gait)
 q_target     out   18    rad    joint targets ``(alpha, beta, gamma)`` per leg (to ``q_target``)

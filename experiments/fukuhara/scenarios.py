@@ -58,8 +58,7 @@ from cpgsim.experiments.setup import (
     terrain_of,
 )
 from cpgsim.harness.results import Results
-from cpgsim.robots.engines import make_plant
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.registry import make_plant
 from cpgsim.robots.terrain import Terrain
 
 EXPECTED_GAIT = {1: "tripod", 2: "tetrapod", 3: "wave"}
@@ -70,34 +69,6 @@ GAP_MARGIN = 0.25  # m the body centre must pass beyond the gap's far edge
 MIN_WALK = 0.1  # m forward for the amputation scenario to count as walking
 DEFAULT_T_END = {1: 30.0, 2: 40.0, 3: 45.0}
 DEFAULT_TRANSIENT = {1: 15.0, 2: 15.0, 3: 15.0}
-
-
-class AmputatedHexapod(DartHexapod):
-    """The DART hexapod with some legs taken out of the collision world (they touch nothing).
-
-    The legs keep their links and mass (0.27 kg each on YU_SIM) and are held folded by the controller;
-    their shapes are removed from the world's collision group after the world is built, before the
-    settle phase.
-    """
-
-    def __init__(self, name: str = "robot", amputated: tuple[int, ...] = (), settle: float = 0.0,
-                 **kw: Any) -> None:
-        self.amputated = tuple(amputated)
-        self._settle_after = float(settle)
-        super().__init__(name, settle=0.0, **kw)
-
-    def setup(self, t0: float) -> None:
-        super().setup(t0)
-        group = self.world.getConstraintSolver().getCollisionGroup()
-        for i in self.amputated:
-            for body in self.model.link_bodies[i]:
-                for node in body.getShapeNodes():
-                    group.removeShapeFrame(node)
-                    node.removeCollisionAspect()
-        if self._settle_after > 0:
-            self._settle(self._settle_after)
-            self.world.setTime(float(t0))
-            self._update_outputs()
 
 
 # -- building ------------------------------------------------------------------------------------
@@ -139,7 +110,7 @@ def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: di
                 geometry: RobotGeometry = YU_SIM, engine: str = "dart",
                 contact=None) -> tuple[Graph, dict, dict, np.ndarray]:
     """Controller + plant graph (``engine``: ``"dart"`` or ``"mujoco"``, ``contact`` MuJoCo's
-    :class:`~cpgsim.robots.mjcf.ContactModel` or ``None``); returns (graph, scenario options, controller
+    :class:`~cpgsim.robots.mujoco.mjcf.ContactModel` or ``None``); returns (graph, scenario options, controller
     overrides, initial alpha)."""
     opts, ctrl_params, paths = _split_sets(sets, options)
     setting = _setting(opts.get("setting", 1))
@@ -150,12 +121,8 @@ def closed_loop(name: str, sets: dict[str, float], seed: int | None, options: di
     alpha0 = initial_alpha(seed, geometry)
     set_initial(ctrl, alpha0)
     q0 = initial_joint_targets(geometry, alpha0, cut)
-    if engine == "dart":
-        robot = AmputatedHexapod("robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
-                                 settle=SETTLE)
-    else:
-        robot = make_plant(engine, "robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
-                           settle=SETTLE, **({"contact": contact} if contact is not None else {}))
+    robot = make_plant(engine, "robot", amputated=tuple(cut), geometry=geometry, terrain=terrain, q0=q0,
+                       settle=SETTLE, contact=contact)
     g = Graph(name.replace("-", "_"), f"Fukuhara controller + {engine} hexapod ({name})")
     g.add(ctrl)
     g.add(robot)
@@ -394,5 +361,5 @@ def gap_outcome(res: Results, far_edge: float, margin: float = GAP_MARGIN) -> di
 
 
 
-__all__ = ["AmputatedHexapod", "EXPECTED_GAIT", "MODE_NAMES", "build", "closed_loop", "gait_summary",
+__all__ = ["EXPECTED_GAIT", "MODE_NAMES", "build", "closed_loop", "gait_summary",
            "gap_outcome", "initial_alpha", "mode_stance"]

@@ -99,8 +99,8 @@ from cpgsim.experiments.setup import (
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.results import Results
 from cpgsim.robots import terrain as tr
-from cpgsim.robots.engines import make_plant
-from cpgsim.robots.plant import DartHexapod
+from cpgsim.robots.plant_base import HexapodPlant
+from cpgsim.robots.registry import make_plant
 
 CONTROLLER = "controller"
 ROBOT = "robot"
@@ -124,15 +124,15 @@ def initial_targets(controller: Graph) -> np.ndarray:
 
 def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[str, float],
                 sets: dict[str, float], clearance_elevator: float | None = None,
-                gait: int = 1, engine: str = "dart", contact=None) -> tuple[Graph, DartHexapod]:
+                gait: int = 1, engine: str = "dart", contact=None) -> tuple[Graph, HexapodPlant]:
     """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``);
-    ``engine`` picks the plant (:mod:`cpgsim.robots.engines`; same ports in every engine), ``contact`` a
-    MuJoCo :class:`~cpgsim.robots.mjcf.ContactModel` (MuJoCo only; ``None``: its defaults)."""
+    ``engine`` picks the plant (:mod:`cpgsim.robots.registry`; same ports in every engine), ``contact`` a
+    MuJoCo :class:`~cpgsim.robots.mujoco.mjcf.ContactModel` (MuJoCo only; ``None``: its defaults)."""
     ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator)
     for key, value in thresholds.items():
         ctrl.set_param(f"*.sensors.{key}", value)
     robot = make_plant(engine, ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2,
-                       **({"contact": contact} if contact is not None else {}))
+                       contact=contact)
     g = Graph("yu_closed_loop", f"Yu hexapod controller on the {engine} {geometry.name} robot")
     g.add(ctrl)
     g.add(robot)

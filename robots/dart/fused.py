@@ -1,6 +1,7 @@
-"""The controller's compiled step and the DART plant in one C loop (``cpgsim_dart_loop``, :mod:`.dart_native`).
+"""The controller's compiled step and the DART plant in one C loop (``cpgsim_dart_loop``, :mod:`.native`).
 
-Built by :meth:`cpgsim.robots.plant.DartHexapod.closed_loop` for the master's fast path
+A :class:`~cpgsim.harness.contracts.FusedLoop`, built by
+:meth:`cpgsim.robots.dart.plant.DartHexapod.fused_loop` for the master's fast path
 (:mod:`cpgsim.harness.fused`). ``run(k0, k1, times)`` does macro steps ``k0 .. k1-1`` and returns
 ``(rows, status, Y, O)`` like the MuJoCo plant's loop: the rows recorded, the status (0 done, 1 the
 controller's state went non-finite at the last row, 2 an evaluation error), the recorded signals ``y[yi]``
@@ -8,8 +9,8 @@ and the plant's output vectors per row. What the C loop leaves to Python, Python
 then the loop goes on: a servo target that is not finite goes through the plant's ``set_inputs`` (which
 refuses it, as in the master's loop), and a collision object met for the first time through the plant's
 Python contact readout (which registers it with the C step). The first
-:attr:`~cpgsim.robots.dart_native.NativeDartStep.CHECK_STEPS` steps of a set-up run one per call, each
-compared with the plant's Python readout (:meth:`~cpgsim.robots.plant.DartHexapod._check_native`); a
+:attr:`~cpgsim.robots.dart.native.NativeDartStep.CHECK_STEPS` steps of a set-up run one per call, each
+compared with the plant's Python readout (:meth:`~cpgsim.robots.dart.plant.DartHexapod.check_native_step`); a
 difference ends the run with an error naming ``CPGSIM_DART_NATIVE=0`` (the loop cannot go on in Python).
 So the numbers are the Python loop's.
 """
@@ -20,34 +21,39 @@ import ctypes
 
 import numpy as np
 
+from cpgsim.harness.contracts import FusedRequest
 from cpgsim.harness.fused import TimeGrid
-from cpgsim.robots.dart_native import NativeDartStep
+from cpgsim.robots.dart.native import NativeDartStep
 
 
 class FusedLoop:
     """One plant's world and one controller's bound step, looped in C (see the module docstring)."""
 
-    def __init__(self, plant, native: NativeDartStep, commit_fn: int, ctx: int, nx: int, nz: int,
-                 u: np.ndarray, y: np.ndarray, u_idx: np.ndarray, o_idx: np.ndarray, qt_idx: np.ndarray,
-                 yi: np.ndarray, chunk: int = 100) -> None:
+    def __init__(self, plant, native: NativeDartStep, request: FusedRequest, u_idx: np.ndarray, o_idx: np.ndarray,
+                 qt_idx: np.ndarray, chunk: int = 100) -> None:
         self.plant, self.native = plant, native
+        self.output_slices = plant.output_slices
         dp = ctypes.POINTER(ctypes.c_double)
         lp = ctypes.POINTER(ctypes.c_longlong)
+        yi = request.yi
         self._keep = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, qt_idx, yi)]
-        self._y, self._qt_idx = y, np.asarray(qt_idx)
+        self._y, self._qt_idx = request.y, np.asarray(qt_idx)
+        out = plant.buffers.out
         self.Y = np.zeros((chunk, max(1, len(yi))))
-        self.O = np.zeros((chunk, plant._readout_out.size))
+        self.O = np.zeros((chunk, out.size))
         self.chunk = chunk
-        self.q_target = plant._q_target.copy()  # the C loop's target (copied to the plant after each call)
-        self._changed = ctypes.c_int(int(plant._target_changed))
+        q_target, changed = plant.servo_state
+        self.q_target = q_target.copy()  # the C loop's target (copied to the plant after each call)
+        self._changed = ctypes.c_int(int(changed))
         self._updated = ctypes.c_int(0)
         self._status = ctypes.c_int(0)
-        self._fn = native._lib.cpgsim_dart_loop
+        self._fn = native.library.cpgsim_dart_loop
         u_i, o_i, q_i, y_i = (a.ctypes.data_as(lp) for a in self._keep)
-        self._head = (native._ctx, ctypes.c_void_p(commit_fn), ctypes.c_void_p(ctx), nx, nz, u.ctypes.data_as(dp),
-                      y.ctypes.data_as(dp), len(u_idx), u_i, o_i, plant._readout_out.ctypes.data_as(dp),
-                      plant._readout_out.size, q_i, self.q_target.ctypes.data_as(dp), ctypes.byref(self._changed),
-                      ctypes.byref(self._updated), float(plant.values["kp"]), len(yi), y_i)
+        self._head = (native.context, ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx,
+                      request.nz, request.u.ctypes.data_as(dp), request.y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
+                      out.ctypes.data_as(dp), out.size, q_i, self.q_target.ctypes.data_as(dp),
+                      ctypes.byref(self._changed), ctypes.byref(self._updated), float(plant.values["kp"]), len(yi),
+                      y_i)
         self._grid = TimeGrid()
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
@@ -56,7 +62,7 @@ class FusedLoop:
         times_p = self._grid.pointer(times)
         plant, k, status = self.plant, k0, 0
         while k < k1:
-            if plant._native is not self.native:
+            if plant.native_step is not self.native:
                 raise RuntimeError(f"{plant.name}: the C step of DART disagreed with dartpy's bindings; "
                                    "run with CPGSIM_DART_NATIVE=0")
             checking = self.native.checks_left > 0
@@ -71,13 +77,14 @@ class FusedLoop:
             if status == 4:  # a target not finite: the plant refuses it (ModelError), as in the master's loop
                 plant.set_inputs({"q_target": self._y[self._qt_idx].copy()})
                 plant.do_step(float(times[k - 1]), float(times[k] - times[k - 1]))
-                self.q_target[:] = plant._q_target
-                self._changed.value = int(plant._target_changed)
+                q_target, changed = plant.servo_state
+                self.q_target[:] = q_target
+                self._changed.value = int(changed)
             elif status == 5:  # the world step met a collision object for the first time
-                plant._read_contacts()
-                plant._update_outputs()
+                plant.read_contacts()
+                plant.update_outputs()
             elif checking:
-                plant._check_native()
+                plant.check_native_step()
             status = 0
         return k - k0, status, self.Y[:k - k0], self.O[:k - k0]
 
@@ -88,4 +95,4 @@ class FusedLoop:
     def _sync(self, k: int) -> None:
         """The plant's Python state once the C loop has stepped it to ``times[k]``."""
         updated, self._updated.value = self._updated.value, 0
-        self.plant._after_fused(float(self._grid.values[k]), self.q_target, bool(self._changed.value), updated > 0)
+        self.plant.take_c_loop_state(float(self._grid.values[k]), self.q_target, bool(self._changed.value), updated > 0)

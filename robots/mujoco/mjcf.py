@@ -1,19 +1,18 @@
-"""The hexapod and its terrain as a MuJoCo model (MJCF text), from the same description as the DART model.
+"""The hexapod and its terrain as a MuJoCo model (MJCF text), written from the engine-neutral description.
 
-One source of truth: :func:`mjcf` reads the :class:`~cpgsim.components.geometry.RobotGeometry`, the
-:class:`~cpgsim.robots.hexapod.LinkSizes` and the :class:`~cpgsim.robots.terrain.Terrain` boxes that
-:func:`cpgsim.robots.hexapod.build_hexapod` and :meth:`Terrain.add_to` read, and builds the same bodies,
-frames, joint axes, shapes and masses (:mod:`cpgsim.robots.hexapod` explains them):
+One source of truth: :func:`mjcf` walks the link table of :func:`cpgsim.robots.description.describe_hexapod`
+(the same table :func:`cpgsim.robots.dart.model.build_hexapod` walks) and the
+:class:`~cpgsim.robots.terrain.Terrain` boxes, so the bodies, frames, joint axes, shapes and masses are the
+DART model's:
 
-- a free root joint carrying the body box; per leg the ``alpha`` (``side * z``), ``beta`` (``-y``) and
-  ``gamma`` (``+y``) hinges at the mount, coxa end and femur end, in a leg frame with ``x`` outward (the
-  left legs' frame is turned by pi about ``z``); box links, the tibia box stopping half a foot radius short
-  of the foot sphere at the tibia's end;
-- every body's mass, centre of mass and full inertia written out (``<inertial>``), computed here in closed
-  form (uniform solid box ``m/12 (b^2 + c^2)``, sphere ``2/5 m r^2``, parallel-axis sum) -- exactly what
-  DART's ``Shape.computeInertia`` and ``hexapod._set_inertia`` give (``tests/test_mujoco.py`` checks it);
+- a free root joint carrying the body box; per leg the ``alpha``, ``beta`` and ``gamma`` hinges, in a leg
+  frame with ``x`` outward (the left legs' frame is turned by pi about ``z``); box links, the tibia box
+  stopping half a foot radius short of the foot sphere at the tibia's end;
+- every body's mass, centre of mass and full inertia written out (``<inertial>``), from the description's
+  closed forms (uniform solid box ``m/12 (b^2 + c^2)``, sphere ``2/5 m r^2``, parallel-axis sum), which
+  agree with DART's ``Shape.computeInertia`` (``tests/test_mujoco.py`` checks it);
 - joints unlimited, as in DART (the servos hold them); the servos are ``general`` actuators whose force
-  is DART's servo law (:class:`cpgsim.robots.mujoco_plant.MujocoHexapod` sets the gains);
+  is DART's servo law (:class:`cpgsim.robots.mujoco.plant.MujocoHexapod` sets the gains);
 - terrain boxes as static world geoms. Only robot-terrain pairs collide (``contype``/``conaffinity``),
   as in DART, where a skeleton does not collide with itself.
 
@@ -29,13 +28,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import LEG_NAMES, RobotGeometry
+from cpgsim.robots.description import GRAVITY, BodyMass, LinkSizes, LinkSpec, describe_hexapod
 from cpgsim.robots.terrain import Terrain
 
-GRAVITY = 9.81
 CONES = ("pyramidal", "elliptic")
 CONDIMS = (1, 3, 4, 6)
 
@@ -145,61 +142,6 @@ def _plain(value: object) -> str:
     return repr(list(value)) if isinstance(value, tuple) else repr(value)
 
 
-def box_inertia(mass: float, size: Sequence[float]) -> np.ndarray:
-    """Inertia (3x3, about the centre) of a uniform solid box of full edge lengths ``size``."""
-    a, b, c = (float(s) for s in size)
-    return mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
-
-
-def sphere_inertia(mass: float, radius: float) -> np.ndarray:
-    """Inertia (3x3, about the centre) of a uniform solid sphere."""
-    return 0.4 * mass * radius * radius * np.eye(3)
-
-
-def combine(parts: Sequence[tuple[float, np.ndarray, np.ndarray]]) -> tuple[float, np.ndarray, np.ndarray]:
-    """``(mass, com, inertia about com)`` of ``(mass, centre, inertia about centre)`` parts (parallel axes)."""
-    parts = [p for p in parts if p[0] > 0]
-    if not parts:
-        return 1e-6, np.zeros(3), 1e-9 * np.eye(3)
-    mass = sum(m for m, _, _ in parts)
-    com = sum(m * np.asarray(c, dtype=float) for m, c, _ in parts) / mass
-    inertia = np.zeros((3, 3))
-    for m, c, local in parts:
-        d = np.asarray(c, dtype=float) - com
-        inertia += local + m * (d @ d * np.eye(3) - np.outer(d, d))
-    return mass, com, inertia
-
-
-@dataclass(frozen=True)
-class BodyMass:
-    """One body's mass properties in its own frame."""
-
-    mass: float
-    com: np.ndarray
-    inertia: np.ndarray
-
-
-def mass_properties(geometry: RobotGeometry, links=None) -> dict[str, BodyMass]:
-    """Mass, COM and inertia of every body (``body``, ``L1_coxa``, ``L1_femur``, ``L1_tibia``, ...)."""
-    from cpgsim.robots.hexapod import LinkSizes  # the DART module (dartpy) only for the link sizes' rule
-
-    leg = geometry.leg
-    links = links or LinkSizes.for_geometry(geometry)
-    out = {"body": BodyMass(*combine([(geometry.body_mass, np.zeros(3), box_inertia(
-        geometry.body_mass, (geometry.body_width, geometry.body_length, geometry.body_thickness)))]))}
-    shank_len = leg.shank - 0.5 * leg.foot_radius
-    for name in LEG_NAMES:
-        out[f"{name}_coxa"] = BodyMass(*combine([(leg.coxa_mass, np.array([leg.coxa / 2, 0, 0]), box_inertia(
-            leg.coxa_mass, (leg.coxa, links.coxa_width, links.coxa_width)))]))
-        out[f"{name}_femur"] = BodyMass(*combine([(leg.thigh_mass, np.array([leg.thigh / 2, 0, 0]), box_inertia(
-            leg.thigh_mass, (leg.thigh, links.femur_width, links.femur_width)))]))
-        out[f"{name}_tibia"] = BodyMass(*combine([
-            (leg.shank_mass, np.array([shank_len / 2, 0, 0]),
-             box_inertia(leg.shank_mass, (shank_len, links.tibia_width, links.tibia_width))),
-            (leg.foot_mass, np.array([leg.shank, 0, 0]), sphere_inertia(leg.foot_mass, leg.foot_radius))]))
-    return out
-
-
 def _v(values: Sequence[float]) -> str:
     return " ".join(f"{float(x):.17g}" for x in values)
 
@@ -214,22 +156,52 @@ ROBOT_COLLISION = 'contype="1" conaffinity="0"'
 TERRAIN_COLLISION = 'contype="0" conaffinity="1" priority="1"'
 
 
+def mass_properties(geometry: RobotGeometry, links: LinkSizes | None = None) -> dict[str, BodyMass]:
+    """Mass, COM and inertia of every body (``body``, ``L1_coxa``, ``L1_femur``, ``L1_tibia``, ...)."""
+    return describe_hexapod(geometry, links).mass_properties()
+
+
+def _link_lines(link: LinkSpec, children: dict[str, list[LinkSpec]], rgeom: str, depth: int) -> list[str]:
+    """The ``<body>`` element of ``link`` and, nested, its children's."""
+    pad = "  " * depth
+    if link.parent is None:
+        lines = [f'{pad}<body name="{link.name}" pos="0 0 0">', f'{pad}  <freejoint name="root"/>']
+    else:
+        quat = ' quat="0 0 0 1"' if link.turned else (' quat="1 0 0 0"' if link.joint.endswith("_alpha") else "")
+        lines = [f'{pad}<body name="{link.name}" pos="{_v(link.origin)}"{quat}>',
+                 f'{pad}  <joint name="{link.joint}" type="hinge" axis="{_axis(link.axis)}"/>']
+    lines.append(f'{pad}  {_inertial(link.mass_properties())}')
+    for spec in link.shapes:
+        if spec.kind == "sphere":
+            lines.append(f'{pad}  <geom name="{spec.name}" type="sphere" size="{spec.size[0]:.17g}" '
+                         f'pos="{_v(spec.offset)}" {rgeom}/>')
+        elif link.parent is None:
+            lines.append(f'{pad}  <geom name="{spec.name}" type="box" size="{_v(tuple(x / 2 for x in spec.size))}" '
+                         f'{rgeom}/>')
+        else:
+            lines.append(f'{pad}  <geom name="{spec.name}" type="box" size="{_v(tuple(x / 2 for x in spec.size))}" '
+                         f'pos="{_v(spec.offset)}" {rgeom}/>')
+    for child in children.get(link.name, []):
+        lines += _link_lines(child, children, rgeom, depth + 1)
+    lines.append(f'{pad}</body>')
+    return lines
+
+
+def _axis(axis: tuple[float, float, float]) -> str:
+    return " ".join(f"{a:g}" for a in axis)
+
+
 def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
-         contact: ContactModel | None = None, links=None) -> str:
+         contact: ContactModel | None = None, links: LinkSizes | None = None) -> str:
     """The MJCF document of the hexapod on ``terrain`` (body at the world origin, joints at 0).
 
     Actuators ``{leg}_{joint}_servo`` (one per hinge, leg-major) are ``general`` with unit gain and zero
     bias; the plant writes the servo gains into ``actuator_gainprm``/``actuator_biasprm``.
     """
-    from cpgsim.robots.hexapod import LinkSizes
-
     contact = contact or ContactModel()
-    leg = geometry.leg
-    links = links or LinkSizes.for_geometry(geometry)
-    masses = mass_properties(geometry, links)
+    description = describe_hexapod(geometry, links)
     geom_common = geom_contact(contact)
     rgeom = f'{ROBOT_COLLISION} friction="{friction:.17g} 0 0" {geom_common}'
-    shank_len = leg.shank - 0.5 * leg.foot_radius
     lines = [
         f'<mujoco model="{geometry.name}">',
         '  <compiler angle="radian" autolimits="true" inertiafromgeom="false"/>',
@@ -243,36 +215,11 @@ def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
         turn = f'euler="{angle:.17g} 0 0" ' if angle else ""
         lines.append(f'    <geom name="ground_{k}" type="box" size="{_v(tuple(size / 2))}" pos="{_v(tuple(centre))}" '
                      f'{turn}{TERRAIN_COLLISION} friction="{ground_mu:.17g} 0 0" {geom_common}/>')
-    lines += ['    <body name="body" pos="0 0 0">', '      <freejoint name="root"/>',
-              f'      {_inertial(masses["body"])}',
-              f'      <geom name="body_box" type="box" size="'
-              f'{_v((geometry.body_width / 2, geometry.body_length / 2, geometry.body_thickness / 2))}" {rgeom}/>']
-    for i, (mx, my) in enumerate(geometry.mounts):
-        side = geometry.side(i)
-        name = LEG_NAMES[i]
-        quat = "1 0 0 0" if side > 0 else "0 0 0 1"  # left legs: leg frame turned by pi about z
-        cw, fw, tw = links.coxa_width / 2, links.femur_width / 2, links.tibia_width / 2
-        lines += [
-            f'      <body name="{name}_coxa" pos="{_v((mx, my, 0.0))}" quat="{quat}">',
-            f'        <joint name="{name}_alpha" type="hinge" axis="0 0 {float(side):g}"/>',
-            f'        {_inertial(masses[f"{name}_coxa"])}',
-            f'        <geom name="{name}_coxa_box" type="box" size="{_v((leg.coxa / 2, cw, cw))}" '
-            f'pos="{_v((leg.coxa / 2, 0, 0))}" {rgeom}/>',
-            f'        <body name="{name}_femur" pos="{_v((leg.coxa, 0, 0))}">',
-            f'          <joint name="{name}_beta" type="hinge" axis="0 -1 0"/>',
-            f'          {_inertial(masses[f"{name}_femur"])}',
-            f'          <geom name="{name}_femur_box" type="box" size="{_v((leg.thigh / 2, fw, fw))}" '
-            f'pos="{_v((leg.thigh / 2, 0, 0))}" {rgeom}/>',
-            f'          <body name="{name}_tibia" pos="{_v((leg.thigh, 0, 0))}">',
-            f'            <joint name="{name}_gamma" type="hinge" axis="0 1 0"/>',
-            f'            {_inertial(masses[f"{name}_tibia"])}',
-            f'            <geom name="{name}_tibia_box" type="box" size="{_v((shank_len / 2, tw, tw))}" '
-            f'pos="{_v((shank_len / 2, 0, 0))}" {rgeom}/>',
-            f'            <geom name="{name}_foot" type="sphere" size="{leg.foot_radius:.17g}" '
-            f'pos="{_v((leg.shank, 0, 0))}" {rgeom}/>',
-            '          </body>', '        </body>', '      </body>',
-        ]
-    lines += ['    </body>', '  </worldbody>', '  <actuator>']
+    children: dict[str, list[LinkSpec]] = {}
+    for link in description.links[1:]:
+        children.setdefault(link.parent, []).append(link)
+    lines += _link_lines(description.links[0], children, rgeom, 2)
+    lines += ['  </worldbody>', '  <actuator>']
     for name in LEG_NAMES:
         for j in ("alpha", "beta", "gamma"):
             lines.append(f'    <general name="{name}_{j}_servo" joint="{name}_{j}" gainprm="1" biasprm="0 0 0" '

@@ -6,7 +6,7 @@ per sub-step.
 :func:`cpgsim.harness.native.compile_source` (the per-user cache, named by the content digest of source
 and flags). It works on the very ``mjModel``/``mjData`` the Python bindings own (their ``_address``),
 so the Python plant keeps reading and writing them between calls. ``run(n)`` does what
-:meth:`cpgsim.robots.mujoco_plant.MujocoHexapod.do_step` does per sub-step -- ``mj_step``, then each
+:meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.do_step` does per sub-step -- ``mj_step``, then each
 contact between a robot geom and the terrain through ``mj_contactForce``, rotated into the world frame,
 signed as the force on the robot and summed per leg -- and averages the sums over the ``n`` sub-steps.
 Raises :class:`~cpgsim.harness.native.NativeUnavailable` when no compiler or no ``libmujoco`` is found
@@ -23,11 +23,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from cpgsim.harness.contracts import FusedRequest
 from cpgsim.harness.fused import TimeGrid
 from cpgsim.harness.native import NativeUnavailable, compile_source, optimization_flags
 
 BATCH = threading.local()
-"""``BATCH.current``: the :class:`cpgsim.robots.mujoco_batch.Batch` whose trial runs on this thread (None:
+"""``BATCH.current``: the :class:`cpgsim.robots.mujoco.batch.Batch` whose trial runs on this thread (None:
 a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_loop`` call per chunk)."""
 
 SOURCE = r"""
@@ -266,6 +267,21 @@ class NativeMujocoStep:
         self._ptrs = (self._codes.ctypes.data_as(ip), self.force.ctypes.data_as(dp), self.flags.ctypes.data_as(dp))
         self._fn = self._lib.cpgsim_mj_run
 
+    @property
+    def library(self) -> ctypes.CDLL:
+        """The compiled library (``cpgsim_mj_loop`` and the batch's trial functions)."""
+        return self._lib
+
+    @property
+    def model_data(self) -> tuple:
+        """``(mjModel *, mjData *)`` as C addresses."""
+        return self._args
+
+    @property
+    def sums(self) -> tuple:
+        """``(geom codes, force, flags)`` pointers, as the C loop takes them."""
+        return self._ptrs
+
     def run(self, n: int) -> bool:
         """Advance ``n`` steps; ``force``/``flags`` hold the sums. False when the state went non-finite."""
         m, d = self._args
@@ -275,47 +291,49 @@ class NativeMujocoStep:
 class FusedLoop:
     """The controller's bound compiled step and the plant in one C loop (:func:`cpgsim_mj_loop`).
 
-    Built by :meth:`cpgsim.robots.mujoco_plant.MujocoHexapod.closed_loop`. ``run(k0, k1, times)`` does macro
+    Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`. ``run(k0, k1, times)`` does macro
     steps ``k0 .. k1-1`` and returns ``(rows, status, Y, O)``: the rows recorded, the status (0 done, 1 the
     controller's state went non-finite at the last row, 2 an evaluation error, 3 MuJoCo's state went
     non-finite or out of range after the last row), the recorded signals ``y[yi]`` and the plant's output
     vectors per row (columns: ``slices``). Made on a trial thread of a
-    :class:`~cpgsim.robots.mujoco_batch.Batch`, it hands each chunk to the batch, which advances it with the
+    :class:`~cpgsim.robots.mujoco.batch.Batch`, it hands each chunk to the batch, which advances it with the
     other trials' chunks in one ``cpgsim_mj_batch`` call: the same C loop on the same buffers, so the same
     numbers.
     """
 
-    def __init__(self, plant, native: NativeMujocoStep, commit_fn: int, ctx: int, nx: int, nz: int,
-                 u: np.ndarray, y: np.ndarray, u_idx: np.ndarray, o_idx: np.ndarray, qt_idx: np.ndarray,
-                 yi: np.ndarray, chunk: int = 100) -> None:
+    def __init__(self, plant, native: NativeMujocoStep, request: FusedRequest, u_idx: np.ndarray,
+                 o_idx: np.ndarray, qt_idx: np.ndarray, chunk: int = 100) -> None:
         self.plant, self.native = plant, native
-        readout = plant._readout  # a NativeFunction bound on the plant's buffers
+        self.output_slices = plant.output_slices
+        self._dt = request.dt
+        b = plant.buffers
+        feval, fctx = plant.compiled_readout.c_entry()  # the readout compiled on the plant's buffers
         dp = ctypes.POINTER(ctypes.c_double)
         lp = ctypes.POINTER(ctypes.c_longlong)
+        yi = request.yi
         self._keep = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, qt_idx, yi)]
-        self._u, self._y = u, y
         self.Y = np.zeros((chunk, max(1, len(yi))))
-        self.O = np.zeros((chunk, plant._readout_out.size))
+        self.O = np.zeros((chunk, b.out.size))
         self.chunk = chunk
         self._status = ctypes.c_int(0)
-        self._fn = native._lib.cpgsim_mj_loop
-        feval = ctypes.cast(readout._eval, ctypes.c_void_p).value
+        lib = native.library
+        self._fn = lib.cpgsim_mj_loop
         u_i, o_i, q_i, y_i = (a.ctypes.data_as(lp) for a in self._keep)
-        self._head = (*native._args, plant._steps_for(plant._dt_bound), *native._ptrs,
-                      ctypes.c_void_p(commit_fn), ctypes.c_void_p(ctx), nx, nz,
-                      u.ctypes.data_as(dp), y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
-                      ctypes.c_void_p(feval), ctypes.c_void_p(readout._ctx), plant._pos.ctypes.data_as(dp),
-                      plant._vel.ctypes.data_as(dp), plant._contact.ctypes.data_as(dp),
-                      plant._readout_out.ctypes.data_as(dp), plant._readout_out.size, q_i, len(yi), y_i,
+        self._head = (*native.model_data, plant.steps_for(request.dt), *native.sums,
+                      ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx, request.nz,
+                      request.u.ctypes.data_as(dp), request.y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
+                      ctypes.c_void_p(feval), ctypes.c_void_p(fctx), b.pos.ctypes.data_as(dp),
+                      b.vel.ctypes.data_as(dp), b.contact.ctypes.data_as(dp),
+                      b.out.ctypes.data_as(dp), b.out.size, q_i, len(yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
         self._grid = TimeGrid()
-        self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco_batch
+        self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco.batch
         self.trial = None
         if self.batch is not None:
-            self.trial = native._lib.cpgsim_mj_trial_new(*self._head)
+            self.trial = lib.cpgsim_mj_trial_new(*self._head)
             if not self.trial:
                 raise MemoryError("cpgsim_mj_trial_new: allocation failed")
-            self._free = native._lib.cpgsim_mj_trial_free
+            self._free = lib.cpgsim_mj_trial_free
 
     def __del__(self) -> None:
         if getattr(self, "trial", None):
@@ -331,5 +349,5 @@ class FusedLoop:
             rows = self._fn(*self._head, k0, k1, times_p, ctypes.byref(self._status))
             status = self._status.value
         stepped = rows - (1 if status == 1 else 0)
-        self.plant._after_fused(stepped, float(times[k0 + stepped]) if stepped else None)
+        self.plant.take_c_loop_steps(stepped, float(times[k0 + stepped]) if stepped else None, self._dt)
         return rows, status, self.Y[:rows], self.O[:rows]

@@ -11,7 +11,7 @@ getVelocity``. The addresses of the C++ objects are those pybind11 keeps in its 
 pointer after the object header), and the ``Contact`` fields read are DART's struct (``point, normal,
 force`` as three ``Eigen::Vector3d``, then ``collisionObject1, collisionObject2``).
 
-The same library holds ``cpgsim_dart_loop``, the controller + plant loop of :mod:`cpgsim.robots.dart_fused`.
+The same library holds ``cpgsim_dart_loop``, the controller + plant loop of :mod:`cpgsim.robots.dart.fused`.
 
 Nothing here is trusted blindly: :class:`NativeDartStep` checks the world's time step and the skeleton's dof count
 and positions through the C calls against the bindings, and the plant compares the C readout with its
@@ -376,6 +376,16 @@ class NativeDartStep:
                                                          and np.array_equal(vel, skel.getVelocities())):
             self.close()  # (the plant reads its outputs again after this)
             raise NativeUnavailable("the C step reads other positions than the bindings")
+
+    @property
+    def library(self) -> ctypes.CDLL:
+        """The compiled library (its ``cpgsim_dart_loop`` is the fused loop's)."""
+        return self._lib
+
+    @property
+    def context(self):
+        """The bound C context (the world, the skeleton and the plant's buffers)."""
+        return self._ctx
 
     def step_time(self) -> tuple[float, int, float]:
         """Seconds spent inside ``World::step`` by :meth:`step`, the number of those steps, and the seconds

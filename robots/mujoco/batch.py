@@ -4,11 +4,11 @@
 threads, at most ``concurrency`` at a time, and serves them from the calling thread. Each trial builds its
 scenario, compiles (from the cache), sets up its plant and runs the co-simulation master as it would alone;
 when the master reaches the fused loop (:mod:`cpgsim.harness.fused`,
-:class:`cpgsim.robots.mujoco_native.FusedLoop`), each chunk of macro steps is handed to the :class:`Batch`
+:class:`cpgsim.robots.mujoco.native.FusedLoop`), each chunk of macro steps is handed to the :class:`Batch`
 instead of being run by the trial's own thread. The serving thread collects the chunks and advances them all
 in one ``cpgsim_mj_batch`` call: ``threads`` POSIX threads (default: the CPUs this process may use), each
 taking whole trials, each trial its own ``mjData`` and controller context, all running the very loop
-``cpgsim_mj_loop`` runs (``trial_loop`` in :data:`cpgsim.robots.mujoco_native.SOURCE`). The call releases
+``cpgsim_mj_loop`` runs (``trial_loop`` in :data:`cpgsim.robots.mujoco.native.SOURCE`). The call releases
 the GIL, so the other trials' Python (setup, recording their last chunk, outcomes) goes on meanwhile.
 
 Between calls each trial records, streams and checks its chunk on its own thread, as alone; a trial whose
@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from cpgsim.robots.mujoco_native import BATCH, library
+from cpgsim.robots.mujoco.native import BATCH, library
 
 WAIT_S = 0.002
 """How long a round waits for trials that have not handed in their chunk yet (busy in Python)."""
@@ -60,7 +60,7 @@ class Batch:
         self.c_time_s = 0.0
 
     def advance(self, loop: Any, k0: int, k1: int, times_p: Any, last: bool) -> tuple[int, int]:
-        """Called by a trial's :class:`~cpgsim.robots.mujoco_native.FusedLoop`: run macro steps ``k0 .. k1-1``
+        """Called by a trial's :class:`~cpgsim.robots.mujoco.native.FusedLoop`: run macro steps ``k0 .. k1-1``
         in the next round; returns ``(rows, status)``."""
         self._lib.cpgsim_mj_trial_range(loop.trial, k0, k1, times_p)
         req = [loop, False, 0, 0]

@@ -1,10 +1,11 @@
 """The hexapod in MuJoCo as a co-simulation block: the same ports, names and units as the DART plant.
 
-:class:`MujocoHexapod` is a drop-in for :class:`cpgsim.robots.plant.DartHexapod` (same constructor
-arguments except ``detector``, same parameters ``kp``, ``kd``, ``friction``, ``velocity_ff``, same output
-ports from the same compiled readout, :mod:`cpgsim.robots.readout` with ``root="quat"``), so the
-controllers, outcomes, report and benchmark need no engine-specific code. The model is the MJCF of
-:func:`cpgsim.robots.mjcf.mjcf`, generated from the same robot description and terrain as the DART one.
+:class:`MujocoHexapod` is a :class:`~cpgsim.robots.plant_base.HexapodPlant` like
+:class:`cpgsim.robots.dart.plant.DartHexapod` (same constructor arguments except ``detector``, same
+parameters, same ports from the same compiled readout, :mod:`cpgsim.robots.readout` with ``root="quat"``),
+so the controllers, outcomes, report and benchmark need no engine-specific code. The model is the MJCF of
+:func:`cpgsim.robots.mujoco.mjcf.mjcf`, written from the same robot description
+(:mod:`cpgsim.robots.description`) and terrain as the DART one.
 
 Servos: DART's law, ``tau = -kp (q + h qd - q_target) - kd qd`` (``h`` the world step; DART integrates its
 joint spring implicitly, which is where ``h qd`` comes from). Here each joint's ``general`` actuator has
@@ -24,46 +25,42 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
-from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
-from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
-from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.components.core import ModelError, ParameterError
+from cpgsim.components.geometry import YU_SIM, RobotGeometry
+from cpgsim.harness.contracts import FusedRequest
+from cpgsim.harness.native import NativeUnavailable
+from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, CONTACT_OTHER, describe_hexapod, foot_positions_body
 from cpgsim.robots.disturbance import Push
-from cpgsim.robots.hexapod import foot_positions_body, tilt_angle
-from cpgsim.robots.mjcf import ContactModel, mjcf
-from cpgsim.robots.plant import PlantCommon, declare_plant
-from cpgsim.robots.readout import OUTPUT_PORTS, readout_function
+from cpgsim.robots.mujoco.mjcf import ContactModel, mjcf
+from cpgsim.robots.plant_base import HexapodPlant
 from cpgsim.robots.terrain import Terrain
 
-_LINK = 10
-_BODY = 100
-_OTHER = 1000
 
-
-class MujocoHexapod(PlantCommon, CoSimBlock):
+class MujocoHexapod(HexapodPlant):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
-    Constructor: ``geometry``, ``terrain``, ``q0``, ``body_height``, ``sense_shank``, ``settle``,
-    ``disturbances`` as :class:`~cpgsim.robots.plant.DartHexapod`; ``amputated``: leg indices whose links
-    touch nothing (Fukuhara 2022, Sec. 3.2: they keep their mass); (pushes are applied through
-    ``xfrc_applied`` at every MuJoCo step they cover, by the Python sub-steps: a run with pushes does not
-    use the native step loop); ``contact`` a :class:`~cpgsim.robots.mjcf.ContactModel`
+    Constructor: the arguments of :class:`~cpgsim.robots.plant_base.HexapodPlant` (amputated legs' geoms get
+    ``contype = conaffinity = 0``; pushes are applied through ``xfrc_applied`` at every MuJoCo step they
+    cover, by the Python sub-steps: a run with pushes does not use the native step loop); ``native``: use
+    the C macro step when it can be built (default); ``contact`` a :class:`~cpgsim.robots.mujoco.mjcf.ContactModel`
     (its ``timestep`` is the MuJoCo step; ``do_step``'s ``dt`` must be a multiple of it). ``time_step``,
     if given, replaces ``contact.timestep``.
     """
 
     engine = "mujoco"
+    POS_SIZE = 25
+    READOUT_ROOT = "quat"
 
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
                  settle: float = 0.0, native: bool = True, disturbances: Sequence[Push | Mapping] | None = None,
                  amputated: Sequence[int] = (), **params: float) -> None:
-        self.name = name
-        q0_arr = self._describe(geometry, terrain, q0, body_height, sense_shank, settle, disturbances)
         contact = contact or ContactModel()
         if time_step is not None:
             if not (math.isfinite(time_step) and time_step > 0):
@@ -72,18 +69,15 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         self.contact = contact
         self.time_step = contact.timestep
         self.native = bool(native)
-        self.amputated = tuple(int(i) for i in amputated)
-        if any(not 0 <= i < 6 for i in self.amputated):
-            raise ParameterError(f"amputated legs must be leg indices 0-5, got {self.amputated}")
-        self._native = None
+        self.native_step = None
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
-        self._q_target = q0_arr.copy()
-        super().__init__(name, **params)
+        super().__init__(name, geometry, terrain, q0, body_height, sense_shank, settle, disturbances, amputated,
+                         **params)
 
-    # -- declaration (the DART plant's ports and parameters) ---------------------------------------
-    def declare(self) -> None:
-        declare_plant(self)
+    @property
+    def is_set_up(self) -> bool:
+        return self.data is not None
 
     def set(self, **values: float) -> MujocoHexapod:
         """Set parameters; on a set-up plant, gains apply from the next step (friction needs a new setup)."""
@@ -111,13 +105,16 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         self.terminate()
         model = mujoco.MjModel.from_xml_string(self.xml())
         for i in self.amputated:  # an amputated leg keeps its links and mass but touches nothing
-            for link in ("coxa_box", "femur_box", "tibia_box", "foot"):
-                gid = model.geom(f"{LEG_NAMES[i]}_{link}").id
+            for spec in describe_hexapod(self.geometry).shapes():
+                if spec.leg != i:
+                    continue
+                gid = model.geom(spec.name).id
                 model.geom_contype[gid] = 0
                 model.geom_conaffinity[gid] = 0
         data = mujoco.MjData(model)
         self.model, self.data = model, data
-        z = self.body_height if self.body_height is not None else self._touching_height()
+        z = self.body_height if self.body_height is not None else self._touching_height(
+            foot_positions_body(self.geometry, self.q0))
         data.qpos[:3] = (0.0, 0.0, z)
         data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
         data.qpos[7:] = self.q0
@@ -125,65 +122,77 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         mujoco.mj_forward(model, data)
         self._apply_gains()
 
-        self._geom_code = np.full(model.ngeom, _OTHER, dtype=np.int64)
-        for i, leg in enumerate(LEG_NAMES):
-            self._geom_code[model.geom(f"{leg}_foot").id] = i
-            self._geom_code[model.geom(f"{leg}_tibia_box").id] = i if self.sense_shank else _LINK + i
-            self._geom_code[model.geom(f"{leg}_coxa_box").id] = _LINK + i
-            self._geom_code[model.geom(f"{leg}_femur_box").id] = _LINK + i
-        self._geom_code[model.geom("body_box").id] = _BODY
-        self._steps_per: dict[float, int] = {}
-        self._q_target = self.q0.copy()
-        self._q_target_prev = self.q0.copy()
-        self._target_changed = True
-        self._ff_active = False
+        self._geom_code = np.full(model.ngeom, CONTACT_OTHER, dtype=np.int64)
+        for spec in describe_hexapod(self.geometry).shapes():
+            self._geom_code[model.geom(spec.name).id] = spec.contact_code(self.sense_shank)
+        self._reset_readings()
         self._cf = np.zeros(6)
-        self._force_world = np.zeros(18)
-        self._body_contact = False
-        self._link_contact = np.zeros(6, dtype=bool)
-        self._n_steps = 0
         self._bind_readout()
-        self._native = None
+        self.native_step = None
         self._body_id = model.body("body").id
         if self.native and not self.pushes:
             try:
-                from cpgsim.robots.mujoco_native import NativeMujocoStep
+                from cpgsim.robots.mujoco.native import NativeMujocoStep
 
-                self._native = NativeMujocoStep(model, data, self._geom_code, force=self._force_world)
+                self.native_step = NativeMujocoStep(model, data, self._geom_code, force=self._force_world)
             except NativeUnavailable:  # no compiler or no libmujoco: Python sub-steps (slower, same results)
-                self._native = None
+                self.native_step = None
+        resume = self._take_resume(t0)
+        if resume is not None:
+            self.restore(resume)
+            return
         for _ in range(int(round(self.settle / self.time_step))):
             self._update_ctrl(self.time_step)
             self._substeps(1)
         data.time = float(t0)
         self._t = float(t0)
-        self._update_outputs()
-
-    def _touching_height(self) -> float:
-        feet = foot_positions_body(self.geometry, self.q0)
-        ground = np.asarray(self.terrain.height_at(feet[:, 0], feet[:, 1]), dtype=float)
-        ok = np.isfinite(ground)
-        if not ok.any():
-            raise ModelError("no foot of the initial posture is above ground")
-        return float(np.max(ground[ok] + self.geometry.leg.foot_radius - feet[ok, 2]))
-
-    def _bind_readout(self) -> None:
-        self._pos, self._vel = np.zeros(25), np.zeros(24)
-        self._contact = np.zeros(1)
-        self._readout_out = np.zeros(sum(n for _, n in OUTPUT_PORTS))
-        fn = _readout_for(self.geometry)
-        try:
-            self._readout = NativeFunction(fn, [self._pos, self._vel, self._force_world, self._contact],
-                                           [self._readout_out])
-        except NativeUnavailable:
-            def evaluate() -> None:
-                self._readout_out[:] = np.asarray(fn(self._pos, self._vel, self._force_world, self._contact)).ravel()
-            self._readout = evaluate
+        self.update_outputs()
 
     def terminate(self) -> None:
-        self._native = None
+        """Keep the final state (:attr:`last_snapshot`), then drop the model."""
+        if self.data is not None:
+            self.last_snapshot = self.snapshot()
+        self.native_step = None
         self.model = None
         self.data = None
+
+    # -- exact state ------------------------------------------------------------------------------
+    def snapshot(self) -> MujocoSnapshot:
+        """Everything the next steps depend on: MuJoCo's integration state (``mj_getState`` with
+        ``mjSTATE_INTEGRATION``: time, ``qpos``, ``qvel``, actuator activations, the solver's warm start,
+        controls, applied forces), the servo targets and the last step's contact readings."""
+        if self.data is None:
+            raise ModelError(f"{self.name}: snapshot before setup")
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.zeros(mujoco.mj_stateSize(self.model, spec))
+        mujoco.mj_getState(self.model, self.data, state, spec)
+        return MujocoSnapshot(
+            t=self._t, state=state, q_target=self._q_target.copy(),
+            q_target_prev=np.array(self._q_target_prev, dtype=float), target_changed=self._target_changed,
+            ff_active=self._ff_active, force_world=self._force_world.copy(), body_contact=self._body_contact,
+            link_contact=self._link_contact.copy(), n_steps=self._n_steps)
+
+    def restore(self, snap: MujocoSnapshot) -> None:
+        """Put a set-up plant into the state ``snap`` (see :meth:`snapshot`)."""
+        if self.data is None:
+            raise ModelError(f"{self.name}: restore before setup")
+        if not isinstance(snap, MujocoSnapshot):
+            raise ModelError(f"{self.name}: a {type(snap).__name__} is not a MuJoCo plant's state")
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        if snap.state.shape != (mujoco.mj_stateSize(self.model, spec),):
+            raise ModelError(f"{self.name}: a snapshot of {snap.state.size} values does not fit this model")
+        mujoco.mj_setState(self.model, self.data, snap.state, spec)
+        mujoco.mj_forward(self.model, self.data)
+        self._t = float(snap.t)
+        self._q_target = snap.q_target.copy()
+        self._q_target_prev = snap.q_target_prev.copy()
+        self._target_changed = snap.target_changed
+        self._ff_active = snap.ff_active
+        self._force_world[:] = snap.force_world
+        self._body_contact = snap.body_contact
+        self._link_contact[:] = snap.link_contact
+        self._n_steps = snap.n_steps
+        self.update_outputs()
 
     # -- stepping ---------------------------------------------------------------------------------
     def _update_ctrl(self, dt: float) -> None:
@@ -201,21 +210,18 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
 
     def do_step(self, t: float, dt: float) -> None:
         """Advance ``[t, t + dt]``: ``dt / time_step`` MuJoCo steps with the servo targets held."""
-        if self.data is None:
-            raise ModelError(f"{self.name}: do_step before setup")
-        n = self._steps_for(dt)
-        if abs(t - self._t) > 0.5 * self.time_step:
-            raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
+        self._check_step(t)
+        n = self.steps_for(dt)
         self._update_ctrl(dt)
         self._substeps(n)
         self._t = t + dt
         self._n_steps += n
-        self._update_outputs()
+        self.update_outputs()
 
     def _substeps(self, n: int) -> None:
         """``n`` MuJoCo steps; the contact forces averaged and the contact flags or-ed over them."""
-        if self._native is not None:
-            native = self._native
+        if self.native_step is not None:
+            native = self.native_step
             native.run(n)
             self._force_world[:] = native.force
             flags = native.flags
@@ -257,45 +263,30 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
         data.xfrc_applied[b] = wrench
 
     # -- the closed loop in C (cpgsim.harness.fused) ----------------------------------------------------
-    def closed_loop(self, commit_fn: int, ctx: int, nx: int, nz: int, u: np.ndarray, y: np.ndarray,
-                    u_map: list[tuple[slice, str]], inputs: dict[str, slice], yi: np.ndarray, dt: float):
-        """A :class:`~cpgsim.robots.mujoco_native.FusedLoop` running this plant with a controller's bound
-        compiled step (``commit_fn(ctx, t, nx, nz)``, the ``cpgsim_step_commit`` of
-        :mod:`cpgsim.harness.native`) in one C loop, or None when this plant cannot (no native step,
-        ``velocity_ff`` on, an input that is not ``q_target``).
-
-        ``u_map``: which slice of the controller's input vector ``u`` takes which output port; ``inputs``:
-        the slice of the controller's signals ``y`` feeding each input port; ``yi``: the recorded signals.
-        """
-        if (self._native is None or not isinstance(self._readout, NativeFunction) or self.values["velocity_ff"]
-                or set(inputs) != {"q_target"}):
+    def fused_loop(self, request: FusedRequest):
+        """A :class:`~cpgsim.robots.mujoco.native.FusedLoop` running this plant with the controller's bound
+        compiled step in one C loop (the master's fast path, :mod:`cpgsim.harness.fused`), or None when this
+        set-up cannot (no native step or compiled readout, ``velocity_ff`` on, pushes, an input that is not
+        ``q_target``)."""
+        if self.native_step is None or self._fused_refusal(request):
             return None
-        from cpgsim.robots.mujoco_native import FusedLoop
-
-        sl = inputs["q_target"]
-        qt_idx = np.arange(sl.start, sl.stop)
-        if qt_idx.size != 18:
+        indices = request.indices(self.output_slices, "q_target", 18)
+        if indices is None:
             return None
-        u_idx, o_idx = [], []
-        for u_sl, port in u_map:
-            o_sl = _PORT_DICT[port]
-            u_idx += list(range(u_sl.start, u_sl.stop))
-            o_idx += list(range(o_sl.start, o_sl.stop))
-        self._dt_bound = dt
-        self.output_slices = dict(_PORT_DICT)
-        return FusedLoop(self, self._native, commit_fn, ctx, nx, nz, u, y, np.array(u_idx), np.array(o_idx), qt_idx,
-                         np.asarray(yi))
+        from cpgsim.robots.mujoco.native import FusedLoop
 
-    def _after_fused(self, steps: int, t: float | None) -> None:
-        """Bring the Python side up to date after ``steps`` macro steps of the fused loop (ending at ``t``)."""
+        return FusedLoop(self, self.native_step, request, *indices)
+
+    def take_c_loop_steps(self, steps: int, t: float | None, dt: float) -> None:
+        """Bring the Python side up to date after ``steps`` macro steps ``dt`` of the fused loop (ending at ``t``)."""
         if steps <= 0:
             return
         self._t = t
-        self._n_steps += steps * self._steps_for(self._dt_bound)
+        self._n_steps += steps * self.steps_for(dt)
         self._q_target = np.array(self.data.ctrl)
         self._q_target_prev = self._q_target
-        flags = self._native.flags
-        self._force_world[:] = self._native.force
+        flags = self.native_step.flags
+        self._force_world[:] = self.native_step.force
         self._body_contact = bool(flags[0])
         self._link_contact[:] = flags[1:] > 0.5
 
@@ -312,62 +303,50 @@ class MujocoHexapod(PlantCommon, CoSimBlock):
             c = data.contact[k]
             g1, g2 = int(c.geom1), int(c.geom2)
             code1, code2 = codes[g1], codes[g2]
-            if code2 != _OTHER:  # the force geom1 exerts on geom2 is the force on the robot
+            if code2 != CONTACT_OTHER:  # the force geom1 exerts on geom2 is the force on the robot
                 code, sign = code2, 1.0
-            elif code1 != _OTHER:
+            elif code1 != CONTACT_OTHER:
                 code, sign = code1, -1.0
             else:
                 continue
-            if code < _LINK:
+            if code < CONTACT_LINK:
                 mujoco.mj_contactForce(model, data, k, cf)
                 world = c.frame.reshape(3, 3).T @ cf[:3]
                 f[3 * code:3 * code + 3] += sign * world
-            elif code == _BODY:
+            elif code == CONTACT_BODY:
                 body = True
             else:
-                self._link_contact[code - _LINK] = True
+                self._link_contact[code - CONTACT_LINK] = True
         self._body_contact = body
 
-    def _update_outputs(self) -> None:
+    def _read_state(self) -> None:
         self._pos[:] = self.data.qpos
         self._vel[:] = self.data.qvel
-        self._contact[0] = 1.0 if self._body_contact else 0.0
-        self._readout()
 
-    def get_outputs(self) -> dict[str, np.ndarray]:
-        if self.data is None:
-            raise ModelError(f"{self.name}: get_outputs before setup")
-        out = self._readout_out.copy()
-        return {name: out[sl] for name, sl in _PORT_SLICES}
-
-    # -- helpers (time, toe_force_world, link_contacts, body_contact, set_inputs: PlantCommon) ------
+    # -- helpers (time, toe_force_world, link_contacts, body_contact, set_inputs, fell: HexapodPlant) ------
 
     def total_mass(self) -> float:
         """Mass of the robot in the compiled model (kg)."""
         return float(self.model.body_mass[1:].sum())
 
-    def fell(self, max_tilt: float = math.pi / 4) -> bool:
-        if self.data is None:
-            return False
-        if self._body_contact:
-            return True
-        if not np.all(np.isfinite(self.data.qpos)):
-            return True
-        return tilt_angle(self.data.xmat[self.model.body("body").id].reshape(3, 3)) > max_tilt
+    def _state_finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.data.qpos)))
+
+    def _body_rotation(self) -> np.ndarray:
+        return self.data.xmat[self._body_id].reshape(3, 3)
 
 
-def _readout_for(geometry: RobotGeometry):
-    key = repr(geometry)
-    fn = _READOUTS.get(key)
-    if fn is None:
-        fn = _READOUTS[key] = readout_function(geometry, root="quat")
-    return fn
+@dataclass(frozen=True)
+class MujocoSnapshot:
+    """The exact state of a :class:`MujocoHexapod` at time ``t`` (:meth:`MujocoHexapod.snapshot`)."""
 
-
-_READOUTS: dict[str, object] = {}
-_PORT_SLICES: list[tuple[str, slice]] = []
-_k = 0
-for _name, _size in OUTPUT_PORTS:
-    _PORT_SLICES.append((_name, slice(_k, _k + _size)))
-    _k += _size
-_PORT_DICT = dict(_PORT_SLICES)
+    t: float
+    state: np.ndarray
+    q_target: np.ndarray
+    q_target_prev: np.ndarray
+    target_changed: bool
+    ff_active: bool
+    force_world: np.ndarray
+    body_contact: bool
+    link_contact: np.ndarray
+    n_steps: int

@@ -1,0 +1,284 @@
+"""What the hexapod plant of every engine shares: one class an engine's plant derives from.
+
+:class:`HexapodPlant` holds the engine-neutral part of the plant block (Yu 2019, Sec. 5: the servos track
+the joint targets of the CPG's linear converter; Fukuhara 2022 reads the vertical toe forces): the
+constructor arguments every engine takes, the parameters and ports (:mod:`cpgsim.robots.ports`), taking the
+joint targets, the world steps per macro step, the compiled readout bound on :class:`PlantBuffers`, the
+outputs, the fall test, pushes and amputated legs, and the fused-loop request's indices. An engine's plant
+supplies the rest (the engine contract, docs/architecture.md):
+
+- ``_build(t0)``: build the engine's model of the robot on the terrain, place it, set the servos; fill
+  the buffers' ``pos``/``vel`` layout (``POS_SIZE``; ``READOUT_ROOT`` names the root joint's coordinates);
+- ``_step(t, dt, n)``: ``n`` engine steps with the targets held, pushes applied, contact readings summed
+  (averaged over the sub-steps) into the buffers;
+- ``_read_state()``: the engine's generalized positions and velocities into the buffers;
+- ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
+- ``snapshot``/``restore`` (:class:`~cpgsim.harness.contracts.ResumableBlock`) and ``fused_loop``
+  (:class:`~cpgsim.harness.contracts.FusedLoopBlock`), or a refusal that names the engine.
+
+Every capability an engine declares in the registry (:mod:`cpgsim.robots.registry`) it implements here;
+the contract tests (tests/test_engine_contract.py) run the same checks on every registered engine.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
+from cpgsim.components.geometry import RobotGeometry
+from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
+from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
+from cpgsim.robots.ports import PORT_SLICES, READOUT_SIZE, declare_plant
+from cpgsim.robots.readout import readout_function
+from cpgsim.robots.terrain import Terrain, flat
+
+
+@dataclass
+class PlantBuffers:
+    """The arrays a plant's readout (and its C step, and its fused loop) reads and writes in place.
+
+    ``pos``, ``vel``: the engine's generalized positions and velocities (the root joint's, then the 18
+    joints); ``force_world``: per leg the ground force on the foot, world frame (18); ``contact``: the body
+    contact flag as a number (1); ``link_contact``: per leg, a coxa or femur (or unsensed tibia) touched
+    something (6, bool); ``out``: the readout vector, the output ports in ``OUTPUT_PORTS`` order."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    force_world: np.ndarray = field(default_factory=lambda: np.zeros(18))
+    contact: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    link_contact: np.ndarray = field(default_factory=lambda: np.zeros(6, dtype=bool))
+    out: np.ndarray = field(default_factory=lambda: np.zeros(READOUT_SIZE))
+
+
+class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
+    """The hexapod on a terrain, stepped by the co-simulation master; an engine's plant derives from it.
+
+    Constructor arguments every engine takes (fixed for the block's life; parameters go in ``**params``):
+
+    - ``geometry``: a :class:`~cpgsim.components.geometry.RobotGeometry`;
+    - ``terrain``: a :class:`~cpgsim.robots.terrain.Terrain` (default flat ground);
+    - ``q0``: initial joint angles (18, rad; default :func:`~cpgsim.robots.description.standing_posture`);
+    - ``body_height``: initial height of the body frame (m); default: the lowest foot sphere just touches
+      the ground under it (body level, at the world origin, facing ``+y``);
+    - ``sense_shank``: count tibia contacts as toe forces (default ``True``);
+    - ``settle``: seconds simulated in :meth:`setup` with the targets held at ``q0`` before the clock is set
+      to ``t0`` (so ``t0``'s outputs show a loaded, resting robot); default 0;
+    - ``disturbances``: pushes on the body (:class:`~cpgsim.robots.disturbance.Push` or mappings with
+      ``start_s``, ``duration_s``, ``force_N`` in the world frame, ``point_m`` in the body frame), applied
+      at every engine step they cover;
+    - ``amputated``: leg indices whose links touch nothing (Fukuhara 2022, Sec. 3.2: they keep their mass
+      and are held folded by the controller).
+
+    Parameters: ``kp`` (N m/rad), ``kd`` (N m s/rad), ``friction`` (Coulomb coefficient of the robot's
+    shapes; the ground has its terrain's), ``velocity_ff`` (0/1).
+    """
+
+    engine: ClassVar[str]
+    POS_SIZE: ClassVar[int]
+    READOUT_ROOT: ClassVar[str]
+
+    time_step: float
+    buffers: PlantBuffers
+
+    def __init__(self, name: str, geometry: RobotGeometry, terrain: Terrain | None, q0: Sequence[float] | None,
+                 body_height: float | None, sense_shank: bool, settle: float,
+                 disturbances: Sequence[Push | Mapping] | None, amputated: Sequence[int],
+                 **params: float) -> None:
+        from cpgsim.robots.description import standing_posture
+
+        self.name = name
+        self.set_disturbances(disturbances)
+        if not isinstance(geometry, RobotGeometry):
+            raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
+        if not (math.isfinite(settle) and settle >= 0):
+            raise ParameterError(f"settle must be >= 0, got {settle!r}")
+        self.geometry = geometry
+        self.terrain = terrain if terrain is not None else flat()
+        q0_arr = standing_posture(geometry) if q0 is None else np.asarray(q0, dtype=float).ravel()
+        if q0_arr.shape != (18,) or not np.all(np.isfinite(q0_arr)):
+            raise ParameterError(f"q0 needs 18 finite joint angles, got shape {q0_arr.shape}")
+        self.q0 = q0_arr
+        self.body_height = body_height
+        self.sense_shank = bool(sense_shank)
+        self.settle = float(settle)
+        try:
+            self.amputated = tuple(sorted({int(i) for i in amputated}))
+        except (TypeError, ValueError):
+            raise ParameterError(f"amputated must be leg indices 0-5, got {amputated!r}") from None
+        if any(not 0 <= i < 6 for i in self.amputated):
+            raise ParameterError(f"amputated legs must be leg indices 0-5, got {self.amputated}")
+        self._q_target = q0_arr.copy()
+        self._resume = None
+        self.last_snapshot = None
+        super().__init__(name, **params)
+
+    # -- declaration ------------------------------------------------------------------------------
+    def declare(self) -> None:
+        declare_plant(self)
+
+    # -- inputs and steps -------------------------------------------------------------------------
+    def set_inputs(self, values: Mapping[str, np.ndarray]) -> None:
+        q = values.get("q_target")
+        if q is None:
+            return
+        q = np.asarray(q, dtype=float)
+        if q.shape != (18,):
+            q = q.ravel()
+            if q.shape != (18,):
+                raise ModelError(f"{self.name}.q_target needs 18 values, got {q.size}")
+        if not math.isfinite(float(q.sum())):  # a sum is finite only if every element is
+            raise ModelError(f"{self.name}.q_target is not finite: {q}")
+        if q.tobytes() != self._q_target.tobytes():  # cheaper than array_equal on 18 values
+            self._q_target = q.copy()
+            self._target_changed = True
+
+    def steps_for(self, dt: float) -> int:
+        """Engine steps per macro step ``dt`` (a whole number, or an error naming the plant)."""
+        n = self._steps_per.get(dt)
+        if n is None:
+            h = self.time_step
+            n = int(round(dt / h))
+            if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
+                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
+            self._steps_per[dt] = n
+        return n
+
+    def _check_step(self, t: float) -> None:
+        if not self.is_set_up:
+            raise ModelError(f"{self.name}: do_step before setup")
+        if abs(t - self._t) > 0.5 * self.time_step:
+            raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
+
+    @property
+    def is_set_up(self) -> bool:
+        raise NotImplementedError
+
+    @property
+    def time(self) -> float:
+        return self._t
+
+    def _reset_readings(self) -> None:
+        """The per-run state every engine keeps between steps, as at the start of a set-up."""
+        self._steps_per: dict[float, int] = {}
+        self._q_target = self.q0.copy()
+        self._q_target_prev = self.q0.copy()
+        self._target_changed = True
+        self._ff_active = False
+        self._body_contact = False
+        self._n_steps = 0
+
+    # -- pushes -----------------------------------------------------------------------------------
+    def set_disturbances(self, disturbances: Sequence[Push | Mapping] | None) -> None:
+        """Replace the pushes (as the constructor's ``disturbances``); from the next :meth:`setup` on."""
+        self.pushes = as_pushes(disturbances, f"{self.name}: disturbances")
+
+    def pushes_at(self, t: float) -> list[Push]:
+        """The pushes (:mod:`cpgsim.robots.disturbance`) an engine step starting at ``t`` feels."""
+        return active_pushes(self.pushes, t, self.time_step) if self.pushes else []
+
+    # -- readout and outputs ----------------------------------------------------------------------
+    def _bind_readout(self) -> None:
+        """The compiled sensor readout (:mod:`cpgsim.robots.readout`) on fresh :class:`PlantBuffers`."""
+        b = self.buffers = PlantBuffers(np.zeros(self.POS_SIZE), np.zeros(24))
+        self._force_world, self._link_contact, self._contact = b.force_world, b.link_contact, b.contact
+        self._pos, self._vel, self._readout_out = b.pos, b.vel, b.out
+        fn = readout_for(self.geometry, self.READOUT_ROOT)
+        try:
+            self.readout = NativeFunction(fn, [b.pos, b.vel, b.force_world, b.contact], [b.out])
+        except NativeUnavailable:  # no C compiler: CasADi's VM evaluates the same function (slower)
+            def evaluate() -> None:
+                b.out[:] = np.asarray(fn(b.pos, b.vel, b.force_world, b.contact)).ravel()
+            self.readout = evaluate
+
+    @property
+    def compiled_readout(self) -> NativeFunction | None:
+        """The readout as compiled C (what a C step or fused loop calls), None in CasADi's VM."""
+        return self.readout if isinstance(self.readout, NativeFunction) else None
+
+    def _read_state(self) -> None:
+        raise NotImplementedError
+
+    def update_outputs(self) -> None:
+        """The output ports from the engine's state and the summed contacts (compiled readout, about 1 us)."""
+        self._read_state()
+        self._contact[0] = 1.0 if self._body_contact else 0.0
+        self.readout()
+
+    def get_outputs(self) -> dict[str, np.ndarray]:
+        if not self.is_set_up:
+            raise ModelError(f"{self.name}: get_outputs before setup")
+        out = self._readout_out.copy()  # the next do_step overwrites the bound buffer
+        return {name: out[sl] for name, sl in PORT_SLICES.items()}
+
+    output_slices = PORT_SLICES
+
+    def toe_force_world(self) -> np.ndarray:
+        """Per-leg ground force on the foot in the world frame of the last step, shape (6, 3)."""
+        return self._force_world.reshape(6, 3).copy()
+
+    def link_contacts(self) -> np.ndarray:
+        """Per leg, whether a coxa or femur (or an unsensed tibia) touched something in the last step."""
+        return self._link_contact.copy()
+
+    def body_contact(self) -> bool:
+        """Whether the body box touched anything in the last step."""
+        return bool(self._body_contact)
+
+    def _touching_height(self, feet: np.ndarray) -> float:
+        from cpgsim.robots.description import touching_height
+
+        return touching_height(self.geometry, self.terrain.height_at, feet)
+
+    # -- the fall test ----------------------------------------------------------------------------
+    def _body_rotation(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _state_finite(self) -> bool:
+        raise NotImplementedError
+
+    def fell(self, max_tilt: float = math.pi / 4) -> bool:
+        """The robot has fallen: body touched the ground, tilt above ``max_tilt`` or non-finite state."""
+        from cpgsim.robots.description import tilt_angle
+
+        if not self.is_set_up:
+            return False
+        if self._body_contact:
+            return True
+        if not self._state_finite():
+            return True
+        return tilt_angle(self._body_rotation()) > max_tilt
+
+    # -- exact state (ResumableBlock) ---------------------------------------------------------------
+    def resume_from(self, snap) -> None:
+        """Make the next :meth:`setup` start in ``snap`` (no settling) instead of the initial posture."""
+        self._resume = snap
+
+    def _take_resume(self, t0: float):
+        """The snapshot to start from (checked against ``t0``), consumed; None: start from ``q0``."""
+        resume, self._resume = self._resume, None
+        if resume is not None and abs(resume.t - float(t0)) > 0.5 * self.time_step:
+            raise ModelError(f"{self.name}: resuming a state saved at t = {resume.t} in a run from t0 = {t0}")
+        return resume
+
+    def _fused_refusal(self, request) -> bool:
+        """What every engine's fused loop needs and this set-up lacks: a compiled readout, ``velocity_ff``
+        off, no pushes."""
+        return self.compiled_readout is None or bool(self.values["velocity_ff"]) or bool(self.pushes)
+
+
+def readout_for(geometry: RobotGeometry, root: str):
+    """The readout function of a geometry and root-joint layout (built once per process)."""
+    key = (repr(geometry), root)
+    fn = _READOUTS.get(key)
+    if fn is None:
+        fn = _READOUTS[key] = readout_function(geometry, root=root)
+    return fn
+
+
+_READOUTS: dict[tuple[str, str], object] = {}

@@ -22,6 +22,27 @@ def one_line(text: object, limit: int = 600) -> str:
     return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
+OPTIONAL_LIBRARIES = {"flint": ("python-flint", "pip install python-flint"),
+                      "dask": ("dask", "pip install 'dask[distributed]'"),
+                      "distributed": ("dask", "pip install 'dask[distributed]'")}
+"""Import name -> (package, install command) of the libraries a command may find missing; the physics
+engines' come from :data:`cpgsim.robots.registry.ENGINES`."""
+
+
+def missing_library(exc: BaseException) -> str | None:
+    """The one-line error for an import of a known optional library that failed, else None."""
+    name = (getattr(exc, "name", None) or "").split(".")[0] if isinstance(exc, ImportError) else ""
+    if not name:
+        return None
+    from cpgsim.robots.registry import ENGINES
+
+    known = {e.package: (e.package, e.install) for e in ENGINES.values()} | OPTIONAL_LIBRARIES
+    if name not in known:
+        return None
+    package, install = known[name]
+    return f"this needs the {package} package, which cannot be imported ({one_line(exc)}): {install}"
+
+
 def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
     """The CLI's error policy for one exception: ``(exit status, one-line message)``.
 
@@ -41,6 +62,9 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
         return 2, msg
     if type(exc).__name__ in ("FmuRuntimeError", "FmuCrashedError", "FmuTimeoutError"):
         return 1, msg
+    missing = missing_library(exc)
+    if missing is not None:
+        return 2, missing
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         return 1, one_line(f"writing failed: {where}{exc.strerror or exc} (the run's results are incomplete)")

@@ -38,6 +38,7 @@ from cpgsim.verify.prove import (
     prove_report,
     prove_system,
     system_of_graph,
+    tape_constants,
 )
 from cpgsim.verify.result import VerifyOptions
 from cpgsim.verify.shooting import verify
@@ -151,6 +152,41 @@ def _contains(printed: tuple[Decimal, Decimal], lo: float, hi: float) -> bool:
     return printed[0] <= Decimal(lo) and Decimal(hi) <= printed[1]
 
 
+def test_not_proved_names_the_knob(vdp_proof) -> None:
+    """At 64 bits and order 8 the classical cycle (proved at the defaults) is not proved: the reason says
+    that more bits or a higher order may succeed."""
+    g, rep, _ = vdp_proof
+    res = prove_report(g, rep, opts=ProofOptions(precision=64, order=8))
+    assert not res.proved and res.reason.startswith("not proved")
+    assert "may succeed" in res.reason and "--precision" in res.reason and "now 64" in res.reason
+    assert "\n" not in res.reason
+
+
+def test_the_proof_states_the_tape_doubles() -> None:
+    """omega = 0.9 enters the equations as the double nearest 0.9, squared and rounded to a double: the
+    proof states those exact binary values (not the decimals 0.9 and 0.81)."""
+    f, _ = system_of_graph(single_vdp(eps=0.37, b=2.5, omega=0.9))
+    consts = tape_constants(Tape(f))
+    omega2 = Decimal(0.9) * Decimal(0.9)  # exact product of the doubles
+    got = [Decimal(c["exact"]) for c in consts]
+    assert all(Decimal(float(c["repr"])) == Decimal(c["exact"]) for c in consts)  # repr names that double
+    near = [v for v in got if abs(v - omega2) < Decimal("1e-15")]
+    assert len(near) == 1 and near[0] != Decimal("0.81") and near[0] != omega2  # rounded once more
+    assert near[0] == Decimal(0.9 * 0.9)  # ... to the nearest double (IEEE product)
+    assert Decimal(0.37) in got and Decimal("0.37") not in got
+
+
+def test_proof_output_states_what_was_proved(vdp_proof) -> None:
+    from cpgsim.cli.commands.verify import _proof_text
+
+    g, _, res = vdp_proof
+    d = res.to_json()["proved_for"]
+    assert "tape" in d["statement"] and d["tape_constants"]
+    assert {p["path"] for p in d["parameters"]} >= {"z.eps", "z.b", "z.omega"}
+    assert res.certificate is not None and res.certificate["tape_constants"] == d["tape_constants"]
+    assert "proved for the tape constants" in _proof_text(res)
+
+
 def test_interval_text_rounds_outward() -> None:
     # 0.1 is the double 0.1000000000000000055...: rounding to nearest prints "0.1", which excludes it
     lo, hi = (Decimal(x) for x in interval_text(0.1, 0.1, 3)[1:-1].split(", "))
@@ -211,6 +247,7 @@ def test_harmonic_oscillator_is_never_proved() -> None:
     rep = verify(g, options=FAST)
     res = prove_report(g, rep, opts=ProofOptions(precision=128, order=20))
     assert not res.proved and res.exit_code == 1
+    assert "will not help" in res.reason  # a centre is not a matter of bits or order
     g = damped_oscillator()  # decays to the origin: no orbit at all
     res = prove_report(g, verify(g, options=FAST))
     assert not res.proved and "no periodic orbit" in res.reason
@@ -340,6 +377,9 @@ def test_cli_tampered_certificates_fail(cli_cert, tmp_path) -> None:
     assert check(bad) == 1
     bad = copy.deepcopy(good)  # other equations (tape digest)
     bad["params"]["z.eps"] = 0.9
+    assert check(bad) == 1
+    bad = copy.deepcopy(good)  # a stated tape constant that is not in the tape
+    bad["tape_constants"][0]["exact"] = "0.5"
     assert check(bad) == 1
     bad = copy.deepcopy(good)  # a multiplier claim that is not what the interval computation gives
     bad["claims"]["multipliers"][0]["abs"] = [0.5, 0.6]

@@ -52,7 +52,31 @@ Progress = Callable[[str], None]
 
 
 class ProofFailed(Exception):
-    """A step of the proof could not be validated (the message is the one-line reason)."""
+    """A step of the proof could not be validated (the message is the one-line reason).
+
+    ``knob`` names what the failure points to: ``"bits"`` (the ball enclosures are too wide: more
+    precision), ``"bits-order"`` (a Taylor step or the crossing could not be validated: more precision or a
+    higher order), ``"box"`` (the Krawczyk box: its radius is chosen automatically), ``None`` (a property
+    of the system or the certificate: no setting helps).
+    """
+
+    def __init__(self, message: str, knob: str | None = None) -> None:
+        super().__init__(message)
+        self.knob = knob
+
+
+def knob_hint(knob: str | None, opts: ProofOptions) -> str:
+    """The sentence appended to a not-proved reason: which setting may make the proof succeed."""
+    p, o = opts.precision, opts.order
+    if knob == "bits":
+        return f"; more bits may succeed (e.g. --precision {min(2 * p, 4096)}; now {p})"
+    if knob == "bits-order":
+        return (f"; more bits or a higher Taylor order may succeed (e.g. --precision {min(2 * p, 4096)} --order "
+                f"{min(o + 16, 200)}; now {p} bits, order {o})")
+    if knob == "box":
+        return (f"; the box radius (chosen automatically, 4 radii tried) did not fit: more bits may succeed "
+                f"(e.g. --precision {min(2 * p, 4096)}; now {p})")
+    return "; a property of the system, not of the settings: more bits or a higher order will not help"
 
 
 @dataclass
@@ -124,6 +148,8 @@ class ProofResult:
     certificate: dict[str, Any] | None = None
     tape_instructions: int = 0
     steps: int = 0
+    tape_constants: list[dict[str, str]] = field(default_factory=list)  # see exact_doubles
+    parameters: list[dict[str, str]] = field(default_factory=list)  # the graph's numeric parameters, as doubles
 
     @property
     def exit_code(self) -> int:
@@ -145,6 +171,8 @@ class ProofResult:
             "method": (f"validated Taylor integration (order {self.options.order}, arb balls at "
                        f"{self.options.precision} bits) of x' = f(x), V' = J(x) V from the graph's CasADi tape; "
                        "Poincare return map; Krawczyk test; Gershgorin enclosures of the multipliers"),
+            "proved_for": {"statement": PROVED_FOR, "tape_constants": self.tape_constants,
+                           "parameters": self.parameters},
             "taylor_steps": self.steps, "tape_instructions": self.tape_instructions,
             "wall_time_s": round(self.wall_time_s, 3),
         }
@@ -154,6 +182,36 @@ class ProofResult:
 
 
 # -- exact numbers ---------------------------------------------------------------------------------
+
+PROVED_FOR = ("the proof is for x' = f(x) with exactly the constants of the CasADi tape, binary doubles (repr and "
+              "exact decimal value); a decimal parameter such as 0.9 is the nearest double, and a derived constant "
+              "(e.g. omega^2) is that double's square rounded to a double once more")
+
+
+def exact_double(x: float) -> dict[str, str]:
+    """``{"repr": shortest round-trip text, "exact": the double's exact decimal value}``."""
+    return {"repr": repr(float(x)), "exact": str(decimal.Decimal(float(x)))}
+
+
+def tape_constants(tape: Tape) -> list[dict[str, str]]:
+    """The distinct constants of the tape (sorted), each as :func:`exact_double`: what the proof is about."""
+    return [exact_double(c) for c in sorted({float(i.const) for i in tape.instrs if i.op == "const"})]
+
+
+def parameter_doubles(graph: Any) -> list[dict[str, str]]:
+    """The graph's scalar numeric parameters as doubles (``path`` with :func:`exact_double`)."""
+    out: list[dict[str, str]] = []
+    paths = graph.parameter_paths() if hasattr(graph, "parameter_paths") else list(getattr(graph, "parameters", []))
+    for path in paths:
+        try:
+            v = graph.get_param(path) if hasattr(graph, "get_param") else graph.values[path]
+        except Exception:  # noqa: BLE001 - array or string parameters: not a scalar double
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
+            continue
+        out.append({"path": path, **exact_double(float(v))})
+    return out
+
 
 def exact_str(v: arb) -> str:
     """An exact arb (a dyadic number) as ``"m*2^e"``."""
@@ -282,7 +340,7 @@ class Prover:
                 h = h / 2
                 st = integ.step(z, arb(h), coeffs)
             if st is None:
-                raise ProofFailed(f"the Picard test failed at t = {t_f:.6g} s (step {h:.3g} s)")
+                raise ProofFailed(f"the Picard test failed at t = {t_f:.6g} s (step {h:.3g} s)", "bits-order")
             last = False
             if t_cross is not None:
                 if t_f + h > t_cross:
@@ -317,7 +375,7 @@ class Prover:
             g0, gh = sg * (st.z[i] - c), sg * (st.at(st.h)[i] - c)
             if g0 > 0 or gh < 0:
                 return
-        raise ProofFailed(f"step {k}: an earlier crossing of the section cannot be excluded")
+        raise ProofFailed(f"step {k}: an earlier crossing of the section cannot be excluded", "bits-order")
 
     def _cross(self, st: Step, t: arb, sec: Section, tau: float, used: list[float], augmented: bool) -> Return:
         """Interval Newton for the crossing time within the last step (monotone: ``sign f_i(E) = direction``)."""
@@ -325,17 +383,19 @@ class Prover:
         n = self.n
         d_all = sg * self.flow.rhs(st.enclosure[:n])[i]
         if not d_all > 0:
-            raise ProofFailed(f"the flow is not transversal to the section {sec.name} = {sec.level:g} on the last step")
+            raise ProofFailed(f"the flow is not transversal to the section {sec.name} = {sec.level:g} on the last "
+                              "step", "bits-order")
         h = st.h
         if not (0 < tau < float(h.mid())):
-            raise ProofFailed("no return to the section: the crossing is not inside the last step")
+            raise ProofFailed("no return to the section: the crossing is not inside the last step", "bits-order")
         # first Newton step over the whole step [0, h], with f_i(E): the Taylor enclosures hold on [0, h] only,
         # so the new interval must lie strictly inside (0, h)
         t_hat = arb(tau)
         g_hat = sg * (st.at(t_hat)[i] - c)
         T = t_hat - g_hat / d_all
         if not (T.lower() > 0 and T.upper() < h):
-            raise ProofFailed("no return to the section: interval Newton could not enclose the crossing time")
+            raise ProofFailed("no return to the section: interval Newton could not enclose the crossing time",
+                              "bits-order")
         for _ in range(8):
             t_hat = T.mid()
             g_hat = sg * (st.at(t_hat)[i] - c)
@@ -582,6 +642,7 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
     with precision(opts.precision, cap=max(64, opts.order + 8)):
         pr = Prover(f, names, opts, say)
         res.tape_instructions = len(pr.tape)
+        res.tape_constants = tape_constants(pr.tape)
         fx = np.asarray(f(np.asarray(x_star, dtype=float))).ravel()
         sec = choose_section(names, np.asarray(x_star, dtype=float), fx, reference)
         res.section = sec
@@ -640,7 +701,7 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
                 assert DGX is not None
                 Jx = _mid_matrix(DGX)
                 if not np.all(np.isfinite(Jx)) or abs(np.linalg.det(Jx)) == 0:
-                    raise ProofFailed("Krawczyk test failed: DG(X) is singular")
+                    raise ProofFailed("Krawczyk test failed: DG(X) is singular", "bits-order")
                 C = arb_mat([[arb(float(v)) for v in row] for row in np.linalg.inv(Jx)])
                 ok, info = krawczyk(center, G_center, DGX, C, r)
                 info["box_radius"] = r_f
@@ -658,7 +719,8 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
             if not ok or box is None:
                 raise ProofFailed(f"Krawczyk test failed at box width {2 * r_f:.3g} (|I - C DG(X)| <= "
                                   f"{round_up(info.get('contraction_norm', math.nan), 3)}, |C G(s_hat)| <= "
-                                  f"{round_up(info.get('residual', math.nan), 3)})")
+                                  f"{round_up(info.get('residual', math.nan), 3)})",
+                                  "bits-order" if info.get("contraction_norm", math.inf) >= 1 else "box")
             # the fixed point lies in K(X) n X, far narrower than X: the period and the multipliers
             # are enclosed over that box (one more validated run)
             K_box = [arb(c.mid(), arb(info["K_radius"]) * 2) for c in center]
@@ -682,6 +744,7 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
                               "(stability not proved)")
             res.certificate = {
                 "format": CERT_FORMAT, "states": list(names), "tape_sha256": pr.tape.digest(),
+                "proved_for": PROVED_FOR, "tape_constants": res.tape_constants,
                 "precision": opts.precision, "order": opts.order, "section": sec.to_json(),
                 "period_guess": period,
                 "s_hat": [exact_str(v.mid()) for v in s], "center_shift": center_shift,
@@ -691,7 +754,7 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
                            "stable": res.stable},
             }
         except ProofFailed as exc:
-            res.proved, res.stable, res.reason = False, False, str(exc)
+            res.proved, res.stable, res.reason = False, False, str(exc) + knob_hint(exc.knob, opts)
     res.wall_time_s = time.perf_counter() - t0
     return res
 
@@ -828,6 +891,9 @@ def prove_report(graph: Any, report: Any, inputs: Mapping[str, Any] | None = Non
     M = np.asarray(cyc.monodromy)[np.ix_([cyc.states.index(nm) for nm in names],
                                           [cyc.states.index(nm) for nm in names])]
     res = prove_system(f, names, x, cyc.period, cyc.reference, opts, progress, monodromy=M)
+    res.parameters = parameter_doubles(graph)
+    if res.certificate is not None:
+        res.certificate["parameters"] = res.parameters
     if not res.proved and not res.reason.startswith("not proved"):
         res.reason = "not proved: " + res.reason
     return res
@@ -881,6 +947,10 @@ def check_certificate(path: Path, graph: Any, graph_spec: str | None = None,
                            f"states {cert['tape_sha256']} (other equations or parameter values)")
         if names != cert["states"]:
             return False, "the graph's states differ from the certified ones"
+        if "tape_constants" in cert and cert["tape_constants"] != tape_constants(Tape(f)):
+            return False, "the certificate's stated tape constants are not those of the graph's tape"
+        if "parameters" in cert and cert["parameters"] != parameter_doubles(graph):
+            return False, "the certificate's stated parameter doubles are not those of the graph"
         ok, msg = check_system(f, names, cert, progress)
         what = f"graph {label}" + (f" with {params}" if params else "")
         return ok, f"{what}: {msg}"

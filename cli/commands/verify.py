@@ -200,8 +200,21 @@ def _proof_text(proof) -> str:
         for mu in d["multipliers"]:
             lines.append(f"  |mu| in {interval_text(*mu['abs'], 12)}  re in {interval_text(*mu['re'], 12)}  "
                          f"im in {interval_text(*mu['im'], 3)}")
+        pf = d["proved_for"]
+        lines.append("  proved for the tape constants (exact binary doubles): "
+                     + ", ".join(_double_text(c) for c in pf["tape_constants"]))
+        if pf["parameters"]:
+            lines.append("  parameters as doubles: "
+                         + ", ".join(f"{c['path']} = {_double_text(c)}" for c in pf["parameters"]))
         lines.append(f"  {d['taylor_steps']} Taylor steps, {d['wall_time_s']:.1f} s")
     return "\n".join(lines)
+
+
+def _double_text(c: dict) -> str:
+    """``repr`` of a double, with its exact decimal value when the two differ (``0.9 (= 0.9000...0222...)``)."""
+    from decimal import Decimal
+
+    return c["repr"] if Decimal(c["repr"]) == Decimal(c["exact"]) else f"{c['repr']} (= {c['exact']})"
 
 
 def _check(args: argparse.Namespace) -> int:

@@ -85,7 +85,7 @@ SCOPES: dict[str, tuple[str, ...]] = {
     "simulate-nonfinite": ("_input_series", "_initial_states", "_check_resume", "_run_chunk", "_diverged", "commit",
                            "check_finite", "check_memory"),
     # the model description's checks (XML limits, structure, binaries, default experiment)
-    "description-checks": ("_check_xml", "check", "check_binary", "default_experiment"),
+    "description-checks": ("_decode_xml", "_check_xml", "check", "check_binary", "default_experiment"),
 }
 """Modules scored on some functions only: the mutants elsewhere are skipped (:func:`skip_out_of_scope`)."""
 SCOPE_NOTE = "skipped: outside the functions this module is scored on (SCOPES)"

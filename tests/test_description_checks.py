@@ -146,3 +146,55 @@ def test_an_entity_without_a_doctype_is_refused_as_such():
     xml = BODY.format("<ModelVariables/>").replace("<ModelVariables/>", "<ModelVariables/><!ENTITY e 'x'>")
     with pytest.raises(ModelDescriptionError, match="declares a DTD or entities"):
         _check_xml(xml.encode(), Path("m.fmu"))
+
+
+DECL = '<?xml version="1.0" encoding="{}"?>'
+ENCODINGS = [  # (the encoding the bytes are in, the name declared in the document); "+bom": a byte order mark
+    ("utf-8", "UTF-8"), ("utf-8-sig", "UTF-8"), ("utf-16-le+bom", "UTF-16"), ("utf-16-be+bom", "UTF-16"),
+    ("utf-16-le", "UTF-16"), ("utf-16-be", "UTF-16"), ("utf-32-le+bom", "UTF-32"), ("utf-32-be+bom", "UTF-32"),
+    ("utf-32-le", "UTF-32"), ("utf-32-be", "UTF-32"), ("latin-1", "ISO-8859-1")]
+
+
+def encoded(text: str, encoding: str) -> bytes:
+    codec, bom = encoding.removesuffix("+bom"), encoding.endswith("+bom")
+    return (("\ufeff" if bom else "") + text).encode(codec)
+DTDS = {"doctype": '<!DOCTYPE x [<!ENTITY e "boom">]>', "lowercase": '<!doctype x>',
+        "entity alone": '<!ENTITY e "boom">', "mixed case": '<!DocType x>'}
+PLACES = {"first": lambda d, body: d + body,
+          "after a long comment": lambda d, body: "<!--" + "c\u00e9" * 3000 + "-->" + d + body,
+          "inside the root": lambda d, body: body.replace("</fmiModelDescription>", d + "</fmiModelDescription>"),
+          "at the end": lambda d, body: body + d}
+
+
+@pytest.mark.parametrize("encoding, declared", ENCODINGS)
+@pytest.mark.parametrize("dtd", sorted(DTDS))
+@pytest.mark.parametrize("place", sorted(PLACES))
+def test_a_dtd_or_entity_anywhere_in_any_encoding_is_refused_as_such(encoding, declared, dtd, place):
+    """The text scan refuses a DTD or entity wherever it stands, whatever the encoding (with or without a
+    byte order mark): the message says so, not merely that the XML does not parse."""
+    body = BODY.format('<ModelVariables/><V n="\u00e9"/>')
+    data = encoded(DECL.format(declared) + PLACES[place](DTDS[dtd], body), encoding)
+    with pytest.raises(ModelDescriptionError, match="declares a DTD or entities"):
+        _check_xml(data, Path("m.fmu"))
+
+
+@pytest.mark.parametrize("encoding, declared", [e for e in ENCODINGS if not e[0].startswith("utf-32")])
+def test_a_clean_document_in_each_encoding_xml_requires_is_accepted(encoding, declared):
+    """UTF-8 and UTF-16 (XML 1.0, sec. 4.3.3: every processor reads them), with or without a byte order mark,
+    and a declared single-byte encoding: the same clean document passes the checks."""
+    body = BODY.format('<ModelVariables>' + '<V n="\u00e9"/>' * 3 + '</ModelVariables>')
+    _check_xml(encoded(DECL.format(declared) + "<!--" + "c" * 2000 + "-->" + body, encoding), Path("m.fmu"))
+
+
+def test_a_long_xml_declaration_still_names_the_encoding():
+    """The declaration may be padded (XML allows any whitespace between its attributes): a single-byte
+    encoding declared after 600 spaces is still read as declared, so the accented name decodes."""
+    decl = '<?xml version="1.0"' + " " * 600 + 'encoding="ISO-8859-1"?>'
+    _check_xml((decl + BODY.format('<V n="\u00e9"/>')).encode("latin-1"), Path("m.fmu"))
+
+
+def test_an_unknown_or_wrong_encoding_is_one_line_naming_it():
+    with pytest.raises(ModelDescriptionError, match="declares an unknown encoding 'X-NOPE'"):
+        _check_xml((DECL.format("X-NOPE") + BODY.format("")).encode(), Path("m.fmu"))
+    with pytest.raises(ModelDescriptionError, match=r"is not valid utf-8 \(byte 5\)"):
+        _check_xml(b"<fmi \xff\xfe" + BODY.format("").encode(), Path("m.fmu"))

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_fuzz_fmus import c_fmu, compile_library
+from test_isolation_limits import hostile_library
 
 from cpgsim.fmus.errors import FmuCrashedError, FmuError, FmuRuntimeError, FmuTimeoutError
 from cpgsim.fmus.importer import isolation
@@ -92,6 +93,9 @@ def fmus(tmp_path_factory) -> dict[str, Path]:
     for hostile in ("SEGV", "EXIT", "SLEEP", "SIGSTOP"):
         lib = compile_library(folder / f"{hostile.lower()}.so", (f"H_{hostile}", "AT_DOSTEP"))
         out[hostile] = c_fmu(folder / f"{hostile.lower()}.fmu", library=lib)
+    for hostile in ("HANGSETSID", "SPAM"):  # a setsid process then a hang; 3 MiB printed in doStep
+        out[hostile] = c_fmu(folder / f"{hostile.lower()}.fmu",
+                             library=hostile_library(folder / f"{hostile.lower()}.so", hostile))
     nolib = folder / "nolib.fmu"  # a model description whose binary is missing: the child cannot load it
     import zipfile
 
@@ -211,6 +215,63 @@ def test_a_hanging_step_is_killed_at_the_timeout(fmus, tmp_path):
     assert str(err.value) == (f"FMU sleep.fmu (block 'plant', isolated process pid {rt.proc.pid}): step at "
                               f"t=0.05 s took longer than 0.4 s (--fmu-timeout); the process was killed")
     assert 0.4 <= waited < 5.0  # the lifeline ends the child at once, far before the FMU's 600 s sleep
+    assert_gone(rt)
+
+
+def open_fds() -> set[str]:
+    return set(os.listdir("/proc/self/fd"))
+
+
+def test_a_timeout_ends_what_the_fmu_started_and_leaks_no_descriptor(fmus, tmp_path, monkeypatch):
+    """The FMU starts a process that leaves the group (setsid), then hangs: at the timeout the child and that
+    process end (the lifeline), and the parent holds no descriptor of the run afterwards."""
+    pidfile = tmp_path / "pids"
+    monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
+    before = open_fds()
+    rt = runtime(fmus["HANGSETSID"], tmp_path, timeout=0.5)
+    rt.setup(0.0)
+    rt.do_step(0.0, 0.05)  # hostile from t = 0.05 s on
+    with pytest.raises(FmuTimeoutError):
+        rt.do_step(0.05, 0.05)
+    child, escaped = map(int, pidfile.read_text().split())
+    try:
+        assert wait_until(lambda: not alive(escaped), 5), "a setsid process of the FMU outlived its timeout"
+        assert not alive(child)
+        rt._output.finish()
+        assert open_fds() == before, "descriptors of the isolated run are still open"
+    finally:
+        os.kill(escaped, signal.SIGKILL) if alive(escaped) else None
+    assert_gone(rt)
+
+
+@pytest.mark.parametrize("end", ["terminate", "crash"])
+def test_a_run_leaks_no_descriptor(fmus, tmp_path, end):
+    before = open_fds()
+    rt = runtime(fmus["good" if end == "terminate" else "SEGV"], tmp_path)
+    rt.setup(0.0)
+    rt.do_step(0.0, 0.05)
+    if end == "terminate":
+        rt.terminate()
+    else:
+        with pytest.raises(FmuCrashedError):
+            rt.do_step(0.05, 0.05)
+    rt._output.finish()
+    assert open_fds() == before
+    assert_gone(rt)
+
+
+def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fmus, tmp_path, monkeypatch, capfd):
+    monkeypatch.setattr(isolation, "OUTPUT_LIMIT", 1000)  # the forwarder reads the limit as it copies
+    rt = runtime(fmus["SPAM"], tmp_path, name="talker")
+    rt.setup(0.0)
+    rt.do_step(0.0, 0.05)
+    rt.do_step(0.05, 0.05)  # prints from t = 0.05 s on
+    rt.terminate()
+    err = capfd.readouterr().err
+    printed = 3 * 1024 * 1025
+    assert err.count(f"cpgsim: warning: FMU spam.fmu (block 'talker') printed {printed} bytes; the "
+                     f"{printed - 1000} bytes after the first 1000 were not shown") == 1
+    assert err.startswith("x" * 1000) and len(err) < 1000 + 300
     assert_gone(rt)
 
 

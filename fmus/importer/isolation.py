@@ -122,7 +122,7 @@ class IsolatedRuntime:
         where = f"FMU {self.path.name} (block {self.name!r}, isolated process pid {self.proc.pid})"
         try:
             self.conn.send((what, payload))
-        except (BrokenPipeError, ConnectionError, OSError):
+        except OSError:  # BrokenPipeError, ConnectionResetError: the child is gone
             self._raise_dead(where, what)
         deadline = None if timeout is None else time.monotonic() + timeout
         wait = 0.001
@@ -141,7 +141,7 @@ class IsolatedRuntime:
                                       f"(--fmu-timeout); the process was killed")
         try:
             reply = self.conn.recv()
-        except (EOFError, ConnectionError, OSError):
+        except (EOFError, OSError):
             self._raise_dead(where, what)
         status, value = reply
         if status == "ok":
@@ -289,8 +289,11 @@ class OutputForwarder:
             pass
 
     def finish(self) -> None:
-        """Wait briefly for the rest of the output; say once how much was not shown."""
+        """Wait briefly for the rest of the output, close the pipe once it is read to its end (a run leaves
+        no descriptor behind); say once how much was not shown."""
         self._thread.join(timeout=2.0)
+        if not self._thread.is_alive():
+            self.pipe.close()
         if self.dropped and not self._reported:
             self._reported = True
             print(f"cpgsim: warning: {self.label} printed {self.shown + self.dropped} bytes; the "
@@ -444,10 +447,7 @@ def _serve(fd: int) -> None:
             name = type(exc).__name__
             reply = ("err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS
                              else f"{name}: {one_line(exc)}"))
-        try:
-            conn.send(reply)
-        except OSError:  # the socket is gone (the FMU closed it): the parent sees the child end
-            os._exit(3)
+        conn.send(reply)  # if the socket is gone (the FMU closed it), the caller ends the child: exit status 3
     if rt is not None:
         rt.terminate()
     conn.close()
@@ -456,8 +456,7 @@ def _serve(fd: int) -> None:
 if __name__ == "__main__":
     os.dup2(2, 1)  # anything the FMU prints goes to stderr, never into the protocol
     _become_subreaper()
-    if len(sys.argv) > 2:
-        threading.Thread(target=_watch_lifeline, args=(int(sys.argv[2]),), daemon=True).start()
+    threading.Thread(target=_watch_lifeline, args=(int(sys.argv[2]),), daemon=True).start()
     try:
         _serve(int(sys.argv[1]))
         sys.stderr.flush()

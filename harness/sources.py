@@ -48,12 +48,24 @@ def _module_name(path: Path) -> str | None:
     return ".".join([PACKAGE, *parts])
 
 
-def _imported_names(path: Path, own: str | None) -> set[str]:
-    """Dotted module names (and ``module.attribute`` candidates) imported anywhere in ``path``."""
+def _imported_names(path: Path, own: str | None) -> frozenset[str]:
+    """Dotted module names (and ``module.attribute`` candidates) imported anywhere in ``path``.
+
+    Each file is parsed once per process and version: the result is kept under the file's size and
+    modification time, so the closures of many block modules (one per compile) share the package's parses."""
+    try:
+        st = path.stat()
+    except OSError:
+        return frozenset()
+    return _parsed_imports(path, own, st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4096)
+def _parsed_imports(path: Path, own: str | None, size: int, mtime_ns: int) -> frozenset[str]:
     try:
         tree = ast.parse(path.read_bytes(), filename=str(path))
     except (OSError, SyntaxError, ValueError):
-        return set()
+        return frozenset()
     names: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -68,7 +80,7 @@ def _imported_names(path: Path, own: str | None) -> set[str]:
                 base = ".".join([*pkg, base] if base else pkg)
             names.add(base)
             names.update(f"{base}.{a.name}" for a in node.names if a.name != "*")
-    return names
+    return frozenset(names)
 
 
 @functools.cache

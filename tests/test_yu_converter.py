@@ -113,11 +113,28 @@ def _followers_at_aeps(eps: float, b: float, k: float, n_half: int) -> np.ndarra
     return r.y_events[0][:, 2:]
 
 
-_SLOW = pytest.mark.slow
 
 
-@pytest.mark.parametrize("eps, b, k", [(0.1, 9.0, 0.1)] + [pytest.param(*c, marks=_SLOW) for c in (
-    (0.1, 4.0, 0.1), (0.1, 16.0, 0.1), (0.1, 0.25, 0.4), (0.3, 25.0, 0.1), (0.05, 1.0, 0.4), (1.0, 9.0, 0.4))])
+FORWARD_RUN_B9 = (-0.5824892216483648, -0.008968524994716898, -0.5824892216483646)
+"""The followers' (x2, y2, x3) at the last of 200 AEPs of the forward run below at eps 0.1, b 9, k 0.1 (scipy
+DOP853, rtol 1e-10, atol 1e-12; computed once with ``_followers_at_aeps(0.1, 9.0, 0.1, 200)[-1]``: the
+dynamics, not the solver under test). The quick tier checks the solver against it; the slow tier repeats
+the run itself (about 4 s of Python right-hand sides) at b = 9 and six more points."""
+
+
+def test_the_locked_orbit_at_b_9_is_where_a_stored_forward_run_settled():
+    """b = 9 is where scipy 1.17's fsolve stopped on its own step test: the solver's answer against the
+    stored forward run (tolerance as below)."""
+    o = locked_orbit(0.1, 9.0, k=0.1)
+    amp = 2.0 / 3.0
+    assert FORWARD_RUN_B9[0] == pytest.approx(o.x2_switch, abs=1e-5 * amp)
+    assert FORWARD_RUN_B9[2] == pytest.approx(o.x2_switch, abs=1e-5 * amp)
+    assert FORWARD_RUN_B9[1] == pytest.approx(o.y2_switch, abs=1e-5 * amp)
+
+
+@pytest.mark.slow  # a forward run per case (4 s of Python right-hand sides each); b = 9 is quick above
+@pytest.mark.parametrize("eps, b, k", [(0.1, 9.0, 0.1), (0.1, 4.0, 0.1), (0.1, 16.0, 0.1), (0.1, 0.25, 0.4),
+                                       (0.3, 25.0, 0.1), (0.05, 1.0, 0.4), (1.0, 9.0, 0.4)])
 def test_the_locked_orbit_is_the_lock_a_forward_run_settles_on(eps, b, k):
     """Over the range users set (eps 0.05-1, b 0.25-25, k 0.1-0.4; b = 9 failed with scipy 1.17's fsolve,
     which stopped on its own step test at the integrator's noise): the followers' state that the solver returns
@@ -132,7 +149,15 @@ def test_the_locked_orbit_is_the_lock_a_forward_run_settles_on(eps, b, k):
     assert fol[1] == pytest.approx(o.y2_switch, abs=1e-5 * amp)
 
 
-@pytest.mark.parametrize("eps, b, k", [(1.0, 4.0, 0.1), pytest.param(0.1, 4.0, 0.0, marks=_SLOW)])
+def test_no_locked_orbit_is_one_line():
+    """eps = 1, k = 0.1: a forward run keeps drifting (the slow test below shows it), so the solver refuses."""
+    with pytest.raises(ParameterError, match="do not lock") as info:
+        locked_orbit(1.0, 4.0, k=0.1)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.slow  # a forward run per case; the refusal alone is quick above
+@pytest.mark.parametrize("eps, b, k", [(1.0, 4.0, 0.1), (0.1, 4.0, 0.0)])
 def test_no_locked_orbit_where_a_forward_run_keeps_drifting(eps, b, k):
     """Where the followers do not lock (k = 0: uncoupled; eps = 1 with k = 0.1: the leader's and the followers'
     frequency shifts differ more than the coupling pulls), a forward run's follower state at the AEPs keeps

@@ -96,7 +96,9 @@ def test_a_scalar_input_is_repeated_over_the_horizon():
 
 @pytest.mark.parametrize("x0, phrase", [({"nope": 1.0}, "no state 'nope'"),
                                          ({"pos.x": [1.0, 2.0]}, "must be 1 finite number(s)"),
-                                         ({"pos.x": float("nan")}, "must be 1 finite number(s)")])
+                                         ({"pos.x": float("nan")}, "must be 1 finite number(s)"),
+                                         ({"pos.x": float("inf")}, "must be 1 finite number(s)"),
+                                         ({"pos.x": [-float("inf")]}, "must be 1 finite number(s)")])
 def test_bad_start_values_are_refused_naming_the_state(x0, phrase):
     with pytest.raises(ParameterError, match=phrase.replace("(", r"\(").replace(")", r"\)")):
         Simulator(damped_oscillator()).run(0.01, x0=x0)

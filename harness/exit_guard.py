@@ -3,8 +3,8 @@
 An FMU runs in-process as a shared library; if it calls ``exit(0)`` inside ``doStep``, the C library
 ends the process: Python's exception handling, ``finally`` blocks and ``atexit`` never run and the
 exit status would be 0. :func:`guard_run` arms a C exit handler (``on_exit``, from a few lines of C
-compiled once into the cache and checked against its digest before every load like any cached
-library, see :func:`cpgsim.harness.native.cached_library`) for the duration of a run: if the process
+in ``harness/c/exit_guard.c``, compiled once into the cache by :mod:`cpgsim.harness.toolchain` and checked
+against its digest before every load like any cached library) for the duration of a run: if the process
 exits while it is armed, the handler prints one line naming the run (and where its partial results
 are, marked incomplete) and ends the process with status 1 instead. While armed, the fatal signals
 of a crash in native code (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT) are reported the same way
@@ -19,67 +19,17 @@ end); without a C compiler the guard is not available and :func:`guard_run` does
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
-import subprocess
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 
-_SOURCE = r"""
-#define _GNU_SOURCE
-#include <signal.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <unistd.h>
+from cpgsim.harness.toolchain import NativeUnavailable, c_source, compile_source, library_name
 
-static volatile int cpgsim_armed = 0;
-static char cpgsim_msg[2048];
-static char cpgsim_crash[2048];
-static const int cpgsim_signals[5] = {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT};
-static struct sigaction cpgsim_old[5];
-
-static void cpgsim_on_signal(int sig) {
-    const char *name = sig == SIGSEGV ? "SIGSEGV" : sig == SIGBUS ? "SIGBUS" : sig == SIGFPE ? "SIGFPE"
-        : sig == SIGILL ? "SIGILL" : "SIGABRT";
-    ssize_t w = write(2, cpgsim_crash, strlen(cpgsim_crash));
-    w = write(2, name, strlen(name));
-    w = write(2, ")\n", 2);
-    (void)w;
-    _exit(1);
-}
-
-static void cpgsim_on_exit(int status, void *arg) {
-    (void)arg;
-    if (!cpgsim_armed) return;
-    cpgsim_armed = 0;
-    char line[2300];
-    int n = snprintf(line, sizeof line, "%s (exit status %d)\n", cpgsim_msg, status);
-    if (n > 0) { ssize_t w = write(2, line, (size_t)(n < (int)sizeof line ? n : (int)sizeof line - 1)); (void)w; }
-    _exit(1);
-}
-
-int cpgsim_guard_install(void) { return on_exit(cpgsim_on_exit, NULL); }
-void cpgsim_guard_arm(const char *msg, const char *crash) {
-    strncpy(cpgsim_msg, msg, sizeof cpgsim_msg - 1);
-    cpgsim_msg[sizeof cpgsim_msg - 1] = 0;
-    strncpy(cpgsim_crash, crash, sizeof cpgsim_crash - 1);
-    cpgsim_crash[sizeof cpgsim_crash - 1] = 0;
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = cpgsim_on_signal;
-    sigemptyset(&sa.sa_mask);
-    for (int i = 0; i < 5; i++) sigaction(cpgsim_signals[i], &sa, &cpgsim_old[i]);
-    cpgsim_armed = 1;
-}
-void cpgsim_guard_disarm(void) {
-    if (cpgsim_armed)
-        for (int i = 0; i < 5; i++) sigaction(cpgsim_signals[i], &cpgsim_old[i], NULL);
-    cpgsim_armed = 0;
-}
-int cpgsim_guard_armed(void) { return cpgsim_armed; }
-"""
+_SOURCE = c_source(__package__, "c/exit_guard.c")
+_OPTIONS = ("-shared", "-fPIC")
+_FLAGS = ("-O1",)
+LIBRARY_NAME = library_name(_SOURCE, "cpgsim_exit_guard", _FLAGS, _OPTIONS)
+"""The guard's file name in the library cache."""
 
 _lib: ctypes.CDLL | None = None
 _tried = False
@@ -91,23 +41,8 @@ def _load() -> ctypes.CDLL | None:
     if _tried:
         return _lib
     _tried = True
-    from cpgsim.harness.native import NativeUnavailable, cached_library, compiler
-
-    cc = compiler()
-    if cc is None:
-        return None
-    digest = hashlib.sha256(_SOURCE.encode()).hexdigest()[:16]
-
-    def build(out: Path) -> None:
-        src = out.with_name("guard.c")
-        src.write_text(_SOURCE)
-        proc = subprocess.run([cc, "-shared", "-fPIC", "-O1", str(src), "-o", str(out)],
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise NativeUnavailable("the exit guard did not compile")
-
     try:
-        lib = cached_library(f"cpgsim_exit_guard_{digest}.so", build)
+        lib = compile_source(_SOURCE, "cpgsim_exit_guard", _FLAGS, origin="harness/c/exit_guard.c", options=_OPTIONS)
     except NativeUnavailable:
         return None
     try:

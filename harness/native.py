@@ -10,19 +10,21 @@ against its recorded SHA-256 before it is loaded (:func:`cached_library`).
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
-import re
-import shutil
-import subprocess
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from cpgsim.components import memo, private_store
+from cpgsim.harness.toolchain import (  # noqa: F401  (re-exported: the names callers know)
+    NativeUnavailable,
+    cache_dir,
+    cached_library,
+    compile_source,
+    compiler,
+    optimization_flags,
+)
 
 DRIVER = r"""
 #include <math.h>
@@ -239,34 +241,6 @@ void cpgsim_funbind(void *ctx) {
 """
 
 
-class NativeUnavailable(RuntimeError):
-    """No C compiler (or the build failed): use the CasADi path instead."""
-
-
-def cache_dir() -> Path:
-    """Where compiled C libraries go: the per-user cache folder (:func:`cpgsim.components.memo.cache_root`)."""
-    return memo.cache_root()
-
-
-def compiler() -> str | None:
-    return os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
-
-
-_TABLE = re.compile(r"^static const long long \w+\[\] = \{[^}]*\};$", re.MULTILINE)
-
-
-def optimization_flags(source: str) -> tuple[str, ...]:
-    """-O3 for ordinary steps; -O1 above 250 kB of C code (gcc's time grows fast, the run gains little).
-
-    Constant tables (a grouped step's offsets, one line each) are data, not code: they do not count.
-    Measured on the six-leg controller's grouped step (197 kB of code since its costly subexpressions
-    are carried, ``benchmarks/bench_controller.py``, 2026-12-03, load 2): -O3 runs 1.24x faster than -O1
-    (8.3 vs 10.4 us a step) for 0.9 s more of gcc on a cold start (2.3 vs 1.45 s); the limit was 150 kB
-    when -O3 gained 1.08x on that step. The flat controller (320 kB) stays at -O1.
-    """
-    return ("-O1",) if len(_TABLE.sub("", source)) > 250_000 else ("-O3",)
-
-
 def casadi_c_source(functions: list[ca.Function], tag: str) -> str:
     """The C that CasADi's ``CodeGenerator`` writes for ``functions`` (each under its own name)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -281,54 +255,6 @@ def casadi_c_source(functions: list[ca.Function], tag: str) -> str:
 def build_shared_library(fn: ca.Function, driver: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
     """Generate C for ``fn`` (renamed ``step``-style by its own name), append ``driver``, compile."""
     return compile_source(casadi_c_source([fn], tag) + driver, tag, flags)
-
-
-def compile_source(source: str, tag: str, flags: tuple[str, ...] | None = None) -> Path:
-    """Compile C ``source`` into a shared library in the cache (named by its content hash)."""
-    cc = compiler()
-    if cc is None:
-        raise NativeUnavailable("no C compiler found (set CC)")
-    flags = flags or optimization_flags(source)
-    options = ["-shared", "-fPIC", "-fno-semantic-interposition", "-pthread", "-Wl,-Bsymbolic", *flags]
-    digest = hashlib.sha256((source + " ".join(options)).encode()).hexdigest()[:16]
-
-    def build(out: Path) -> None:
-        src = out.with_name(f"{tag}_full.c")
-        src.write_text(source)
-        proc = subprocess.run([cc, *options, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise NativeUnavailable(f"C compiler failed: {proc.stderr.strip()[:500]}")
-
-    return cached_library(f"{tag}_{digest}.so", build)
-
-
-def cached_library(name: str, build: Callable[[Path], None]) -> Path:
-    """The library ``name`` in the cache, checked against its digest; built by ``build(out)`` when missing.
-
-    A library that fails its check (someone else's file, writable by others, content not matching the
-    digest recorded beside it) is reported once and rebuilt, never returned, so it is never ``dlopen()``ed.
-    Building holds a lock per name, and the result is written to a temporary file in the cache folder,
-    fsynced and renamed: any number of processes asking at once all get the one complete library.
-    Raises :class:`NativeUnavailable` when the build fails or the library cannot be stored.
-    """
-    root = cache_dir()
-    lib = root / name
-    if private_store.check_file(lib) == "ok":
-        return lib
-    try:
-        with private_store.locked(root / f".{name}.lock"):
-            status = private_store.check_file(lib)
-            if status == "ok":
-                return lib  # another process built it meanwhile
-            if status is not None:
-                private_store.warn_once(f"cache entry {lib} not used: {status}; rebuilding it")
-            with tempfile.TemporaryDirectory() as tmp:
-                out = Path(tmp) / name
-                build(out)
-                private_store.install_file(out.read_bytes(), lib)
-    except OSError as exc:
-        raise NativeUnavailable(f"cannot store the compiled library {lib}: {exc.strerror or exc}") from exc
-    return lib
 
 
 class BoundStep:

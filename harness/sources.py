@@ -7,6 +7,11 @@ that sit in the same folder tree as it. It returns the files of that transitive 
 is imported to compute it, so a module that fails to import still gets a key; a name that is not a module
 (``from cpgsim.harness.compiler import Layout``) resolves to the module that defines it.
 
+A module that reads hand-written C from package data names the file by a string constant (``c_source(
+__package__, "c/exit_guard.c")``, :mod:`cpgsim.harness.toolchain`): every string literal of a module that
+names an existing ``.c`` or ``.h`` file relative to the module's folder is in the closure too, with the
+files those ``#include "..."`` in turn, so a C driver is part of every key its Python module is part of.
+
 The compiled-model key (:mod:`cpgsim.harness.cache`) hashes the closure of the compiler and of each
 block class's module, so an edit of any file that shapes a compiled model (the compiler, the step
 arithmetic, units, a helper a block's equations call) gives a new key: no hand-kept list to forget a
@@ -17,6 +22,7 @@ from __future__ import annotations
 
 import ast
 import functools
+import re
 from pathlib import Path
 
 PACKAGE = "cpgsim"
@@ -83,9 +89,50 @@ def _parsed_imports(path: Path, own: str | None, size: int, mtime_ns: int) -> fr
     return frozenset(names)
 
 
+_C_NAME = re.compile(rb"""["']([^"'\n]{1,255}\.[ch])["']""")
+_INCLUDE = re.compile(r'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
+
+
+def c_files(path: Path) -> frozenset[Path]:
+    """The C files the module at ``path`` names (string literals naming an existing ``.c``/``.h`` file relative
+    to its folder), with the files they ``#include "..."`` (relative to the including file), transitively.
+
+    Kept per file version (size, modification time) like :func:`_imported_names`."""
+    try:
+        st = path.stat()
+    except OSError:
+        return frozenset()
+    return _c_files(path, st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4096)
+def _c_files(path: Path, size: int, mtime_ns: int) -> frozenset[Path]:
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return frozenset()
+    todo = [path.parent / m.decode("utf-8", "replace") for m in _C_NAME.findall(data)]
+    found: set[Path] = set()
+    while todo:
+        file = todo.pop()
+        try:
+            if not file.is_file():
+                continue
+            file = file.resolve()
+            if file in found:
+                continue
+            text = file.read_text(errors="replace")
+        except (OSError, ValueError):
+            continue
+        found.add(file)
+        todo.extend(file.parent / name for name in _INCLUDE.findall(text))
+    return frozenset(found)
+
+
 @functools.cache
 def module_closure(path: str) -> tuple[str, ...]:
-    """Files of the module at ``path`` and of every module it imports transitively (see module docstring).
+    """Files of the module at ``path`` and of every module it imports transitively, with the C files each of
+    them reads (:func:`c_files`; see the module docstring).
 
     Followed: modules of the ``cpgsim`` package, and modules whose files lie in the folder of ``path`` when
     ``path`` itself is outside the package (a user's block module and its own helpers). Names are resolved
@@ -114,4 +161,5 @@ def module_closure(path: str) -> tuple[str, ...]:
                 found = _file_of(parts[:i], root)
                 if found is not None:
                     todo.append(found)
-    return tuple(sorted(str(f) for f in seen))
+    c_sources = set().union(*(c_files(f) for f in seen if f.suffix == ".py"))
+    return tuple(sorted(str(f) for f in seen | c_sources))

@@ -215,8 +215,9 @@ def test_engine_root_stays_small():
     root_modules = [p.stem for p in (ROOT / "harness").glob("*.py") if p.stem != "__init__"]
     # 15: the twelve of the engine plus rundir (which files a run may replace, one writer per output),
     # fused (a co-simulation block's own C loop with the compiled step, e.g. MuJoCo's) and contracts (what
-    # the master asks of a block beyond setup/do_step: ResumableBlock, FusedLoopBlock; issue 55)
-    assert len(root_modules) <= 15, sorted(root_modules)
+    # the master asks of a block beyond setup/do_step: ResumableBlock, FusedLoopBlock; issue 55); 16: toolchain
+    # (the one place hand-written C is read from package data and compiled into the cache; issue 56)
+    assert len(root_modules) <= 16, sorted(root_modules)
 
 
 @pytest.mark.parametrize("package", sorted(m for m, p in project_modules().items() if p.name == "__init__.py"))

@@ -43,7 +43,7 @@ void cpgsim_guard_disarm(void) {}
 int f(void) { return 2; }
 """
 
-GUARD_NAME = f"cpgsim_exit_guard_{hashlib.sha256(exit_guard._SOURCE.encode()).hexdigest()[:16]}.so"
+GUARD_NAME = exit_guard.LIBRARY_NAME
 
 
 @pytest.fixture

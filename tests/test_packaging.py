@@ -92,6 +92,7 @@ def test_wheel_installs_only_cpgsim(wheel):
     # the data files and every subpackage came along
     assert "cpgsim/experiments/scenarios/step.toml" in names
     assert "cpgsim/fmus/export/templates/fmi3.c" in names
+    assert "cpgsim/harness/c/exit_guard.c" in names  # the hand-written C the toolchain compiles at run time
     assert "cpgsim/__init__.py" in names and "cpgsim/components/yu/fsm.py" in names
     assert not any(n.startswith(("cpgsim/tests/", "cpgsim/benchmarks/", "cpgsim/docs/")) for n in names)
     assert "cpgsim = cpgsim.cli.main:main" in entry_points

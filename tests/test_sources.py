@@ -101,3 +101,28 @@ def test_the_closure_is_computed_once_per_process(package):
     first = sources.module_closure(path)
     (package / "engine" / "steps.py").write_text("from cpgsim.kit import unused\n")
     assert sources.module_closure(path) is first  # cached: the key of one process is stable
+
+
+def test_the_c_files_a_module_reads_are_in_its_closure(package):
+    """A module naming package-data C (``c_source(__package__, "c/drv.c")``) depends on that file and on the
+    headers it includes; a name that is no file, a C file nobody names, and a system header are not added."""
+    _tree(package, {
+        "engine/native.py": 'from cpgsim.kit import core\nDRV = c_source(__package__, "c/drv.c")\n'
+                            'OUT = "cpgsim_step_full.c"\n',
+        "engine/c/drv.c": '#include <math.h>\n#include "proto.h"\nint f(void) { return 1; }\n',
+        "engine/c/proto.h": '#include "../c/types.h"\nint f(void);\n',
+        "engine/c/types.h": "typedef double real;\n",
+        "engine/c/unused.c": "int g(void);\n",
+        "apps/user.py": "from cpgsim.engine import native\n",
+    })
+    got = _rel(sources.module_closure(str(package / "apps" / "user.py")), package)
+    assert {"engine/c/drv.c", "engine/c/proto.h", "engine/c/types.h", "engine/native.py"} <= got
+    assert "engine/c/unused.c" not in got and not any(f.endswith("full.c") for f in got)
+
+
+def test_the_real_c_drivers_are_in_the_closure_of_their_modules():
+    """The package's own hand-written C is found from the modules that read it (no hand-kept list)."""
+    sources.module_closure.cache_clear()
+    root = sources._package_root()
+    guard = _rel(sources.module_closure(str(root / "harness" / "exit_guard.py")), root)
+    assert "harness/c/exit_guard.c" in guard

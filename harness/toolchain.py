@@ -1,0 +1,133 @@
+"""The one C toolchain: hand-written C read from package data, compiled into the library cache.
+
+Every hand-written C file cpgsim compiles at run time (the exit guard, the horizon and batch drivers, the
+MuJoCo and DART plant loops) is a ``.c`` file shipped as package data, read with :mod:`importlib.resources`
+by :func:`c_source`; C generated from a graph (CasADi's step) stays generated. :func:`compile_source` is the
+one place that picks the compiler (:func:`compiler`: ``$CC``, else gcc, cc, clang), the flags
+(:func:`optimization_flags` unless given) and names the library by the SHA-256 of source and options;
+:func:`cached_library` keeps it in the per-user cache, checked against its recorded digest before every
+load. A failed build raises :class:`NativeUnavailable` with one line naming the source and the compiler's
+first error line.
+
+A module that reads a C file names it by a string constant (``c_source(__package__, "c/guard.c")``):
+:func:`cpgsim.harness.sources.module_closure` finds those names, so the C files are part of every cache key
+the module's Python source is part of.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.resources
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from cpgsim.components import memo, private_store
+
+BASE_OPTIONS = ("-shared", "-fPIC", "-fno-semantic-interposition", "-pthread", "-Wl,-Bsymbolic")
+"""Options of every library :func:`compile_source` builds (before the optimization and extra flags)."""
+
+
+class NativeUnavailable(RuntimeError):
+    """No C compiler (or the build failed): use the CasADi path instead."""
+
+
+def cache_dir() -> Path:
+    """Where compiled C libraries go: the per-user cache folder (:func:`cpgsim.components.memo.cache_root`)."""
+    return memo.cache_root()
+
+
+def compiler() -> str | None:
+    """The C compiler: ``$CC``, else the first of gcc, cc, clang on the PATH; None when there is none."""
+    return os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
+
+
+def c_source(package: str, name: str) -> str:
+    """The text of the package-data C file ``name`` (relative to the folder of ``package``)."""
+    return importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8")
+
+
+_TABLE = re.compile(r"^static const long long \w+\[\] = \{[^}]*\};$", re.MULTILINE)
+
+
+def optimization_flags(source: str) -> tuple[str, ...]:
+    """-O3 for ordinary steps; -O1 above 250 kB of C code (gcc's time grows fast, the run gains little).
+
+    Constant tables (a grouped step's offsets, one line each) are data, not code: they do not count.
+    Measured on the six-leg controller's grouped step (197 kB of code since its costly subexpressions
+    are carried, ``benchmarks/bench_controller.py``, 2026-12-03, load 2): -O3 runs 1.24x faster than -O1
+    (8.3 vs 10.4 us a step) for 0.9 s more of gcc on a cold start (2.3 vs 1.45 s); the limit was 150 kB
+    when -O3 gained 1.08x on that step. The flat controller (320 kB) stays at -O1.
+    """
+    return ("-O1",) if len(_TABLE.sub("", source)) > 250_000 else ("-O3",)
+
+
+def first_error(stderr: str) -> str:
+    """The compiler's first error line (else its first line): what a one-line message quotes."""
+    lines = [ln.strip() for ln in stderr.splitlines() if ln.strip()]
+    for ln in lines:
+        if "error" in ln:
+            return ln[:300]
+    return lines[0][:300] if lines else "no message"
+
+
+def compile_source(source: str, tag: str, flags: tuple[str, ...] | None = None, *, origin: str | None = None,
+                   options: tuple[str, ...] = BASE_OPTIONS) -> Path:
+    """Compile C ``source`` into a shared library in the cache (named ``tag`` and its content hash).
+
+    ``flags``: the optimization (and extra) flags, :func:`optimization_flags` by default; ``options``: the
+    base options; ``origin``: the file the source comes from, for the error message.
+    """
+    cc = compiler()
+    if cc is None:
+        raise NativeUnavailable("no C compiler found (set CC)")
+    flags = flags or optimization_flags(source)
+    args = [*options, *flags]
+
+    def build(out: Path) -> None:
+        src = out.with_name(f"{tag}_full.c")
+        src.write_text(source)
+        proc = subprocess.run([cc, *args, str(src), "-o", str(out), "-lm"], capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise NativeUnavailable(f"C compiler {cc} failed on {origin or tag + '.c'}: {first_error(proc.stderr)}")
+
+    return cached_library(library_name(source, tag, flags, options), build)
+
+
+def library_name(source: str, tag: str, flags: tuple[str, ...], options: tuple[str, ...] = BASE_OPTIONS) -> str:
+    """The cache file name of ``source`` built with ``options`` and ``flags``: ``<tag>_<16 hex of SHA-256>.so``."""
+    digest = hashlib.sha256((source + " ".join([*options, *flags])).encode()).hexdigest()[:16]
+    return f"{tag}_{digest}.so"
+
+
+def cached_library(name: str, build: Callable[[Path], None]) -> Path:
+    """The library ``name`` in the cache, checked against its digest; built by ``build(out)`` when missing.
+
+    A library that fails its check (someone else's file, writable by others, content not matching the
+    digest recorded beside it) is reported once and rebuilt, never returned, so it is never ``dlopen()``ed.
+    Building holds a lock per name, and the result is written to a temporary file in the cache folder,
+    fsynced and renamed: any number of processes asking at once all get the one complete library.
+    Raises :class:`NativeUnavailable` when the build fails or the library cannot be stored.
+    """
+    root = cache_dir()
+    lib = root / name
+    if private_store.check_file(lib) == "ok":
+        return lib
+    try:
+        with private_store.locked(root / f".{name}.lock"):
+            status = private_store.check_file(lib)
+            if status == "ok":
+                return lib  # another process built it meanwhile
+            if status is not None:
+                private_store.warn_once(f"cache entry {lib} not used: {status}; rebuilding it")
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / name
+                build(out)
+                private_store.install_file(out.read_bytes(), lib)
+    except OSError as exc:
+        raise NativeUnavailable(f"cannot store the compiled library {lib}: {exc.strerror or exc}") from exc
+    return lib

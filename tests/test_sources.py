@@ -126,3 +126,32 @@ def test_the_real_c_drivers_are_in_the_closure_of_their_modules():
     root = sources._package_root()
     guard = _rel(sources.module_closure(str(root / "harness" / "exit_guard.py")), root)
     assert "harness/c/exit_guard.c" in guard
+
+
+def test_the_horizon_driver_is_part_of_the_compiled_model_key(tmp_path):
+    """The C looped around every compiled step (``harness/c/horizon_driver.c``) is read by ``harness/native.py``,
+    which the compiler imports: editing the C file (in a copy of the package) changes the model's key."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    root = sources._package_root()
+    copy = tmp_path / "import-root" / "cpgsim"
+    shutil.copytree(root, copy, ignore=shutil.ignore_patterns(".git", ".venv*", "runs", "docs", "benchmarks",
+                                                              "tests", "examples", "__pycache__", "*.egg-info"))
+    script = ("from cpgsim.harness.compile import compiler_sources, model_key; "
+              "from cpgsim.components.neurons import VanDerPolNeuron; "
+              "assert any(f.endswith('harness/c/horizon_driver.c') for f in compiler_sources()); "
+              "print(model_key(VanDerPolNeuron('z')))")
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "import-root")}
+
+    def key() -> str:
+        r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return r.stdout.strip()
+
+    base = key()
+    assert key() == base  # stable when nothing changes
+    driver = copy / "harness" / "c" / "horizon_driver.c"
+    driver.write_text(driver.read_text() + "\n/* edited */\n")
+    assert key() != base

@@ -716,3 +716,32 @@ def test_output_is_drained_when_stderr_fails(monkeypatch):
     data = b"x" * (3 * 65536)
     fw, err = forward(monkeypatch, data, failing=True)
     assert fw.shown + fw.dropped == len(data)
+
+
+class Silent(Server):
+    """Answers the first ``len(replies)`` requests, then reads the next one and never answers it."""
+
+    def run(self) -> None:
+        super().run()
+        self.requests.append(self.conn.recv())
+
+
+def test_a_call_after_a_step_is_timed_at_the_steps_end(fmus, tmp_path):
+    """The time in a failure's message is the FMU's time: after a step from 0.05 s of 0.05 s, outputs asked
+    for (an input changed) and not answered within the timeout are reported at t = 0.1 s."""
+    rt, server = parent_with(fmus, tmp_path, [])
+    server = Silent(server.conn, [("ok", {"y": np.array([0.0])})])
+    server.start()
+    rt.timeout = 0.3
+    try:
+        rt.do_step(0.05, 0.05)
+        rt.set_inputs({"u": np.array([2.0])})
+        with pytest.raises(FmuTimeoutError) as err:
+            rt.get_outputs()
+        assert str(err.value) == (f"FMU good.fmu (block 'ctl', isolated process pid {rt.proc.pid}): outputs at "
+                                  f"t=0.1 s took longer than 0.3 s (--fmu-timeout); the process was killed")
+    finally:
+        rt.conn.close()
+        rt.conn = rt._real_conn
+        rt.terminate()
+    assert_gone(rt)

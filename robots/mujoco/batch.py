@@ -8,7 +8,7 @@ when the master reaches the fused loop (:mod:`cpgsim.harness.fused`,
 instead of being run by the trial's own thread. The serving thread collects the chunks and advances them all
 in one ``cpgsim_mj_batch`` call: ``threads`` POSIX threads (default: the CPUs this process may use), each
 taking whole trials, each trial its own ``mjData`` and controller context, all running the very loop
-``cpgsim_mj_loop`` runs (``trial_loop`` in :data:`cpgsim.robots.mujoco.native.SOURCE`). The call releases
+``cpgsim_mj_loop`` runs (``trial_loop`` in ``robots/mujoco/c/mujoco_loop.c``). The call releases
 the GIL, so the other trials' Python (setup, recording their last chunk, outcomes) goes on meanwhile.
 
 Between calls each trial records, streams and checks its chunk on its own thread, as alone; a trial whose

@@ -1,9 +1,9 @@
 """The MuJoCo plant's macro step in C: ``n`` calls of ``mj_step`` and the per-leg contact sums, no Python
 per sub-step.
 
-:class:`NativeMujocoStep` compiles a small C file against the headers the ``mujoco`` package ships
+:class:`NativeMujocoStep` compiles ``robots/mujoco/c/mujoco_loop.c`` against the headers the ``mujoco`` package ships
 (``mujoco/include``) and links the package's ``libmujoco``, through
-:func:`cpgsim.harness.native.compile_source` (the per-user cache, named by the content digest of source
+:func:`cpgsim.harness.toolchain.compile_source` (the per-user cache, named by the content digest of source
 and flags). It works on the very ``mjModel``/``mjData`` the Python bindings own (their ``_address``),
 so the Python plant keeps reading and writing them between calls. ``run(n)`` does what
 :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.do_step` does per sub-step -- ``mj_step``, then each
@@ -25,185 +25,14 @@ import numpy as np
 
 from cpgsim.harness.contracts import FusedRequest
 from cpgsim.harness.fused import TimeGrid
-from cpgsim.harness.native import NativeUnavailable, compile_source, optimization_flags
+from cpgsim.harness.toolchain import NativeUnavailable, c_source, compile_source, optimization_flags
 
 BATCH = threading.local()
 """``BATCH.current``: the :class:`cpgsim.robots.mujoco.batch.Batch` whose trial runs on this thread (None:
 a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_loop`` call per chunk)."""
 
-SOURCE = r"""
-#include <pthread.h>
-#include <stdatomic.h>
-#include <stdlib.h>
-#include <string.h>
-#include <mujoco/mujoco.h>
-/* codes: 0..5 leg (toe force), 10+leg other leg link, 100 body, 1000 not the robot.
-   force: 18 world-frame ground forces on the feet (mean over the n sub-steps); flags[0] body contact,
-   flags[1..6] link contact per leg (any sub-step). Returns the number of sub-steps whose state went
-   non-finite (0 normally). */
-static int substeps(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
-  int s, k, i, bad = 0;
-  double total[18], cf[6];
-  memset(total, 0, sizeof(total));
-  for (i = 0; i < 7; ++i) flags[i] = 0.0;
-  for (s = 0; s < n; ++s) {
-    mj_step(m, d);
-    for (k = 0; k < d->ncon; ++k) {
-      const mjContact *c = d->contact + k;
-      int g1 = c->geom[0], g2 = c->geom[1], code;
-      double sign;
-      if (g1 < 0 || g2 < 0) continue;
-      if (codes[g2] != 1000) { code = codes[g2]; sign = 1.0; }
-      else if (codes[g1] != 1000) { code = codes[g1]; sign = -1.0; }
-      else continue;
-      if (code < 10) {
-        const double *fr = c->frame;
-        mj_contactForce(m, d, k, cf);
-        for (i = 0; i < 3; ++i)
-          total[3 * code + i] += sign * (fr[i] * cf[0] + fr[3 + i] * cf[1] + fr[6 + i] * cf[2]);
-      } else if (code == 100) {
-        flags[0] = 1.0;
-      } else {
-        flags[1 + code - 10] = 1.0;
-      }
-    }
-    for (i = 0; i < m->nq; ++i) bad |= !(d->qpos[i] == d->qpos[i] && d->qpos[i] - d->qpos[i] == 0.0);
-  }
-  for (i = 0; i < 18; ++i) force[i] = total[i] / n;
-  return bad;
-}
-
-/* MuJoCo's default warning handler prints the warning and appends it to MUJOCO_LOG.TXT in the process's
-   working folder: a file cpgsim's user did not ask for. cpgsim reads the per-data warning counters
-   instead (the bad-state ones end a trial as diverged), so it installs a handler that writes nothing. */
-static void cpgsim_mj_no_log(const char *msg) { (void)msg; }
-void cpgsim_mj_quiet(void) { mju_user_warning = cpgsim_mj_no_log; }
-
-int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
-  return substeps(m, d, n, codes, force, flags);
-}
-
-/* One trial of the closed loop: everything the loop reads and writes (the Python side owns the arrays). */
-typedef int (*commit_fn)(void *, double, int, int);
-typedef int (*eval_fn)(void *);
-typedef struct {
-  const mjModel *m; mjData *d; int nsub; const int *codes; double *force; double *flags;
-  void *step_commit; void *sctx; int nx, nz; double *u; const double *y;
-  int nmap; const long long *u_idx, *o_idx;
-  void *feval; void *rctx; double *rpos, *rvel, *rcontact; const double *O; int nO;
-  const long long *qt_idx; int npick; const long long *yi; double *Yrec, *Orec;
-  int k0, k1; const double *times;
-  int rows, status;
-} cpgsim_mj_trial;
-
-/* The closed loop of a compiled controller step and this plant for macro steps k0 .. k1-1, as the
-   co-simulation master does them (Jacobi, no feedthrough): u <- plant outputs O; controller step at
-   times[k] with commit (x, z move on when finite); record row k (Yrec: y[yi], Orec: O); ctrl <- y[qt];
-   n sub-steps of MuJoCo with the contact sums; O <- readout(qpos, qvel, force, body contact).
-   Sets t->rows (the rows recorded) and t->status: 0 done, 1 the controller state went non-finite at the
-   last recorded row (the plant was not stepped), 2 the controller step failed (row not recorded) or the
-   readout failed (row recorded), 3 MuJoCo's state went non-finite or out of range in the sub-steps after
-   the last recorded row (mj_step warns and resets its data then; the readout is not updated).
-   The one loop both entry points run: cpgsim_mj_loop (one trial) and cpgsim_mj_batch (many, threads). */
-static int bad_state_warnings(const mjData *d) {  /* mj_step's count of non-finite/huge qpos, qvel, qacc */
-  return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number + d->warning[mjWARN_BADQACC].number;
-}
-
-static void trial_loop(cpgsim_mj_trial *t) {
-  const mjModel *m = t->m;
-  mjData *d = t->d;
-  commit_fn commit = (commit_fn)t->step_commit;
-  eval_fn readout = (eval_fn)t->feval;
-  const double *y = t->y, *O = t->O;
-  int k, i, rc, k0 = t->k0, nbad0;
-  t->status = 0;
-  for (k = k0; k < t->k1; ++k) {
-    double *yr = t->Yrec + (long)(k - k0) * t->npick, *orow = t->Orec + (long)(k - k0) * t->nO;
-    for (i = 0; i < t->nmap; ++i) t->u[t->u_idx[i]] = O[t->o_idx[i]];
-    rc = commit(t->sctx, t->times[k], t->nx, t->nz);
-    if (rc == 2) { t->status = 2; t->rows = k - k0; return; }
-    for (i = 0; i < t->npick; ++i) yr[i] = y[t->yi[i]];
-    for (i = 0; i < t->nO; ++i) orow[i] = O[i];
-    if (rc == 1) { t->status = 1; t->rows = k - k0 + 1; return; }
-    for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
-    nbad0 = bad_state_warnings(d);
-    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags) || bad_state_warnings(d) != nbad0) {
-      t->status = 3; t->rows = k - k0 + 1; return;
-    }
-    for (i = 0; i < m->nq; ++i) t->rpos[i] = d->qpos[i];
-    for (i = 0; i < m->nv; ++i) t->rvel[i] = d->qvel[i];
-    t->rcontact[0] = t->flags[0];
-    if (readout(t->rctx)) { t->status = 2; t->rows = k - k0 + 1; return; }
-  }
-  t->rows = t->k1 - k0;
-}
-
-int cpgsim_mj_loop(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
-                   void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
-                   int nmap, const long long *u_idx, const long long *o_idx,
-                   void *feval, void *rctx, double *rpos, double *rvel, double *rcontact, const double *O, int nO,
-                   const long long *qt_idx, int npick, const long long *yi, double *Yrec, double *Orec,
-                   int k0, int k1, const double *times, int *status) {
-  cpgsim_mj_trial t = {m, d, nsub, codes, force, flags, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx,
-                       feval, rctx, rpos, rvel, rcontact, O, nO, qt_idx, npick, yi, Yrec, Orec, k0, k1, times, 0, 0};
-  trial_loop(&t);
-  *status = t.status;
-  return t.rows;
-}
-
-/* A trial for cpgsim_mj_batch: the arguments of cpgsim_mj_loop up to Orec, kept (malloc'd; free with
-   cpgsim_mj_trial_free). cpgsim_mj_trial_range sets the chunk; cpgsim_mj_trial_result reads rows/status. */
-void *cpgsim_mj_trial_new(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
-                          void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
-                          int nmap, const long long *u_idx, const long long *o_idx,
-                          void *feval, void *rctx, double *rpos, double *rvel, double *rcontact, const double *O,
-                          int nO, const long long *qt_idx, int npick, const long long *yi, double *Yrec,
-                          double *Orec) {
-  cpgsim_mj_trial *t = malloc(sizeof(cpgsim_mj_trial));
-  cpgsim_mj_trial v = {m, d, nsub, codes, force, flags, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx,
-                       feval, rctx, rpos, rvel, rcontact, O, nO, qt_idx, npick, yi, Yrec, Orec, 0, 0, 0, 0, 0};
-  if (t) *t = v;
-  return t;
-}
-void cpgsim_mj_trial_range(void *p, int k0, int k1, const double *times) {
-  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
-  t->k0 = k0; t->k1 = k1; t->times = times; t->rows = 0; t->status = 0;
-}
-int cpgsim_mj_trial_result(void *p, int *status) {
-  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
-  *status = t->status;
-  return t->rows;
-}
-void cpgsim_mj_trial_free(void *p) { free(p); }
-
-/* Many trials, each its own mjData and controller context (models may be shared: mj_step only reads
-   them), on min(nthreads, n) POSIX threads; each thread takes whole trials from an atomic counter and
-   runs trial_loop on them; the calling thread is one of them (a thread that cannot be started is one
-   fewer, never a trial left out). Returns the number of threads that ran. */
-typedef struct { cpgsim_mj_trial **trials; int n; atomic_int next; } cpgsim_mj_pool;
-
-static void *batch_worker(void *arg) {
-  cpgsim_mj_pool *pool = (cpgsim_mj_pool *)arg;
-  int i;
-  while ((i = atomic_fetch_add(&pool->next, 1)) < pool->n) trial_loop(pool->trials[i]);
-  return 0;
-}
-
-int cpgsim_mj_batch(void **trials, int n, int nthreads) {
-  cpgsim_mj_pool pool;
-  pthread_t th[256];
-  int i, started = 0;
-  pool.trials = (cpgsim_mj_trial **)trials; pool.n = n;
-  atomic_init(&pool.next, 0);
-  if (nthreads > n) nthreads = n;
-  if (nthreads > 256) nthreads = 256;
-  for (i = 1; i < nthreads; ++i)  /* this thread is worker 0 */
-    if (pthread_create(&th[started], 0, batch_worker, &pool) == 0) ++started;
-  batch_worker(&pool);
-  for (i = 0; i < started; ++i) pthread_join(th[i], 0);
-  return started + 1;
-}
-"""
+SOURCE = c_source(__package__, "c/mujoco_loop.c")
+"""The macro step, the fused controller + plant loop and the batch trials, against ``mujoco.h``."""
 
 
 def mujoco_paths() -> tuple[Path, Path]:
@@ -222,7 +51,7 @@ def library() -> ctypes.CDLL:
     flags = (*optimization_flags(SOURCE), f"-I{include}", "-Wl,--no-as-needed", str(lib),
              f"-Wl,-rpath,{lib.parent}")
     source = f"/* mujoco {mujoco.__version__} */\n" + SOURCE
-    path = compile_source(source, "cpgsim_mujoco", flags)
+    path = compile_source(source, "cpgsim_mujoco", flags, origin="robots/mujoco/c/mujoco_loop.c")
     ctypes.CDLL(str(lib), mode=ctypes.RTLD_GLOBAL)
     dll = ctypes.CDLL(str(path))
     vp, ip, dp = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)

@@ -19,11 +19,13 @@ import numpy as np
 
 from cpgsim.harness.toolchain import (  # noqa: F401  (re-exported: the names callers know)
     NativeUnavailable,
+    Prototypes,
     c_source,
     cache_dir,
     cached_library,
     compile_source,
     compiler,
+    declare,
     optimization_flags,
 )
 
@@ -32,6 +34,29 @@ DRIVER = c_source(__package__, "c/horizon_driver.c")
 
 FUNCTION_DRIVER = c_source(__package__, "c/function_driver.c")
 """Bind/evaluate/unbind of one CasADi function (``cpgsim_fn_impl``) on buffers bound once."""
+
+_vp, _int, _dbl = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+_dp, _lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)
+
+PROTOTYPES: Prototypes = {
+    "cpgsim_horizon": (_int, [_int, _dbl, _dbl, _dp, _dp, _dp, _int, _dp, _dp, _int, _lp, _int, _dp, _int, _int,
+                              _dp, _dp, ctypes.POINTER(ctypes.c_int)]),
+    "cpgsim_bind": (_vp, [_dp] * 7),
+    "cpgsim_step1": (_int, [_vp, _dbl]),
+    "cpgsim_unbind": (None, [_vp]),
+    "cpgsim_step_commit": (_int, [_vp, _dbl, _int, _int]),
+    "cpgsim_worker_start": (_vp, [_vp, _int, _int, ctypes.c_long]),
+    "cpgsim_worker_run": (_int, [_vp, _dbl, _int]),
+    "cpgsim_worker_stop": (None, [_vp]),
+}
+"""The ctypes prototypes of :data:`DRIVER`'s functions (checked against the C by tests/test_prototypes.py)."""
+
+FUNCTION_PROTOTYPES: Prototypes = {
+    "cpgsim_fbind": (_vp, [ctypes.POINTER(_dp), _int, ctypes.POINTER(_dp), _int]),
+    "cpgsim_feval": (_int, [_vp]),
+    "cpgsim_funbind": (None, [_vp]),
+}
+"""The ctypes prototypes of :data:`FUNCTION_DRIVER`'s functions."""
 
 
 def casadi_c_source(functions: list[ca.Function], tag: str) -> str:
@@ -106,12 +131,7 @@ class ThreadedStep(BoundStep):
     def __init__(self, bound: BoundStep, spin: int = 20_000) -> None:
         super().__init__(bound._lib, bound._ctx, bound._keep, bound._nx, bound._nz)
         bound._ctx = None  # ownership moves here
-        lib = self._lib
-        lib.cpgsim_worker_start.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_long]
-        lib.cpgsim_worker_start.restype = ctypes.c_void_p
-        lib.cpgsim_worker_run.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_int]
-        lib.cpgsim_worker_run.restype = ctypes.c_int
-        lib.cpgsim_worker_stop.argtypes = [ctypes.c_void_p]
+        lib = self._lib  # prototypes declared by NativeHorizon (PROTOTYPES)
         self._handle = lib.cpgsim_worker_start(self._ctx, self._nx, self._nz, spin)
         if not self._handle:
             raise NativeUnavailable("could not start the step's worker thread")
@@ -161,23 +181,8 @@ class NativeHorizon:
         self.nx, self.nz = step.size1_in(1), step.size1_in(2)
         self.nu, self.np_, self.ny = step.size1_in(3), step.size1_in(4), step.size1_out(2)
         path = step_library(step, DRIVER, "cpgsim_step", source)
-        self._lib = ctypes.CDLL(str(path))
-        f = self._lib.cpgsim_horizon
-        dp = ctypes.POINTER(ctypes.c_double)
-        ip = ctypes.POINTER(ctypes.c_longlong)
-        f.argtypes = [ctypes.c_int, ctypes.c_double, ctypes.c_double, dp, dp, dp, ctypes.c_int, dp, dp,
-                      ctypes.c_int, ip, ctypes.c_int, dp, ctypes.c_int, ctypes.c_int, dp, dp,
-                      ctypes.POINTER(ctypes.c_int)]
-        f.restype = ctypes.c_int
-        self._fn = f
-        vp = ctypes.c_void_p
-        self._lib.cpgsim_bind.argtypes = [dp] * 7
-        self._lib.cpgsim_bind.restype = vp
-        self._lib.cpgsim_step1.argtypes = [vp, ctypes.c_double]
-        self._lib.cpgsim_step1.restype = ctypes.c_int
-        self._lib.cpgsim_unbind.argtypes = [vp]
-        self._lib.cpgsim_step_commit.argtypes = [vp, ctypes.c_double, ctypes.c_int, ctypes.c_int]
-        self._lib.cpgsim_step_commit.restype = ctypes.c_int
+        self._lib = declare(ctypes.CDLL(str(path)), PROTOTYPES)
+        self._fn = self._lib.cpgsim_horizon
 
     def bind(self, x: np.ndarray, z: np.ndarray, u: np.ndarray, p: np.ndarray, x_next: np.ndarray,
              z_next: np.ndarray, y: np.ndarray) -> BoundStep:
@@ -243,13 +248,8 @@ class NativeFunction:
                                      + [(a, fn.nnz_out(k)) for k, a in enumerate(outputs)]):
             if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != n:
                 raise ValueError(f"buffer {i} of {fn.name()} must be contiguous float64 of size {n}")
-        self._lib = ctypes.CDLL(str(build_shared_library(renamed(fn, "cpgsim_fn_impl"), FUNCTION_DRIVER, "cpgsim_fn")))
-        vp, dpp = ctypes.c_void_p, ctypes.POINTER(ctypes.POINTER(ctypes.c_double))
-        self._lib.cpgsim_fbind.argtypes = [dpp, ctypes.c_int, dpp, ctypes.c_int]
-        self._lib.cpgsim_fbind.restype = vp
-        self._lib.cpgsim_feval.argtypes = [vp]
-        self._lib.cpgsim_feval.restype = ctypes.c_int
-        self._lib.cpgsim_funbind.argtypes = [vp]
+        path = build_shared_library(renamed(fn, "cpgsim_fn_impl"), FUNCTION_DRIVER, "cpgsim_fn")
+        self._lib = declare(ctypes.CDLL(str(path)), FUNCTION_PROTOTYPES)
         self._keep = list(inputs) + list(outputs)
         ptr_t = ctypes.POINTER(ctypes.c_double)
         ins = (ptr_t * max(len(inputs), 1))(*[a.ctypes.data_as(ptr_t) for a in inputs])

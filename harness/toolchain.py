@@ -16,6 +16,7 @@ the module's Python source is part of.
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import importlib.resources
 import os
@@ -25,6 +26,7 @@ import subprocess
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from cpgsim.components import memo, private_store
 
@@ -131,3 +133,75 @@ def cached_library(name: str, build: Callable[[Path], None]) -> Path:
     except OSError as exc:
         raise NativeUnavailable(f"cannot store the compiled library {lib}: {exc.strerror or exc}") from exc
     return lib
+
+
+Prototypes = dict[str, tuple[Any, list[Any]]]
+"""A library's ctypes prototype table: C function name -> ``(restype, argtypes)`` (restype None: void)."""
+
+
+def declare(dll: ctypes.CDLL, table: Prototypes) -> ctypes.CDLL:
+    """Set ``restype`` and ``argtypes`` of every function of ``table`` on ``dll``; returns ``dll``."""
+    for name, (restype, argtypes) in table.items():
+        fn = getattr(dll, name)
+        fn.restype, fn.argtypes = restype, list(argtypes)
+    return dll
+
+
+_C_SCALARS = {ctypes.c_int: "int", ctypes.c_double: "double", ctypes.c_long: "long", ctypes.c_longlong: "long long",
+              ctypes.c_size_t: "size_t", ctypes.c_void_p: "void *", ctypes.c_char_p: "const char *",
+              ctypes.c_bool: "_Bool"}
+"""Where ``c_long`` is ``c_longlong`` (LP64: one ctypes type), the entry says ``long long``, what the C uses."""
+
+
+def c_type(ctype: Any) -> str:
+    """The C spelling of a ctypes type (``POINTER(c_double)`` -> ``double *``; None -> ``void``)."""
+    if ctype is None:
+        return "void"
+    if ctype in _C_SCALARS:
+        return _C_SCALARS[ctype]
+    target = getattr(ctype, "_type_", None)
+    if isinstance(target, type) and issubclass(ctype, ctypes._Pointer):
+        return c_type(target) + " *"
+    raise TypeError(f"no C spelling for the ctypes type {ctype!r}")
+
+
+def prototype_check_source(source: str, table: Prototypes) -> str:
+    """C that ``source`` followed by, per function of ``table``, a call with arguments of the ctypes types.
+
+    Compiled with :func:`check_prototypes`' warnings as errors, a wrong argument count, an argument of
+    another kind (integer, floating, pointer), width or pointee, or another return type does not compile:
+    ``-Wtraditional-conversion`` refuses any argument the prototype converts (int to double, int to long
+    long and back), ``-Wincompatible-pointer-types`` a pointer to another type. ``void *`` arguments pass for
+    any object pointer (ctypes' opaque handles) and ``const`` is not compared (ctypes has none: the check
+    compiles with ``const`` defined away, which ``const double **`` parameters need).
+    """
+    lines = ["#define const", source, "", "#pragma GCC diagnostic push",
+             *[f'#pragma GCC diagnostic error "-W{w}"' for w in ("traditional-conversion", "conversion",
+                                                               "incompatible-pointer-types", "int-conversion",
+                                                               "pointer-sign", "float-conversion")]]
+    for i, (name, (restype, argtypes)) in enumerate(table.items()):
+        decls = " ".join(f"{c_type(a)} a{k} = 0;" for k, a in enumerate(argtypes))
+        call = f"{name}({', '.join(f'a{k}' for k in range(len(argtypes)))})"
+        ret = c_type(restype)
+        same = f"__builtin_types_compatible_p(__typeof__({call}), {ret})"
+        if ret == "long long" and ctypes.sizeof(ctypes.c_long) == ctypes.sizeof(ctypes.c_longlong):
+            same = f"({same} || __builtin_types_compatible_p(__typeof__({call}), long))"  # one ctypes type
+        if ret == "void *":  # any object pointer (a handle): converts to void * without a cast
+            check = f"void *r = {call}; (void)r;"
+        else:
+            check = f'_Static_assert({same}, "{name} returns another type than the ctypes table says ({ret})");'
+        lines.append(f"void cpgsim_check_{i}(void) {{ {decls} {check} }}")
+    lines.append("#pragma GCC diagnostic pop")
+    return "\n".join(lines) + "\n"
+
+
+def check_prototypes(source: str, table: Prototypes, flags: tuple[str, ...] = (), origin: str = "source") -> str | None:
+    """Compile (``-fsyntax-only``) :func:`prototype_check_source`; the compiler's first error line, or None."""
+    cc = compiler()
+    if cc is None:
+        raise NativeUnavailable("no C compiler found (set CC)")
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "prototypes.c"
+        src.write_text(prototype_check_source(source, table))
+        proc = subprocess.run([cc, "-fsyntax-only", *flags, str(src)], capture_output=True, text=True)
+    return None if proc.returncode == 0 else f"{origin}: {first_error(proc.stderr).replace(str(src), 'check')}"

@@ -1,0 +1,75 @@
+"""Issue 56: each library's ctypes prototype table checked against its C by the C compiler itself.
+
+:func:`cpgsim.harness.toolchain.check_prototypes` compiles (``-fsyntax-only``) the library's C followed by one
+call per function of the table with arguments of the table's ctypes types, conversions refused: a table
+whose argument count, kind, width, pointee or order, or return type differs from the C does not compile.
+A planted mismatch of each kind is refused, so the check is not vacuous.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import casadi as ca
+import pytest
+
+from cpgsim.harness import native, toolchain
+
+pytestmark = pytest.mark.skipif(toolchain.compiler() is None, reason="needs a C compiler")
+
+
+def step_source() -> str:
+    """CasADi's C of a small step with the model step's calling convention (``cpgsim_step_impl``)."""
+    t, x, z, u, p = (ca.SX.sym(n, k) for n, k in (("t", 1), ("x", 2), ("z", 1), ("u", 1), ("p", 1)))
+    fn = ca.Function("cpgsim_step_impl", [t, x, z, u, p], [x + t * u, z * p, ca.vertcat(x, z)])
+    return native.casadi_c_source([fn], "proto_step")
+
+
+def function_source() -> str:
+    a = ca.SX.sym("a", 2)
+    return native.casadi_c_source([ca.Function("cpgsim_fn_impl", [a], [a * 2])], "proto_fn")
+
+
+def libraries() -> dict[str, tuple[str, toolchain.Prototypes, tuple[str, ...]]]:
+    """Name -> (the C as compiled, its prototype table, extra compiler flags)."""
+    return {
+        "horizon": (step_source() + native.DRIVER, native.PROTOTYPES, ()),
+        "function": (function_source() + native.FUNCTION_DRIVER, native.FUNCTION_PROTOTYPES, ()),
+    }
+
+
+@pytest.mark.parametrize("name", sorted(libraries()))
+def test_each_prototype_table_matches_its_c(name):
+    source, table, flags = libraries()[name]
+    assert toolchain.check_prototypes(source, table, flags, origin=name) is None
+
+
+def _planted(table: toolchain.Prototypes, name: str, restype=..., argtypes=None) -> toolchain.Prototypes:
+    old_res, old_args = table[name]
+    return {**table, name: (old_res if restype is ... else restype, old_args if argtypes is None else argtypes)}
+
+
+_dbl, _int, _ll, _vp = ctypes.c_double, ctypes.c_int, ctypes.c_longlong, ctypes.c_void_p
+_dp = ctypes.POINTER(ctypes.c_double)
+_HORIZON = native.PROTOTYPES["cpgsim_horizon"][1]
+PLANTED = {
+    "one argument fewer": ("cpgsim_step_commit", ..., [_vp, _dbl, _int]),
+    "one argument more": ("cpgsim_step1", ..., [_vp, _dbl, _int]),
+    "int for double": ("cpgsim_step1", ..., [_vp, _int]),
+    "double for int": ("cpgsim_step_commit", ..., [_vp, _dbl, _dbl, _int]),
+    "long long for int": ("cpgsim_worker_run", ..., [_vp, _dbl, _ll]),
+    "int for long": ("cpgsim_worker_start", ..., [_vp, _int, _int, _int]),
+    "pointer to another type": ("cpgsim_horizon", ..., [*_HORIZON[:10], ctypes.POINTER(_int), *_HORIZON[11:]]),
+    "two arguments swapped": ("cpgsim_horizon", ..., [_HORIZON[0], _HORIZON[3], *_HORIZON[1:3], *_HORIZON[4:]]),
+    "pointer for a number": ("cpgsim_step1", ..., [_vp, _dp]),
+    "double returned, int in C": ("cpgsim_step1", _dbl, None),
+    "int returned, void in C": ("cpgsim_unbind", _int, None),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PLANTED))
+def test_a_planted_mismatch_does_not_compile(case):
+    fn, restype, argtypes = PLANTED[case]
+    source, table, flags = libraries()["horizon"]
+    error = toolchain.check_prototypes(source, _planted(table, fn, restype, argtypes), flags, origin="horizon")
+    assert error is not None and error.startswith("horizon: ") and "\n" not in error, case

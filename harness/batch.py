@@ -58,7 +58,7 @@ from cpgsim.components.core import Block, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.harness.compile import CompiledModel, compile_graph
 from cpgsim.harness.simulate import horizon_steps, matching_columns, physical_memory
-from cpgsim.harness.toolchain import c_source
+from cpgsim.harness.toolchain import Prototypes, c_source, declare
 
 REDUCTIONS = ("final", "min", "max", "mean", "amplitude", "period", "crossings")
 """Reductions :func:`simulate_batch` computes, in the order of ``BATCH_DRIVER``'s result slots."""
@@ -75,6 +75,9 @@ _lp = ctypes.POINTER(ctypes.c_longlong)
 
 
 class _Job(ctypes.Structure):
+    """``cpgsim_batch_job`` of ``harness/c/batch_driver.c`` (field offsets checked by tests/test_prototypes.py)."""
+
+    _c_name_ = "cpgsim_batch_job"
     _fields_ = [("n_var", _ll), ("n_steps", _ll), ("t0", ctypes.c_double), ("dt", ctypes.c_double),
                 ("nx", _ll), ("nz", _ll), ("nu", _ll), ("np", _ll), ("ny", _ll),
                 ("P", _dp), ("X0", _dp), ("Z0", _dp), ("U", _dp),
@@ -82,6 +85,10 @@ class _Job(ctypes.Structure):
                 ("n_red", _ll), ("k_win", _ll), ("want_cross", _ll), ("red_idx", _lp), ("RED", _dp), ("SFLAG", _lp),
                 ("STATUS", _lp), ("DIV_STEP", _lp), ("DIV_STATE", _lp), ("XF", _dp), ("ZF", _dp),
                 ("progress", _lp), ("next", _ll), ("error", _ll)]
+
+
+PROTOTYPES: Prototypes = {"cpgsim_batch_run": (ctypes.c_int, [ctypes.POINTER(_Job), ctypes.c_int])}
+"""The ctypes prototypes of :data:`BATCH_DRIVER`'s functions (checked against the C by tests/test_prototypes.py)."""
 
 
 ParamTable = Mapping[str, Any] | Sequence[Mapping[str, Any]]
@@ -287,9 +294,7 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     _check_memory(N, n_samp, len(signals) if every else 0, n_threads, (n - k_win + 1) * len(signals)
                   if want_cross else 0)
     lib = ctypes.CDLL(str(step_library(model.step, BATCH_DRIVER, "cpgsim_batch", model.c_step_source())))
-    run = lib.cpgsim_batch_run
-    run.argtypes = [ctypes.POINTER(_Job), ctypes.c_int]
-    run.restype = ctypes.c_int
+    run = declare(lib, PROTOTYPES).cpgsim_batch_run
 
     nr = len(signals) if reds else 0
     REC = np.full((N, n_samp, len(signals)), np.nan) if every else None

@@ -154,11 +154,14 @@ _C_SCALARS = {ctypes.c_int: "int", ctypes.c_double: "double", ctypes.c_long: "lo
 
 
 def c_type(ctype: Any) -> str:
-    """The C spelling of a ctypes type (``POINTER(c_double)`` -> ``double *``; None -> ``void``)."""
+    """The C spelling of a ctypes type (``POINTER(c_double)`` -> ``double *``; None -> ``void``; a Structure by
+    its ``_c_name_``)."""
     if ctype is None:
         return "void"
     if ctype in _C_SCALARS:
         return _C_SCALARS[ctype]
+    if isinstance(ctype, type) and issubclass(ctype, ctypes.Structure) and hasattr(ctype, "_c_name_"):
+        return ctype._c_name_  # a struct mirrored in ctypes names its C typedef
     target = getattr(ctype, "_type_", None)
     if isinstance(target, type) and issubclass(ctype, ctypes._Pointer):
         return c_type(target) + " *"
@@ -205,3 +208,23 @@ def check_prototypes(source: str, table: Prototypes, flags: tuple[str, ...] = ()
         src.write_text(prototype_check_source(source, table))
         proc = subprocess.run([cc, "-fsyntax-only", *flags, str(src)], capture_output=True, text=True)
     return None if proc.returncode == 0 else f"{origin}: {first_error(proc.stderr).replace(str(src), 'check')}"
+
+
+def struct_offsets(source: str, c_name: str, fields: list[str], flags: tuple[str, ...] = ()) -> dict[str, int]:
+    """``offsetof`` of each field of the C struct ``c_name`` (and ``sizeof`` as ``"<size>"``), printed by a
+    small program compiled from ``source`` (which defines the struct) and run once."""
+    cc = compiler()
+    if cc is None:
+        raise NativeUnavailable("no C compiler found (set CC)")
+    prints = "".join(f'  printf("{f} %zu\\n", offsetof({c_name}, {f}));\n' for f in fields)
+    program = (f"#include <stddef.h>\n#include <stdio.h>\n{source}\nint main(void) {{\n{prints}"
+               f'  printf("<size> %zu\\n", sizeof({c_name}));\n  return 0;\n}}\n')
+    with tempfile.TemporaryDirectory() as tmp:
+        src, exe = Path(tmp) / "offsets.c", Path(tmp) / "offsets"
+        src.write_text(program)
+        proc = subprocess.run([cc, *flags, str(src), "-o", str(exe), "-pthread", "-lm"], capture_output=True,
+                              text=True)
+        if proc.returncode != 0:
+            raise NativeUnavailable(f"the offsets of {c_name} did not compile: {first_error(proc.stderr)}")
+        out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    return {name: int(value) for name, value in (line.split() for line in out.splitlines())}

@@ -73,3 +73,26 @@ def test_a_planted_mismatch_does_not_compile(case):
     source, table, flags = libraries()["horizon"]
     error = toolchain.check_prototypes(source, _planted(table, fn, restype, argtypes), flags, origin="horizon")
     assert error is not None and error.startswith("horizon: ") and "\n" not in error, case
+
+
+def test_the_batch_table_matches_its_c():
+    from cpgsim.harness import batch
+    assert toolchain.check_prototypes(step_source() + batch.BATCH_DRIVER, batch.PROTOTYPES, origin="batch") is None
+
+
+def test_the_batch_job_struct_has_the_c_layout():
+    """Each field of ctypes' ``_Job`` at the ``offsetof`` the compiler gives ``cpgsim_batch_job``, same size."""
+    from cpgsim.harness import batch
+    fields = [name for name, _ in batch._Job._fields_]
+    got = toolchain.struct_offsets(step_source() + batch.BATCH_DRIVER, batch._Job._c_name_, fields)
+    want = {name: getattr(batch._Job, name).offset for name in fields} | {"<size>": ctypes.sizeof(batch._Job)}
+    assert got == want
+
+
+def test_a_struct_offset_mismatch_shows():
+    """The layout check is not vacuous: a struct with a field of another width moves the offsets after it."""
+    class Planted(ctypes.Structure):
+        _fields_ = [("a", ctypes.c_int), ("b", ctypes.c_int)]
+    got = toolchain.struct_offsets("typedef struct { long long a; int b; } planted;", "planted", ["a", "b"])
+    assert got != {"a": Planted.a.offset, "b": Planted.b.offset, "<size>": ctypes.sizeof(Planted)}
+    assert got == {"a": 0, "b": 8, "<size>": 16}

@@ -96,3 +96,14 @@ def test_a_struct_offset_mismatch_shows():
     got = toolchain.struct_offsets("typedef struct { long long a; int b; } planted;", "planted", ["a", "b"])
     assert got != {"a": Planted.a.offset, "b": Planted.b.offset, "<size>": ctypes.sizeof(Planted)}
     assert got == {"a": 0, "b": 8, "<size>": 16}
+
+
+def test_the_mujoco_table_matches_its_c():
+    mj = pytest.importorskip("cpgsim.robots.mujoco.native")
+    include, _ = mj.mujoco_paths()
+    assert toolchain.check_prototypes(mj.SOURCE, mj.PROTOTYPES, (f"-I{include}",), origin="mujoco") is None
+
+
+def test_the_dart_table_matches_its_c():
+    dn = pytest.importorskip("cpgsim.robots.dart.native")
+    assert toolchain.check_prototypes(dn.SOURCE, dn.PROTOTYPES, origin="dart") is None

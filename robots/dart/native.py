@@ -32,7 +32,7 @@ import os
 import dartpy as dart
 import numpy as np
 
-from cpgsim.harness.toolchain import NativeUnavailable, c_source, compile_source
+from cpgsim.harness.toolchain import NativeUnavailable, Prototypes, c_source, compile_source, declare
 
 _SYMBOLS = {  # the C name of each function pointer -> the exported C++ symbol of dartpy's DART 6
     "world_step": "_ZN4dart10simulation5World4stepEb",
@@ -44,6 +44,25 @@ _SYMBOLS = {  # the C name of each function pointer -> the exported C++ symbol o
     "get_position": "_ZNK4dart8dynamics12MetaSkeleton11getPositionEm",
     "get_velocity": "_ZNK4dart8dynamics12MetaSkeleton11getVelocityEm",
     "num_dofs": "_ZNK4dart8dynamics8Skeleton10getNumDofsEv",
+}
+
+_vp, _int, _dbl = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+_dp, _ip, _lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_longlong)
+
+PROTOTYPES: Prototypes = {  # return types as ctypes had them (int where none was set and the C returns int)
+    "cpgsim_dart_bind": (_vp, [ctypes.POINTER(_vp), _vp, _vp, _dp, _dp, _vp, _dp, _dp, _dp, ctypes.c_size_t, _vp, _vp]),
+    "cpgsim_dart_unbind": (None, [_vp]),
+    "cpgsim_dart_register": (_int, [_vp, _vp, _int]),
+    "cpgsim_dart_time_step": (_dbl, [_vp]),
+    "cpgsim_dart_num_dofs": (ctypes.c_size_t, [_vp]),
+    "cpgsim_dart_outputs": (_int, [_vp, _int]),
+    "cpgsim_dart_step": (_int, [_vp]),
+    "cpgsim_dart_loop": (_int, [_vp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _dp, _int, _lp, _dp, _ip, _ip,
+                                _dbl, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]),
+    "cpgsim_dart_step_seconds": (_dbl, [_vp]),
+    "cpgsim_dart_step_count": (ctypes.c_long, [_vp]),
+    "cpgsim_dart_ctrl_seconds": (_dbl, [_vp]),
+    "cpgsim_dart_loop_seconds": (_dbl, [_vp]),
 }
 
 SOURCE = c_source(__package__, "c/dart_loop.c")
@@ -100,29 +119,7 @@ def _load() -> tuple[ctypes.PyDLL, ctypes.Array]:
         # PyDLL: the calls keep the GIL, as dartpy's world.step() does (no two DART worlds step at once on
         # threads of one process, as before)
         lib = ctypes.PyDLL(str(compile_source(SOURCE, "cpgsim_dart", origin="robots/dart/c/dart_loop.c")))
-        vp, dp = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
-        lib.cpgsim_dart_bind.argtypes = [vp, vp, vp, dp, dp, vp, dp, dp, dp, ctypes.c_size_t, vp, vp]
-        lib.cpgsim_dart_bind.restype = vp
-        lib.cpgsim_dart_unbind.argtypes = [vp]
-        lib.cpgsim_dart_register.argtypes = [vp, vp, ctypes.c_int]
-        lib.cpgsim_dart_time_step.argtypes = [vp]
-        lib.cpgsim_dart_time_step.restype = ctypes.c_double
-        lib.cpgsim_dart_num_dofs.argtypes = [vp]
-        lib.cpgsim_dart_num_dofs.restype = ctypes.c_size_t
-        lib.cpgsim_dart_outputs.argtypes = [vp, ctypes.c_int]
-        lib.cpgsim_dart_step.argtypes = [vp]
-        ip, lp = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_longlong)
-        lib.cpgsim_dart_loop.argtypes = [vp, vp, vp, ctypes.c_int, ctypes.c_int, dp, dp, ctypes.c_int, lp, lp, dp,
-                                         ctypes.c_int, lp, dp, ip, ip, ctypes.c_double, ctypes.c_int, lp, dp, dp,
-                                         ctypes.c_int, ctypes.c_int, dp, ip]
-        lib.cpgsim_dart_step_seconds.argtypes = [vp]
-        lib.cpgsim_dart_step_seconds.restype = ctypes.c_double
-        lib.cpgsim_dart_step_count.argtypes = [vp]
-        lib.cpgsim_dart_step_count.restype = ctypes.c_long
-        lib.cpgsim_dart_ctrl_seconds.argtypes = [vp]
-        lib.cpgsim_dart_ctrl_seconds.restype = ctypes.c_double
-        lib.cpgsim_dart_loop_seconds.argtypes = [vp]
-        lib.cpgsim_dart_loop_seconds.restype = ctypes.c_double
+        declare(lib, PROTOTYPES)
         _LIB, _FNS = lib, fns
     return _LIB, _FNS  # type: ignore[return-value]
 

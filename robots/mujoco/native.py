@@ -25,7 +25,14 @@ import numpy as np
 
 from cpgsim.harness.contracts import FusedRequest
 from cpgsim.harness.fused import TimeGrid
-from cpgsim.harness.toolchain import NativeUnavailable, c_source, compile_source, optimization_flags
+from cpgsim.harness.toolchain import (
+    NativeUnavailable,
+    Prototypes,
+    c_source,
+    compile_source,
+    declare,
+    optimization_flags,
+)
 
 BATCH = threading.local()
 """``BATCH.current``: the :class:`cpgsim.robots.mujoco.batch.Batch` whose trial runs on this thread (None:
@@ -33,6 +40,24 @@ a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_loop`` call per chunk
 
 SOURCE = c_source(__package__, "c/mujoco_loop.c")
 """The macro step, the fused controller + plant loop and the batch trials, against ``mujoco.h``."""
+
+
+_vp, _int, _ip = ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)
+_dp, _lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)
+_LOOP_ARGS = [_vp, _vp, _int, _ip, _dp, _dp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _vp, _vp, _dp, _dp, _dp,
+              _dp, _int, _lp, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]
+
+PROTOTYPES: Prototypes = {
+    "cpgsim_mj_run": (_int, [_vp, _vp, _int, _ip, _dp, _dp]),
+    "cpgsim_mj_loop": (_int, _LOOP_ARGS),
+    "cpgsim_mj_trial_new": (_vp, _LOOP_ARGS[:27]),
+    "cpgsim_mj_trial_range": (None, [_vp, _int, _int, _dp]),
+    "cpgsim_mj_trial_result": (_int, [_vp, _ip]),
+    "cpgsim_mj_trial_free": (None, [_vp]),
+    "cpgsim_mj_batch": (_int, [ctypes.POINTER(_vp), _int, _int]),
+    "cpgsim_mj_quiet": (None, []),
+}
+"""The ctypes prototypes of :data:`SOURCE`'s functions (checked against the C by tests/test_prototypes.py)."""
 
 
 def mujoco_paths() -> tuple[Path, Path]:
@@ -54,25 +79,7 @@ def library() -> ctypes.CDLL:
     path = compile_source(source, "cpgsim_mujoco", flags, origin="robots/mujoco/c/mujoco_loop.c")
     ctypes.CDLL(str(lib), mode=ctypes.RTLD_GLOBAL)
     dll = ctypes.CDLL(str(path))
-    vp, ip, dp = ctypes.c_void_p, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
-    dll.cpgsim_mj_run.argtypes = [vp, vp, ctypes.c_int, ip, dp, dp]
-    dll.cpgsim_mj_run.restype = ctypes.c_int
-    lp = ctypes.POINTER(ctypes.c_longlong)
-    dll.cpgsim_mj_loop.argtypes = [vp, vp, ctypes.c_int, ip, dp, dp, vp, vp, ctypes.c_int, ctypes.c_int, dp, dp,
-                                   ctypes.c_int, lp, lp, vp, vp, dp, dp, dp, dp, ctypes.c_int, lp, ctypes.c_int, lp,
-                                   dp, dp, ctypes.c_int, ctypes.c_int, dp, ip]
-    dll.cpgsim_mj_loop.restype = ctypes.c_int
-    dll.cpgsim_mj_trial_new.argtypes = dll.cpgsim_mj_loop.argtypes[:27]
-    dll.cpgsim_mj_trial_new.restype = vp
-    dll.cpgsim_mj_trial_range.argtypes = [vp, ctypes.c_int, ctypes.c_int, dp]
-    dll.cpgsim_mj_trial_range.restype = None
-    dll.cpgsim_mj_trial_result.argtypes = [vp, ip]
-    dll.cpgsim_mj_trial_result.restype = ctypes.c_int
-    dll.cpgsim_mj_trial_free.argtypes = [vp]
-    dll.cpgsim_mj_trial_free.restype = None
-    dll.cpgsim_mj_batch.argtypes = [ctypes.POINTER(vp), ctypes.c_int, ctypes.c_int]
-    dll.cpgsim_mj_batch.restype = ctypes.c_int
-    dll.cpgsim_mj_quiet.argtypes, dll.cpgsim_mj_quiet.restype = [], None
+    declare(dll, PROTOTYPES)
     dll.cpgsim_mj_quiet()  # no MUJOCO_LOG.TXT in the working folder (see the C source)
     return dll
 

@@ -260,3 +260,85 @@ def test_members_larger_than_one_read_are_extracted_whole(tmp_path):
             assert (dest / name).read_bytes() == data
     finally:
         archive.remove_tree(dest)
+
+
+def _crc_twin(data: bytes) -> bytes:
+    """Other bytes of the same length and CRC-32 as ``data`` (at least 5 bytes): its first byte changed, its
+    last four solved for. CRC-32 is affine over GF(2) for a fixed length, so the 32 bits of the last four
+    bytes are a linear system (Gaussian elimination over bit masks)."""
+    import zlib
+
+    n = len(data)
+    base = bytearray(data)
+    base[0] ^= 0xFF
+    want = zlib.crc32(data) ^ zlib.crc32(bytes(base))  # the CRC difference the last four bytes must make
+    columns = []  # the CRC change of flipping each bit of the last four bytes
+    for bit in range(32):
+        flipped = bytearray(base)
+        flipped[n - 4 + bit // 8] ^= 1 << (bit % 8)
+        columns.append(zlib.crc32(bytes(flipped)) ^ zlib.crc32(bytes(base)))
+    rows = [(columns[b], 1 << b) for b in range(32)]  # (CRC change, which bits flipped)
+    basis: list[tuple[int, int]] = []
+    for value, combo in rows:
+        for bv, bc in basis:
+            if value ^ bv < value:
+                value, combo = value ^ bv, combo ^ bc
+        if value:
+            basis.append((value, combo))
+            basis.sort(reverse=True)
+    target, flips = want, 0
+    for bv, bc in basis:
+        if target ^ bv < target:
+            target, flips = target ^ bv, flips ^ bc
+    assert target == 0, "CRC-32 difference not reachable"
+    for bit in range(32):
+        if flips >> bit & 1:
+            base[n - 4 + bit // 8] ^= 1 << (bit % 8)
+    return bytes(base)
+
+
+@pytest.mark.filterwarnings("ignore:Duplicate name")  # zipfile warns when the test writes the twin
+@pytest.mark.parametrize("twin", ["same size and CRC-32", "same size"])
+def test_a_repeated_name_with_other_bytes_is_refused_even_with_the_same_size_and_crc(tmp_path, twin):
+    """Copies of one name are taken as one only when their bytes are equal: equal sizes and a forged equal
+    CRC-32 (four bytes solve it) do not make them the same file."""
+    import zlib
+
+    data = bytes(range(200))
+    other = _crc_twin(data) if twin.endswith("CRC-32") else bytes(reversed(data))
+    assert other != data and len(other) == len(data)
+    assert (zlib.crc32(other) == zlib.crc32(data)) == twin.endswith("CRC-32")
+    path = _archive(tmp_path / "m.fmu", GOOD + [("resources/twin.bin", data), ("resources/twin.bin", other)])
+    with pytest.raises(UnsafeArchiveError, match="'resources/twin.bin' appears twice with different contents"):
+        archive.safe_extract(path, tmp_path)
+
+
+def test_read_member_gives_members_up_to_its_limit(tmp_path):
+    path = _archive(tmp_path / "m.fmu", [("a.xml", b"x" * 100), ("b.xml", b"y" * 99)])
+    with zipfile.ZipFile(path) as zf:
+        assert archive.read_member(zf, "a.xml", limit=100) == b"x" * 100
+        assert archive.read_member(zf, "b.xml", limit=100) == b"y" * 99
+        assert archive.read_member(zf, "none.xml", limit=100) is None
+
+
+def test_a_folder_entry_after_files_inside_it_extracts(tmp_path):
+    """Zip tools list a folder's own entry anywhere: after a file in it, the folder exists already."""
+    path = _archive(tmp_path / "m.fmu", GOOD + [("resources/sub/a.txt", b"a"), ("resources/sub/", b"")])
+    dest = archive.safe_extract(path, tmp_path)
+    try:
+        assert (dest / "resources" / "sub" / "a.txt").read_bytes() == b"a"
+    finally:
+        archive.remove_tree(dest)
+
+
+@pytest.mark.parametrize("name", ["", "/", "//"])
+def test_a_member_with_an_empty_name_is_refused_by_name(tmp_path, name):
+    """Found by the mutation run: an empty member name crashed extraction with an IndexError."""
+    path = _archive(tmp_path / "m.fmu", GOOD + [zipfile.ZipInfo(name)])
+    with pytest.raises(UnsafeArchiveError, match="it has an empty name"):
+        archive.safe_extract(path, tmp_path)
+
+
+def test_removing_a_folder_that_is_gone_is_no_error(tmp_path):
+    archive.remove_tree(tmp_path / "never-made")  # best effort: never raises
+    assert not (tmp_path / "never-made").exists()

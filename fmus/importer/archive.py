@@ -60,6 +60,8 @@ def open_zip(path: str | os.PathLike, what: str = "FMU") -> zipfile.ZipFile:
 
 def _member_problem(info: zipfile.ZipInfo) -> str | None:
     name = info.filename
+    if not name.strip("/"):
+        return "has an empty name"
     if "\x00" in name:
         return "contains a NUL character"
     if "\\" in name:

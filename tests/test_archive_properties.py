@@ -342,3 +342,18 @@ def test_a_member_with_an_empty_name_is_refused_by_name(tmp_path, name):
 def test_removing_a_folder_that_is_gone_is_no_error(tmp_path):
     archive.remove_tree(tmp_path / "never-made")  # best effort: never raises
     assert not (tmp_path / "never-made").exists()
+
+
+def test_a_central_directory_that_python_cannot_decode_is_one_line(tmp_path):
+    """A member name flagged UTF-8 (general-purpose bit 11) whose bytes are not UTF-8: Python's zipfile raises
+    UnicodeDecodeError (not BadZipFile) on opening; the user gets the FMU error naming the file and cause."""
+    data = bytearray(_archive(tmp_path / "ok.fmu", GOOD + [("resources/caf\u00e9.txt", b"x")]).read_bytes())
+    cd = data.find(b"PK\x01\x02")
+    at = data.find("caf\u00e9".encode(), cd)
+    data[at + 4:at + 5] = b"\x28"  # the second byte of the two-byte sequence of the e-acute: now invalid
+    bad = tmp_path / "bad.fmu"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(archive.FmuFileError) as info:
+        archive.open_zip(bad)
+    assert str(info.value).startswith(f"FMU file {bad} is not a readable zip archive (UnicodeDecodeError: ")
+    assert "\n" not in str(info.value)

@@ -242,3 +242,31 @@ def test_a_state_going_to_infinity_ends_a_co_simulation_at_that_step(backend, fe
     assert "state q.x became inf at t=1.03 s" in str(info.value), str(info.value)
     assert not res.complete and res.time[-1] == pytest.approx(1.02)
     assert np.all(np.isfinite(res["q.y"])) and res["q.y"][-1] > 1e100
+
+
+class CountedSquare(Block):
+    """``dx/dt = x^2`` while a step counter ``n`` (a discrete state, +1 at each sampled update) is at most
+    103: the same blow-up as :class:`Square` (inf at t = 1.03 s, the 103rd step), after which the equation
+    would be still. A report of the diverging step that re-ran it from a later counter would see no change."""
+
+    def declare(self) -> None:
+        self.add_state("x", [1.0])
+        self.add_discrete_state("n", 0.0)
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        import casadi as ca
+
+        x, n = v.x["x"], v.z["n"]
+        return Equations(derivatives={"x": ca.if_else(n <= 103, x * x, 0)}, updates={"n": n + 1},
+                         outputs={"y": x})
+
+
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+def test_the_diverging_step_is_reported_from_the_last_good_discrete_state(backend):
+    g = Graph("counted")
+    g.add(CountedSquare("q"))
+    with pytest.raises(SimulationDiverged) as info:
+        Simulator(g, dt=1e-2, backend=backend).run(2.0)
+    assert "state q.x became inf at t=1.03 s" in str(info.value), str(info.value)
+    assert info.value.results.time[-1] == pytest.approx(1.02)

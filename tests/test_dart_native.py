@@ -3,6 +3,8 @@ the same numbers as the plant's Python loop and the Python master, bit for bit."
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -150,3 +152,56 @@ def test_unverified_dartpy_keeps_the_python_loop(monkeypatch):
     with pytest.warns(RuntimeWarning, match="DART's step stays in Python"):
         robot.setup(0.0)
     assert robot.native_step is None
+
+
+def _fresh_load(monkeypatch) -> None:
+    """Forget this process's loaded (or refused) C step, so the next plant loads and checks it again."""
+    from cpgsim.robots.dart import native as dart_native
+
+    for name in ("_LIB", "_FNS", "_FAILED"):
+        monkeypatch.setattr(dart_native, name, None)
+
+
+def test_the_installed_dartpy_passes_the_load_check(monkeypatch):
+    """Every symbol of the table is exported, and the self-test's contacts read by the C at the table's
+    offsets are dartpy's ``getContacts()``, bit for bit."""
+    from cpgsim.robots.dart import native as dart_native
+
+    _fresh_load(monkeypatch)
+    try:
+        lib, fns = dart_native._library()
+    except dart_native.NativeUnavailable as exc:
+        if "C compiler" in str(exc):
+            pytest.skip(str(exc))
+        raise
+    assert dart_native._self_test(lib, fns) is None
+    assert all(fns[i] for i in range(len(dart_native._SYMBOLS)))
+
+
+@pytest.mark.parametrize("table, key, wrong, message", [
+    ("_SYMBOLS", "get_contact", "_ZNK4dart9collision15CollisionResult10getContactEj",
+     r"does not export the DART symbols the C step needs: "
+     r"get_contact \(_ZNK4dart9collision15CollisionResult10getContactEj\)"),
+    ("LAYOUT", "contact_force", 24, r"Contact\.force at offset 24 reads \[.*\] where getContacts\(\) says"),
+    ("LAYOUT", "contact_object2", 72, r"Contact\.collisionObject2 at offset 72 reads 0x"),
+])
+def test_a_dartpy_that_does_not_match_the_table_keeps_the_python_loop(monkeypatch, table, key, wrong, message):
+    """A symbol dartpy does not export, or an offset that is not DART's: one line naming dartpy's version and
+    what did not match, no C step, and the run is the Python loop's, number for number."""
+    from cpgsim.robots.dart import native as dart_native
+
+    monkeypatch.setenv("CPGSIM_DART_NATIVE", "0")
+    expected = _walk(DartHexapod(), 200)
+    monkeypatch.setenv("CPGSIM_DART_NATIVE", "1")
+    _fresh_load(monkeypatch)
+    monkeypatch.setitem(getattr(dart_native, table), key, wrong)
+    robot = DartHexapod()
+    with pytest.warns(RuntimeWarning) as caught:
+        got = _walk(robot, 200)
+    lines = [str(w.message) for w in caught if "stays in Python" in str(w.message)]
+    assert len(lines) == 1 and "\n" not in lines[0], lines
+    version = dart_native.dart.__version__
+    assert re.search(rf"^{robot.name}: DART's step stays in Python \(dartpy {re.escape(version)}\b.*{message}",
+                     lines[0]), lines
+    assert robot.native_step is None
+    np.testing.assert_array_equal(got, expected)

@@ -106,4 +106,4 @@ def test_the_mujoco_table_matches_its_c():
 
 def test_the_dart_table_matches_its_c():
     dn = pytest.importorskip("cpgsim.robots.dart.native")
-    assert toolchain.check_prototypes(dn.SOURCE, dn.PROTOTYPES, origin="dart") is None
+    assert toolchain.check_prototypes(dn.library_source(), dn.PROTOTYPES, origin="dart") is None

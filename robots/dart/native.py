@@ -21,6 +21,15 @@ addresses, which the plant registers from its Python readout on first sight (the
 unknown object, and the plant reads that step's contacts in Python). The sums are the Python loop's
 operations in the same order (``f += sign * force``, ``sign = +-1``), so the outputs are the same numbers.
 
+What of dartpy's internals the C needs is in one place here: :data:`_SYMBOLS` (the exported C++ functions,
+in the order of the C's ``dart_api`` struct) and :data:`LAYOUT` (the pybind11 value pointer's offset and
+the offsets of ``Contact``'s fields, prepended to the C as ``#define`` lines by :func:`library_source`). When
+the library loads, :func:`_load` checks them against the installed dartpy: a release in
+:data:`VERIFIED_DARTPY`, every symbol exported, and a self-test (:func:`_self_test`: a box resting on the
+ground, one world step, the contacts the C reads at those offsets compared bit for bit with dartpy's
+``getContacts()``). Any failure raises :class:`NativeUnavailable` with one line naming dartpy's version and
+what did not match; the plant warns with it and keeps its Python loop (as ``CPGSIM_DART_NATIVE=0``).
+
 ``CPGSIM_DART_NATIVE=0`` keeps the plant's Python loop (benchmarks compare the two in one process).
 """
 
@@ -34,7 +43,7 @@ import numpy as np
 
 from cpgsim.harness.toolchain import NativeUnavailable, Prototypes, c_source, compile_source, declare
 
-_SYMBOLS = {  # the C name of each function pointer -> the exported C++ symbol of dartpy's DART 6
+_SYMBOLS = {  # the C name of each function pointer (the dart_api struct's order) -> dartpy's DART 6 C++ symbol
     "world_step": "_ZN4dart10simulation5World4stepEb",
     "world_time_step": "_ZNK4dart10simulation5World11getTimeStepEv",
     "world_result": "_ZNK4dart10simulation5World22getLastCollisionResultEv",
@@ -45,6 +54,16 @@ _SYMBOLS = {  # the C name of each function pointer -> the exported C++ symbol o
     "get_velocity": "_ZNK4dart8dynamics12MetaSkeleton11getVelocityEm",
     "num_dofs": "_ZNK4dart8dynamics8Skeleton10getNumDofsEv",
 }
+
+LAYOUT = {
+    # pybind11's instance: the value pointer right after the Python object header (ob_refcnt, ob_type)
+    "pybind_value": ctypes.sizeof(ctypes.c_ssize_t) + ctypes.sizeof(ctypes.c_void_p),
+    # dart::collision::Contact: point, normal, force (Eigen::Vector3d each), collisionObject1, collisionObject2
+    "contact_force": 48,
+    "contact_object1": 72,
+    "contact_object2": 80,
+}
+"""Byte offsets the C step assumes in dartpy's objects (checked at load by :func:`_self_test`)."""
 
 _vp, _int, _dbl = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
 _dp, _ip, _lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_longlong)
@@ -59,6 +78,8 @@ PROTOTYPES: Prototypes = {  # return types as ctypes had them (int where none wa
     "cpgsim_dart_step": (_int, [_vp]),
     "cpgsim_dart_loop": (_int, [_vp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _dp, _int, _lp, _dp, _ip, _ip,
                                 _dbl, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]),
+    "cpgsim_dart_probe": (ctypes.c_size_t, [ctypes.POINTER(_vp), _vp, ctypes.c_size_t, _dp, ctypes.POINTER(_vp),
+                                            ctypes.POINTER(_vp), _dp]),
     "cpgsim_dart_step_seconds": (_dbl, [_vp]),
     "cpgsim_dart_step_count": (ctypes.c_long, [_vp]),
     "cpgsim_dart_ctrl_seconds": (_dbl, [_vp]),
@@ -66,7 +87,15 @@ PROTOTYPES: Prototypes = {  # return types as ctypes had them (int where none wa
 }
 
 SOURCE = c_source(__package__, "c/dart_loop.c")
-"""The world step, contact sums and fused loop, calling DART through the pointer table of ``_SYMBOLS``."""
+"""The world step, contact sums and fused loop, calling DART through the pointer table of ``_SYMBOLS``
+(without the ``Contact`` offsets: :func:`library_source` is what compiles)."""
+
+
+def library_source() -> str:
+    """:data:`SOURCE` after the ``#define CPGSIM_DART_CONTACT_*`` offsets of :data:`LAYOUT`."""
+    defines = "".join(f"#define CPGSIM_DART_{key.upper()} {value}\n" for key, value in LAYOUT.items()
+                      if key.startswith("contact_"))
+    return defines + SOURCE
 
 
 def enabled() -> bool:
@@ -76,10 +105,9 @@ def enabled() -> bool:
 
 def address(obj: object) -> int:
     """The C++ object a pybind11 wrapper holds (its value pointer, right after the Python object header)."""
-    return ctypes.c_void_p.from_address(id(obj) + _HEADER).value or 0
+    return ctypes.c_void_p.from_address(id(obj) + LAYOUT["pybind_value"]).value or 0
 
 
-_HEADER = ctypes.sizeof(ctypes.c_ssize_t) + ctypes.sizeof(ctypes.c_void_p)  # ob_refcnt, ob_type
 _LIB: ctypes.PyDLL | None = None
 _FNS: ctypes.Array | None = None
 _FAILED: NativeUnavailable | None = None  # why the library is unavailable in this process (tried once)
@@ -104,24 +132,94 @@ check sees it, so other releases keep the Python loop (same numbers, slower)."""
 
 
 def _load() -> tuple[ctypes.PyDLL, ctypes.Array]:
+    """Check the installed dartpy against :data:`_SYMBOLS` and :data:`LAYOUT`, compile, self-test, load."""
     global _LIB, _FNS
     if _LIB is None:
-        version = getattr(dart, "__version__", "")
+        version = getattr(dart, "__version__", "") or "(unknown version)"
         if not version.startswith(VERIFIED_DARTPY):
-            raise NativeUnavailable(f"dartpy {version or '(unknown version)'}: the C step was verified on "
+            raise NativeUnavailable(f"dartpy {version}: the C step was verified on "
                                     f"dartpy {', '.join(v + 'x' for v in VERIFIED_DARTPY)} only")
         try:
             dart_lib = ctypes.CDLL(dart.__file__)
-            fns = (ctypes.c_void_p * len(_SYMBOLS))(
-                *[ctypes.cast(dart_lib[sym], ctypes.c_void_p).value for sym in _SYMBOLS.values()])
-        except (OSError, AttributeError) as exc:  # a dartpy without these exported symbols
-            raise NativeUnavailable(f"dartpy does not export the DART symbols the C step needs: {exc}") from exc
+        except OSError as exc:
+            raise NativeUnavailable(f"dartpy {version}: its library does not load with ctypes: {exc}") from exc
+        missing = [name for name, sym in _SYMBOLS.items() if not hasattr(dart_lib, sym)]
+        if missing:
+            raise NativeUnavailable(f"dartpy {version} does not export the DART symbols the C step needs: "
+                                    + ", ".join(f"{name} ({_SYMBOLS[name]})" for name in missing))
+        fns = (ctypes.c_void_p * len(_SYMBOLS))(
+            *[ctypes.cast(dart_lib[sym], ctypes.c_void_p).value for sym in _SYMBOLS.values()])
         # PyDLL: the calls keep the GIL, as dartpy's world.step() does (no two DART worlds step at once on
         # threads of one process, as before)
-        lib = ctypes.PyDLL(str(compile_source(SOURCE, "cpgsim_dart", origin="robots/dart/c/dart_loop.c")))
+        lib = ctypes.PyDLL(str(compile_source(library_source(), "cpgsim_dart", origin="robots/dart/c/dart_loop.c")))
         declare(lib, PROTOTYPES)
+        mismatch = _self_test(lib, fns)
+        if mismatch:
+            raise NativeUnavailable(f"dartpy {version}: the C step's view of DART does not match the bindings': "
+                                    f"{mismatch}")
         _LIB, _FNS = lib, fns
     return _LIB, _FNS  # type: ignore[return-value]
+
+
+def _box_world() -> dart.simulation.World:
+    """A 1 kg box of 0.2 m resting (0.5 mm deep) on an immobile ground box: four contacts every step."""
+    world = dart.simulation.World()
+    world.setTimeStep(1e-3)
+    for name, size, z, mobile in (("ground", [2.0, 2.0, 0.2], -0.1, False), ("box", [0.2, 0.2, 0.2], 0.0995, True)):
+        skel = dart.dynamics.Skeleton(f"cpgsim_self_test_{name}")
+        joint, body = (skel.createFreeJointAndBodyNodePair() if mobile else skel.createWeldJointAndBodyNodePair())
+        node = body.createShapeNode(dart.dynamics.BoxShape(size))
+        node.createCollisionAspect()
+        node.createDynamicsAspect()
+        if mobile:
+            body.setMass(1.0)
+            skel.setPosition(5, z)
+        else:
+            T = dart.math.Isometry3()
+            T.set_identity()
+            T.set_translation([0.0, 0.0, z])
+            joint.setTransformFromParentBodyNode(T)
+            skel.setMobile(False)
+        world.addSkeleton(skel)
+    return world
+
+
+def _self_test(lib: ctypes.PyDLL, fns: ctypes.Array) -> str | None:
+    """One world step of :func:`_box_world`, its contacts read by the C (``cpgsim_dart_probe``, at the
+    :data:`LAYOUT` offsets) and by dartpy's ``getContacts()``: None when they agree bit for bit, else what
+    differed (one line).
+
+    The object header is checked first (the C follows the world's address; the contacts' fields are only
+    read, the objects they name are compared by address, never followed).
+    """
+    if LAYOUT["pybind_value"] != object.__basicsize__:
+        return (f"pybind11's value pointer at offset {LAYOUT['pybind_value']}, after a Python object header of "
+                f"{object.__basicsize__} bytes")
+    world = _box_world()
+    world.step()
+    contacts = world.getLastCollisionResult().getContacts()
+    if not contacts:
+        return "no contact between the self-test's box and the ground"
+    max_n = 64
+    force = np.zeros((max_n, 3))
+    obj1, obj2 = (ctypes.c_void_p * max_n)(), (ctypes.c_void_p * max_n)()
+    time_step = ctypes.c_double()
+    n = lib.cpgsim_dart_probe(fns, address(world), max_n, force.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
+                              obj1, obj2, ctypes.byref(time_step))
+    if time_step.value != world.getTimeStep():
+        return f"World::getTimeStep gives {time_step.value!r} where the bindings give {world.getTimeStep()!r}"
+    if n != len(contacts):
+        return f"CollisionResult::getNumContacts gives {n} where getContacts() lists {len(contacts)}"
+    for i, c in enumerate(contacts):
+        if force[i].tobytes() != np.asarray(c.force, dtype=np.float64).tobytes():
+            return (f"Contact.force at offset {LAYOUT['contact_force']} reads {force[i].tolist()} where "
+                    f"getContacts() says {np.asarray(c.force).tolist()}")
+        for key, got, obj in (("contact_object1", obj1[i], c.collisionObject1),
+                              ("contact_object2", obj2[i], c.collisionObject2)):
+            if (got or 0) != address(obj):
+                return (f"Contact.{key[8:].replace('object', 'collisionObject')} at offset {LAYOUT[key]} reads "
+                        f"{got or 0:#x} where the bindings' object is at {address(obj):#x}")
+    return None
 
 
 class NativeDartStep:

@@ -16,7 +16,12 @@ typedef size_t (*num_dofs_t)(const void *);
 typedef int (*feval_t)(void *);
 
 enum { LINK = 10, BODY = 100, OTHER = 1000, MAX_OBJECTS = 256 };
-enum { FORCE = 48, OBJECT1 = 72, OBJECT2 = 80 };  /* offsets in dart::collision::Contact */
+/* offsets in dart::collision::Contact: defined by cpgsim.robots.dart.native.LAYOUT (prepended to this file by
+   native.library_source(), checked against the installed dartpy when the library loads) */
+#if !defined(CPGSIM_DART_CONTACT_FORCE) || !defined(CPGSIM_DART_CONTACT_OBJECT1) || !defined(CPGSIM_DART_CONTACT_OBJECT2)
+#error "dart_loop.c needs the Contact offsets of cpgsim.robots.dart.native.LAYOUT (native.library_source())"
+#endif
+enum { FORCE = CPGSIM_DART_CONTACT_FORCE, OBJECT1 = CPGSIM_DART_CONTACT_OBJECT1, OBJECT2 = CPGSIM_DART_CONTACT_OBJECT2 };
 
 typedef struct {
     world_step_t world_step; world_time_step_t world_time_step; world_result_t world_result;
@@ -103,6 +108,25 @@ int cpgsim_dart_register(void *vc, const void *obj, int code) {
     if (c->nobj >= MAX_OBJECTS) return -1;
     c->obj[c->nobj] = obj; c->code[c->nobj] = code; c->nobj++;
     return 0;
+}
+
+/* The load-time self-test (native._self_test): the contacts of world's last collision result as the C step
+   reads them (force, collisionObject1/2 at the LAYOUT offsets), at most max of them, and the world's time step.
+   Returns the number of contacts. Reads the objects' addresses, never follows them. */
+size_t cpgsim_dart_probe(void **fns, void *world, size_t max, double *force, void **obj1, void **obj2,
+                         double *time_step) {
+    dart_api api;
+    memcpy(&api, fns, sizeof(dart_api));
+    *time_step = api.world_time_step(world);
+    const void *res = api.world_result(world);
+    size_t n = api.num_contacts(res);
+    for (size_t i = 0; i < n && i < max; i++) {
+        const char *ct = api.get_contact(res, i);
+        memcpy(force + 3 * i, ct + FORCE, 3 * sizeof(double));
+        obj1[i] = *(void *const *)(ct + OBJECT1);
+        obj2[i] = *(void *const *)(ct + OBJECT2);
+    }
+    return n;
 }
 
 double cpgsim_dart_time_step(void *vc) { plant_ctx *c = vc; return c->api.world_time_step(c->world); }

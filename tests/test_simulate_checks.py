@@ -149,6 +149,38 @@ def test_the_casadi_loop_runs_chunk_after_chunk_like_the_c_loop():
         runs[backend] = s.run(2.0, inputs={"u": u})
     np.testing.assert_allclose(runs["casadi"]["i.y"], runs["native"]["i.y"], rtol=0, atol=1e-12)
     assert runs["native"]["i.y"][-1][1] == pytest.approx(8 / 3, abs=1e-2)  # the integral of t^2 over 2 s
+    s = Simulator(integrator_graph(), dt=1e-3, backend="native")
+    s.chunk = 137  # the C loop in chunks too (as with a progress bar): the same numbers, bit for bit
+    np.testing.assert_array_equal(s.run(2.0, inputs={"u": u}, progress=True)["i.y"], runs["native"]["i.y"])
+
+
+@pytest.mark.parametrize("backend", ["native", "casadi"])
+def test_each_chunk_gets_its_own_times(backend):
+    """y = sin(2 pi t) read from the time itself (no input), over many chunks: the sine of the grid."""
+    from cpgsim.components.basic import SineSource
+
+    g = Graph("sine")
+    g.add(SineSource("s", amplitude=1.0, frequency=1.0))
+    s = Simulator(g, dt=1e-3, backend=backend)
+    s.chunk = 137
+    res = s.run(1.0, progress=True)
+    np.testing.assert_allclose(res["s.y"], np.sin(2 * np.pi * res.time), rtol=0, atol=1e-12)
+
+
+def test_an_input_of_more_than_256_elements_is_taken():
+    """Sizes compared by value, not identity (CPython shares the int objects only up to 256)."""
+    res = Simulator(integrator_graph(300), dt=0.1).run(1.0, inputs={"u": np.arange(300.0)})
+    np.testing.assert_allclose(res["i.y"][-1], np.arange(300.0))
+
+
+def test_an_unknown_start_value_lists_the_first_eight_states():
+    g = Graph("many")
+    for i in range(10):
+        g.add(Integrator(f"i{i}"))
+        g.expose_input(f"u{i}", f"i{i}.u")
+    with pytest.raises(ParameterError) as info:
+        Simulator(g, dt=0.1).run(1.0, x0={"nope": 1.0})
+    assert str(info.value) == ("no state 'nope' (states: i0.x, i1.x, i2.x, i3.x, i4.x, i5.x, i6.x, i7.x...)")
 
 
 def test_the_casadi_loop_keeps_the_state_before_a_divergence_in_a_later_chunk():
@@ -245,9 +277,14 @@ def test_a_state_going_to_infinity_ends_a_co_simulation_at_that_step(backend, fe
 
 
 class CountedSquare(Block):
-    """``dx/dt = x^2`` while a step counter ``n`` (a discrete state, +1 at each sampled update) is at most
-    103: the same blow-up as :class:`Square` (inf at t = 1.03 s, the 103rd step), after which the equation
-    would be still. A report of the diverging step that re-ran it from a later counter would see no change."""
+    """``dx/dt = x^2`` while a step counter ``n`` (a discrete state, +1 at each sampled update) lies in
+    ``window`` (0..103: the same blow-up as :class:`Square`, inf at t = 1.03 s, the 103rd step), still
+    elsewhere. A report that re-ran the diverging step from another counter than the last good one would see
+    the equation still and name a finite value."""
+
+    def __init__(self, name: str, window: tuple[int, int]) -> None:
+        self._window = window
+        super().__init__(name)
 
     def declare(self) -> None:
         self.add_state("x", [1.0])
@@ -258,15 +295,36 @@ class CountedSquare(Block):
         import casadi as ca
 
         x, n = v.x["x"], v.z["n"]
-        return Equations(derivatives={"x": ca.if_else(n <= 103, x * x, 0)}, updates={"n": n + 1},
+        lo, hi = self._window
+        return Equations(derivatives={"x": ca.if_else(ca.logic_and(n >= lo, n <= hi), x * x, 0)},
+                         updates={"n": n + 1},
                          outputs={"y": x})
 
 
 @pytest.mark.parametrize("backend", ["native", "casadi"])
-def test_the_diverging_step_is_reported_from_the_last_good_discrete_state(backend):
+@pytest.mark.parametrize("window, t_inf", [((0, 103), 1.03), ((100, 10**6), 2.02)])
+def test_the_diverging_step_is_reported_from_the_last_good_discrete_state(backend, window, t_inf):
+    """Two windows of the counter: up to 103 (a report from a later counter would see the equation still)
+    and from 100 on (x stays 1 until t = 0.99 s, then 1 / (1 - (t - 0.99)) overflows at 2.02 s; a report
+    from the chunk's first counter would see it still)."""
     g = Graph("counted")
-    g.add(CountedSquare("q"))
+    g.add(CountedSquare("q", window))
     with pytest.raises(SimulationDiverged) as info:
-        Simulator(g, dt=1e-2, backend=backend).run(2.0)
-    assert "state q.x became inf at t=1.03 s" in str(info.value), str(info.value)
-    assert info.value.results.time[-1] == pytest.approx(1.02)
+        Simulator(g, dt=1e-2, backend=backend).run(3.0)
+    assert f"state q.x became inf at t={t_inf:g} s" in str(info.value), str(info.value)
+    assert info.value.results.time[-1] == pytest.approx(t_inf - 0.01)
+
+
+@pytest.mark.parametrize("blocks", [{}, {"p": "a state"}])
+def test_a_snapshot_without_a_resumable_state_for_each_co_simulation_block_is_refused(blocks):
+    """A resume needs, for every co-simulation block, a saved state and a block that can take it: the
+    pass-through block keeps no state, so neither a snapshot without it nor one that names it resumes."""
+    from cpgsim.harness.simulate import Snapshot
+
+    g = blowup()
+    g.add(PassThrough("p", False))
+    g.connect("q.y", "p.u")
+    sim = Simulator(g, dt=1e-2)
+    snap = Snapshot(0.0, np.array([1.0]), np.zeros(0), blocks)
+    with pytest.raises(ModelError, match="snapshot has no state for co-simulation block 'p'"):
+        sim.run(0.5, resume=snap)

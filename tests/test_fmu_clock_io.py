@@ -159,6 +159,9 @@ def test_clock_wiring_errors_name_the_ports(trig_fmu):
         simulate(FmuBlock("a", trig_fmu, kind="cs"), t_end=0.1, dt=DT)
     with pytest.raises(Exception, match=r"not a triggered input clock"):
         FmuBlock("a", trig_fmu, clocks={"every": [0.1]})
+    for bad in ([0.1, float("inf")], [float("-inf")], [float("nan"), 0.2], "soon"):
+        with pytest.raises(Exception, match=r"clock 'trig': tick times must be finite numbers"):
+            FmuBlock("a", trig_fmu, clocks={"trig": bad})
 
 
 def test_off_grid_tick_without_variable_step_size_is_refused(trig_fmu, tmp_path):

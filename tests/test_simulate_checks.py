@@ -46,7 +46,7 @@ def test_a_diverging_state_ends_the_run_at_its_first_non_finite_step(backend):
     # overflow within a few steps (1.01: 1e13, 1.02: 5e173, 1.03: inf)
     assert res.time[-1] == pytest.approx(1.02) and np.all(np.isfinite(res["q.y"]))
     assert res["q.y"][-1] > 1e100  # the last finite state is kept
-    assert "state q.x became inf at t=1.03 s" in str(info.value)
+    assert "state q.x became inf at t=1.03 s (last finite value 4.77518e+173)" in str(info.value)
 
 
 def test_both_backends_stop_at_the_same_step_with_the_same_last_state():
@@ -118,6 +118,10 @@ def test_a_snapshot_of_another_model_is_refused():
         other.run(0.02, resume=snap)
     with pytest.raises(ModelError, match="does not fit the model"):
         Simulator(damped_oscillator()).run(0.02, resume=snap.replace(z=np.zeros(snap.z.size + 1)))
+    small = Simulator(blowup(), dt=1e-3)  # fewer states than the model: refused too
+    small.run(0.01)
+    with pytest.raises(ModelError, match="does not fit the model"):
+        Simulator(damped_oscillator()).run(0.02, resume=small.snapshot())
     resumed = Simulator(damped_oscillator()).run(0.02, resume=snap)
     assert resumed.time[0] == pytest.approx(0.01)
 
@@ -192,7 +196,7 @@ def test_the_casadi_loop_keeps_the_state_before_a_divergence_in_a_later_chunk():
     assert info.value.results["q.y"][-1] > 1e100
 
 
-@pytest.mark.parametrize("chunk", [7, 103])  # 103: the divergence is the first step of the second chunk
+@pytest.mark.parametrize("chunk", [7, 102, 103])  # 102: the diverging step (the 103rd) opens the second chunk
 def test_a_divergence_at_any_place_in_a_chunk_keeps_the_state_before_it(chunk):
     s = Simulator(blowup(), dt=1e-2, backend="casadi")
     s.chunk = chunk
@@ -200,6 +204,7 @@ def test_a_divergence_at_any_place_in_a_chunk_keeps_the_state_before_it(chunk):
         s.run(2.0)
     assert info.value.results.time[-1] == pytest.approx(1.02)
     assert info.value.results["q.y"][-1] == pytest.approx(4.77517763e173, rel=1e-6)
+    assert "(last finite value 4.77518e+173)" in str(info.value)  # the state before the bad step, named
 
 
 class Root(Block):
@@ -328,3 +333,31 @@ def test_a_snapshot_without_a_resumable_state_for_each_co_simulation_block_is_re
     snap = Snapshot(0.0, np.array([1.0]), np.zeros(0), blocks)
     with pytest.raises(ModelError, match="snapshot has no state for co-simulation block 'p'"):
         sim.run(0.5, resume=snap)
+
+
+class Counter(Block):
+    """A discrete counter ``n`` (+1 at each sampled update), output ``y = n``."""
+
+    def declare(self) -> None:
+        self.add_discrete_state("n", 0.0)
+        self.add_output("y")
+
+    def define(self, v: Symbols) -> Equations:
+        return Equations(updates={"n": v.z["n"] + 1}, outputs={"y": v.z["n"]})
+
+
+def test_the_discrete_state_carries_over_from_chunk_to_chunk():
+    """The CasADi loop in chunks of 7 steps counts like the C loop in one call: every row the same count."""
+    g = Graph("count")
+    g.add(Counter("c"))
+    native = Simulator(g, dt=1e-2, backend="native").run(1.0)
+    s = Simulator(g, dt=1e-2, backend="casadi")
+    s.chunk = 7
+    np.testing.assert_array_equal(s.run(1.0)["c.y"], native["c.y"])
+    assert native["c.y"][-1] - native["c.y"][0] == 100  # one count per step
+
+
+def test_a_start_value_of_more_than_256_elements_is_taken():
+    res = Simulator(integrator_graph(300), dt=0.1).run(0.1, inputs={"u": np.zeros(300)},
+                                                        x0={"i.x": np.arange(300.0)})
+    np.testing.assert_array_equal(res["i.y"][0], np.arange(300.0))

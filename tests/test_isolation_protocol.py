@@ -111,6 +111,14 @@ def runtime(path: Path, workdir: Path, timeout: float | None = None, name: str =
     return IsolatedRuntime(args, timeout=timeout)
 
 
+def at_hostile_time(path: Path, workdir: Path, **kw) -> IsolatedRuntime:
+    """A runtime set up and stepped to t = 0.05 s, where the hostile FMUs turn hostile (their next step)."""
+    rt = runtime(path, workdir, **kw)
+    rt.setup(0.0)
+    rt.do_step(0.0, 0.05)
+    return rt
+
+
 def assert_gone(rt: IsolatedRuntime) -> None:
     """The child has ended and been reaped, its connection is closed and its scratch folder removed."""
     assert rt.proc.poll() is not None, "the isolated child still runs"
@@ -190,10 +198,8 @@ def test_a_relative_fmu_path_is_made_absolute_for_the_child(fmus, tmp_path, monk
 @pytest.mark.parametrize("hostile, cause", [("SEGV", "signal SIGSEGV"), ("EXIT", "exit status 0")])
 def test_a_child_that_dies_in_a_step_is_one_error_naming_fmu_block_call_time_and_cause(fmus, tmp_path, hostile,
                                                                                          cause):
-    rt = runtime(fmus[hostile], tmp_path, name="legs")
+    rt = at_hostile_time(fmus[hostile], tmp_path, name="legs")
     try:
-        rt.setup(0.0)
-        rt.do_step(0.0, 0.05)  # the FMU is hostile from t = 0.05 s on
         with pytest.raises(FmuCrashedError) as err:
             rt.do_step(0.05, 0.05)
     finally:
@@ -205,9 +211,7 @@ def test_a_child_that_dies_in_a_step_is_one_error_naming_fmu_block_call_time_and
 
 
 def test_a_hanging_step_is_killed_at_the_timeout(fmus, tmp_path):
-    rt = runtime(fmus["SLEEP"], tmp_path, timeout=0.4)
-    rt.setup(0.0)
-    rt.do_step(0.0, 0.05)
+    rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=0.4)
     start = time.monotonic()
     with pytest.raises(FmuTimeoutError) as err:
         rt.do_step(0.05, 0.05)
@@ -228,9 +232,7 @@ def test_a_timeout_ends_what_the_fmu_started_and_leaks_no_descriptor(fmus, tmp_p
     pidfile = tmp_path / "pids"
     monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
     before = open_fds()
-    rt = runtime(fmus["HANGSETSID"], tmp_path, timeout=0.5)
-    rt.setup(0.0)
-    rt.do_step(0.0, 0.05)  # hostile from t = 0.05 s on
+    rt = at_hostile_time(fmus["HANGSETSID"], tmp_path, timeout=0.5)
     with pytest.raises(FmuTimeoutError):
         rt.do_step(0.05, 0.05)
     child, escaped = map(int, pidfile.read_text().split())
@@ -262,9 +264,7 @@ def test_a_run_leaks_no_descriptor(fmus, tmp_path, end):
 
 def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fmus, tmp_path, monkeypatch, capfd):
     monkeypatch.setattr(isolation, "OUTPUT_LIMIT", 1000)  # the forwarder reads the limit as it copies
-    rt = runtime(fmus["SPAM"], tmp_path, name="talker")
-    rt.setup(0.0)
-    rt.do_step(0.0, 0.05)
+    rt = at_hostile_time(fmus["SPAM"], tmp_path, name="talker")
     rt.do_step(0.05, 0.05)  # prints from t = 0.05 s on
     rt.terminate()
     err = capfd.readouterr().err
@@ -276,9 +276,7 @@ def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fm
 
 
 def test_a_stopped_child_is_killed_and_reported(fmus, tmp_path):
-    rt = runtime(fmus["SIGSTOP"], tmp_path, timeout=60)
-    rt.setup(0.0)
-    rt.do_step(0.0, 0.05)
+    rt = at_hostile_time(fmus["SIGSTOP"], tmp_path, timeout=60)
     start = time.monotonic()
     with pytest.raises(FmuCrashedError) as err:
         rt.do_step(0.05, 0.05)

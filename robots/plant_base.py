@@ -17,7 +17,7 @@ supplies the rest (the engine contract, docs/architecture.md):
   (:class:`~cpgsim.harness.contracts.FusedLoopBlock`), or a refusal that names the engine.
 
 Every capability an engine declares in the registry (:mod:`cpgsim.robots.registry`) it implements here;
-the contract tests (tests/test_engine_contract.py) run the same checks on every registered engine.
+the contract tests (tests/test_plant_contract.py) run the same checks on every registered engine.
 """
 
 from __future__ import annotations

@@ -44,7 +44,8 @@ class Engine:
     install: str
     capabilities: frozenset[str]
     options: tuple[str, ...] = ()
-    """Constructor arguments only this engine takes (``detector`` for DART, ``contact`` for MuJoCo)."""
+    """Constructor arguments beyond :class:`~cpgsim.robots.plant_base.HexapodPlant`'s that this engine takes
+    (``detector`` for DART, ``contact`` for MuJoCo, ``native`` for both: the C step or the Python one)."""
 
     def available(self) -> bool:
         """Whether the engine's Python package can be imported."""
@@ -69,7 +70,8 @@ class Engine:
 
 ENGINES: dict[str, Engine] = {e.name: e for e in (
     Engine("dart", "cpgsim.robots.dart.plant:DartHexapod", "dartpy", "pip install dartpy",
-           frozenset({"fused_loop", "snapshot_restore", "pushes", "amputation", "detectors"}), ("detector",)),
+           frozenset({"fused_loop", "snapshot_restore", "pushes", "amputation", "detectors"}),
+           ("detector", "native")),
     Engine("mujoco", "cpgsim.robots.mujoco.plant:MujocoHexapod", "mujoco", "pip install 'cpgsim[mujoco]'",
            frozenset({"fused_loop", "batched_rollouts", "snapshot_restore", "pushes", "amputation"}),
            ("contact", "native")),

@@ -78,7 +78,10 @@ class DartHexapod(HexapodPlant):
     - ``detector``: ``'dart'`` (default: exact for spheres and boxes, the fastest measured),
       ``'fcl'``, ``'bullet'`` or ``'ode'``;
     - ``time_step``: the DART world step (s, default 1 ms); ``do_step``'s ``dt`` must be a
-      multiple of it.
+      multiple of it;
+    - ``native``: step the world through the C step (:mod:`cpgsim.robots.dart.native`) when it can be built
+      (``True``), or always in Python (``False``); ``None`` (default): as the environment variable
+      ``CPGSIM_DART_NATIVE`` says at :meth:`setup` (C unless it is ``0``).
 
     Amputated legs' shapes are taken out of the world's collision group after the world is built, before
     the settle phase.
@@ -92,12 +95,13 @@ class DartHexapod(HexapodPlant):
                  q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
                  time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
                  disturbances: Sequence[Push | Mapping] | None = None, amputated: Sequence[int] = (),
-                 **params: float) -> None:
+                 native: bool | None = None, **params: float) -> None:
         if detector not in DETECTORS:
             raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
         if not (math.isfinite(time_step) and time_step > 0):
             raise ParameterError(f"time_step must be > 0, got {time_step!r}")
         self.detector = detector
+        self.native = None if native is None else bool(native)
         self.time_step = float(time_step)
         self.world: dart.simulation.World | None = None
         self.model: HexapodModel | None = None
@@ -244,7 +248,7 @@ class DartHexapod(HexapodPlant):
     def _bind_native(self) -> None:
         """The C step (:mod:`cpgsim.robots.dart.native`) on this plant's world and buffers, when it works."""
         self.native_step = None
-        if not dart_native.enabled():
+        if not (dart_native.enabled() if self.native is None else self.native):
             return
         readout = self.compiled_readout.c_entry() if self.compiled_readout is not None else None
         try:

@@ -1,0 +1,169 @@
+"""The hexapod plant contract (issue 57), checked the same way on every registered engine: the same ports,
+a standing robot carries its weight, the C step equals the Python step bit for bit, a snapshot restored
+replays the next steps exactly, and a capability an engine does not declare is refused naming it.
+
+An engine whose Python package is missing is skipped by name. Expected values come from outside the plants:
+the port table of docs (robots/ports.py's docstring, written out below), the robot's masses from the neutral
+description times g."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cpgsim.components.core import ParameterError
+from cpgsim.components.geometry import YU_SIM
+from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
+from cpgsim.robots.description import describe_hexapod
+from cpgsim.robots.registry import CAPABILITIES, ENGINES, make_plant, require
+
+G = 9.81  # m/s^2
+DT = 1e-3
+
+
+def _engines(*needs: str) -> list:
+    """Every registered engine (those declaring ``needs``), skipped by name when its package is missing."""
+    params = []
+    for name, eng in ENGINES.items():
+        if not all(n in eng.capabilities or n in eng.options for n in needs):
+            continue
+        params.append(pytest.param(name, id=name, marks=pytest.mark.skipif(
+            not eng.available(), reason=f"engine {name!r} needs the {eng.package} package ({eng.install})")))
+    return params
+
+
+# the plant's ports as documented (name, direction, shape, unit, kind): every engine declares exactly these
+PORTS = {
+    ("q_target", "in", (18,), "rad", "real"),
+    ("q", "out", (18,), "rad", "real"),
+    ("qd", "out", (18,), "rad/s", "real"),
+    ("toe_force", "out", (18,), "N", "real"),
+    ("body_position", "out", (3,), "m", "real"),
+    ("body_rpy", "out", (3,), "rad", "real"),
+    ("foot_position", "out", (18,), "m", "real"),
+    ("body_contact", "out", (1,), "1", "boolean"),
+}
+
+
+def _ports(plant) -> set[tuple]:
+    return {(p.name, p.direction, tuple(p.shape), p.unit, p.kind)
+            for p in [*plant.inputs.values(), *plant.outputs.values()]}
+
+
+@pytest.mark.parametrize("engine", _engines())
+def test_ports_are_the_documented_ones(engine):
+    plant = make_plant(engine)
+    assert _ports(plant) == PORTS
+    plant.setup(0.0)
+    out = plant.get_outputs()
+    assert {k: v.shape for k, v in out.items()} == {name: shape for name, d, shape, _, _ in PORTS if d == "out"}
+    plant.terminate()
+
+
+def test_every_engine_has_the_same_ports_and_parameters():
+    available = [name for name, eng in ENGINES.items() if eng.available()]
+    if len(available) < 2:
+        pytest.skip(f"only {available} installed: nothing to compare")
+    plants = [make_plant(name) for name in available]
+    ref = plants[0]
+    for other in plants[1:]:
+        assert _ports(other) == _ports(ref), other.engine
+        assert {k: repr(v) for k, v in other.parameters.items()} == {k: repr(v) for k, v in ref.parameters.items()}
+
+
+@pytest.mark.parametrize("engine", _engines())
+def test_a_standing_robot_carries_its_weight(engine):
+    weight = sum(m.mass for m in describe_hexapod(YU_SIM).mass_properties().values()) * G
+    plant = make_plant(engine, geometry=YU_SIM, settle=0.5)
+    plant.setup(0.0)
+    for _ in range(200):
+        plant.set_inputs({"q_target": plant.q0})
+        plant.do_step(plant.time, DT)
+    fz = plant.toe_force_world()[:, 2]
+    assert fz.sum() == pytest.approx(weight, rel=0.02)
+    assert np.all(fz > 0.1 * weight / 6), fz  # every foot stands
+    body = plant.get_outputs()["toe_force"].reshape(6, 3)[:, 2]  # body frame: level, so the same
+    assert body.sum() == pytest.approx(weight, rel=0.02)
+    assert not plant.fell()
+    plant.terminate()
+
+
+def _walk(plant, steps: int) -> np.ndarray:
+    """Targets swinging by 0.3 rad around the standing posture (feet lift and land, contacts come and go);
+    every output after every step. The targets depend on the plant's clock only."""
+    rows = []
+    for _ in range(steps):
+        k = round(plant.time / DT)
+        plant.set_inputs({"q_target": plant.q0 + 0.3 * np.sin(2 * np.pi * k / 400.0 + np.arange(18))})
+        plant.do_step(plant.time, DT)
+        rows.append(np.concatenate([v.ravel() for v in plant.get_outputs().values()]))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("engine", _engines("native"))
+def test_the_c_step_equals_the_python_step(engine, monkeypatch):
+    """``native=`` is a constructor argument of every engine that offers the choice; over 0.5 s of moving
+    targets the two give the same outputs bit for bit (the environment variable, set the other way, does not
+    overrule the argument)."""
+    runs = {}
+    for native in (False, True):
+        monkeypatch.setenv("CPGSIM_DART_NATIVE", "0" if native else "1")
+        plant = make_plant(engine, settle=0.1, native=native)
+        plant.setup(0.0)
+        if native and plant.native_step is None:
+            pytest.skip(f"engine {engine!r}: no C step here (no C compiler or no engine library symbols)")
+        assert (plant.native_step is not None) == native
+        runs[native] = _walk(plant, 500)
+        assert (plant.native_step is not None) == native  # the C step was not dropped on the way
+        plant.terminate()
+    np.testing.assert_array_equal(runs[True], runs[False])
+    assert np.ptp(runs[False][:, :18], axis=0).min() > 0.1  # every joint moved
+
+
+@pytest.mark.parametrize("engine", _engines("snapshot_restore"))
+def test_a_restored_snapshot_replays_the_next_steps_exactly(engine):
+    plant = make_plant(engine, settle=0.1)
+    assert isinstance(plant, ResumableBlock)
+    plant.setup(0.0)
+    _walk(plant, 200)
+    snap = plant.snapshot()
+    ahead = _walk(plant, 500)
+    plant.restore(snap)
+    assert plant.time == pytest.approx(0.2)
+    np.testing.assert_array_equal(_walk(plant, 500), ahead)
+    plant.terminate()
+
+    resumed = make_plant(engine, settle=0.1)  # a new plant that starts its run in the saved state
+    resumed.resume_from(snap)
+    resumed.setup(snap.t)
+    np.testing.assert_array_equal(_walk(resumed, 500), ahead)
+    resumed.terminate()
+    assert resumed.last_snapshot is not None and resumed.last_snapshot.t == pytest.approx(0.7)
+
+
+@pytest.mark.parametrize("engine", _engines())
+def test_a_capability_not_declared_is_refused_by_name(engine):
+    declared = ENGINES[engine].capabilities
+    plant = make_plant(engine)
+    assert isinstance(plant, ResumableBlock) == ("snapshot_restore" in declared)
+    assert isinstance(plant, FusedLoopBlock) == ("fused_loop" in declared)
+    for capability in CAPABILITIES:
+        if capability in declared:
+            assert require(engine, capability, "a test").name == engine
+            continue
+        with pytest.raises(ParameterError, match=rf"a test needs the {capability.replace('_', ' ')} capability, "
+                                                 rf"which engine '{engine}' does not have") as err:
+            require(engine, capability, "a test")
+        assert "\n" not in str(err.value)
+    for other in ENGINES.values():
+        for option in other.options:
+            if option in ENGINES[engine].options:
+                continue
+            with pytest.raises(ParameterError, match=rf"{option} \(an option of engine '{other.name}'\) applies to "
+                                                     rf"engine '{other.name}', not '{engine}'"):
+                make_plant(engine, **{option: "x"})
+
+
+def test_an_unknown_capability_is_refused_by_name():
+    with pytest.raises(ParameterError, match="unknown engine capability 'teleport'"):
+        ENGINES["dart"].supports("teleport")

@@ -79,6 +79,7 @@ def test_inputs_are_held_constants_series_or_functions_of_the_right_size():
 @pytest.mark.parametrize("value, phrase", [
     ([1.0, 2.0, 3.0], "needs 2 element(s) per sample, got 3"),
     (np.ones((2, 5)), "time series has 5 samples, need 11"),
+    (np.ones((2, 12)), "time series has 12 samples, need 11"),
     ([1.0, float("nan")], "contains non-finite values"),
     (lambda t: [1.0, float("inf")], "contains non-finite values"),
     (lambda t: [1.0], "needs 2 element(s) per sample, got 1"),
@@ -361,3 +362,9 @@ def test_a_start_value_of_more_than_256_elements_is_taken():
     res = Simulator(integrator_graph(300), dt=0.1).run(0.1, inputs={"u": np.zeros(300)},
                                                         x0={"i.x": np.arange(300.0)})
     np.testing.assert_array_equal(res["i.y"][0], np.arange(300.0))
+
+
+def test_a_start_value_with_too_few_elements_is_refused():
+    """One number for a two-element state is not spread over it: refused, naming the size."""
+    with pytest.raises(ParameterError, match="initial value of i.x must be 2 finite number"):
+        Simulator(integrator_graph(2), dt=0.1).run(0.1, inputs={"u": [0.0, 0.0]}, x0={"i.x": [1.0]})

@@ -90,7 +90,7 @@ def fmus(tmp_path_factory) -> dict[str, Path]:
     """The C FMU, well-behaved and hostile at ``doStep`` from t = 0.05 s on, built once for this module."""
     folder = tmp_path_factory.mktemp("isolation_fmus")
     out = {"good": c_fmu(folder / "good.fmu")}
-    for hostile in ("SEGV", "EXIT", "SLEEP", "SIGSTOP"):
+    for hostile in ("SEGV", "EXIT", "SLEEP", "SIGSTOP", "CLOSEFDS"):
         lib = compile_library(folder / f"{hostile.lower()}.so", (f"H_{hostile}", "AT_DOSTEP"))
         out[hostile] = c_fmu(folder / f"{hostile.lower()}.fmu", library=lib)
     for hostile in ("HANGSETSID", "SPAM"):  # a setsid process then a hang; 3 MiB printed in doStep
@@ -195,7 +195,8 @@ def test_a_relative_fmu_path_is_made_absolute_for_the_child(fmus, tmp_path, monk
 
 
 # -- the child's failures -----------------------------------------------------------------------------
-@pytest.mark.parametrize("hostile, cause", [("SEGV", "signal SIGSEGV"), ("EXIT", "exit status 0")])
+@pytest.mark.parametrize("hostile, cause", [("SEGV", "signal SIGSEGV"), ("EXIT", "exit status 0"),
+                                            ("CLOSEFDS", "exit status 3")])  # the FMU closed the socket
 def test_a_child_that_dies_in_a_step_is_one_error_naming_fmu_block_call_time_and_cause(fmus, tmp_path, hostile,
                                                                                          cause):
     rt = at_hostile_time(fmus[hostile], tmp_path, name="legs")
@@ -533,6 +534,7 @@ def test_signal_names():
     assert _signal_name(None) == "no exit status"
     assert _signal_name(-signal.SIGSEGV) == "signal SIGSEGV"
     assert _signal_name(-signal.SIGKILL) == "signal SIGKILL"
+    assert _signal_name(-1) == "signal SIGHUP"
     assert _signal_name(-200) == "signal 200"
     assert _signal_name(0) == "exit status 0"
     assert _signal_name(3) == "exit status 3"

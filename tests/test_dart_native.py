@@ -75,35 +75,6 @@ def test_native_step_off_by_environment(monkeypatch):
     robot.terminate()
 
 
-def test_fused_dart_loop_equals_python_master(monkeypatch):
-    """The controller + DART loop in C (the master's fast path) records what the Python master and the
-    plant's Python loop record."""
-    import cpgsim.harness.fused as fused
-    from cpgsim.experiments.runner import build_scenario
-    from cpgsim.harness.simulate import Simulator
-
-    runs, used = {}, {}
-    original = fused.fused_runner
-    for native in ("1", "0"):
-        monkeypatch.setenv("CPGSIM_DART_NATIVE", native)
-
-        def runner(*args, native=native):
-            r = original(*args)
-            used[native] = r is not None
-            return r
-
-        monkeypatch.setattr(fused, "fused_runner", runner)
-        setup = build_scenario("step", {})
-        sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=False).prepare()
-        runs[native] = sim.run(1.25)  # the checked steps one by one, a chunk boundary inside, a partial chunk
-    if not used["1"]:
-        pytest.skip("no fused loop here (no C compiler or no C step of DART)")
-    assert used == {"1": True, "0": False}
-    a, b = runs["1"], runs["0"]
-    assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
-    np.testing.assert_array_equal(a.data, b.data)
-    assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
-
 
 def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
     """A controller step that sends NaN targets: the C loop stops before stepping DART with them and the

@@ -1,5 +1,6 @@
 """The MuJoCo plant: its model is the DART model (masses, inertias, kinematics, terrain), its ports are the
-DART plant's, a standing robot carries its weight, and scenarios switch engines with ``robot.engine``."""
+DART plant's, and scenarios switch engines with ``robot.engine`` (what every engine must do alike -- stand,
+step in C as in Python, snapshot -- is tests/test_plant_contract.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from cpgsim.components.geometry import LEG_NAMES, YU_PROTOTYPE, YU_SIM  # noqa: 
 from cpgsim.robots import terrain as tr  # noqa: E402
 from cpgsim.robots.dart.model import build_hexapod  # noqa: E402
 from cpgsim.robots.dart.plant import DartHexapod  # noqa: E402
-from cpgsim.robots.description import GRAVITY, standing_posture  # noqa: E402
 from cpgsim.robots.mujoco.mjcf import mjcf  # noqa: E402
 from cpgsim.robots.mujoco.plant import MujocoHexapod  # noqa: E402
 from cpgsim.robots.registry import make_plant  # noqa: E402
@@ -91,29 +91,6 @@ def test_ports_and_parameters_equal_dart():
         for key in b:
             assert repr(a[key]) == repr(b[key]), key
 
-
-def test_standing_robot_carries_its_weight():
-    plant = MujocoHexapod(settle=0.5)
-    plant.setup(0.0)
-    for k in range(200):
-        plant.set_inputs({"q_target": plant.q0})
-        plant.do_step(k * 1e-3, 1e-3)
-    out = plant.get_outputs()
-    fw = plant.toe_force_world()
-    weight = YU_SIM.mass * GRAVITY
-    assert fw[:, 2].sum() == pytest.approx(weight, rel=0.01)
-    assert np.all(fw[:, 2] > 0.1 * weight / 6)  # every foot stands
-    assert np.abs(fw[:, :2]).max() < 0.05 * weight  # no sliding
-    assert out["toe_force"].reshape(6, 3)[:, 2].sum() == pytest.approx(weight, rel=0.01)  # body frame, level
-    np.testing.assert_allclose(out["q"], standing_posture(YU_SIM), atol=0.03)
-    assert abs(out["body_rpy"]).max() < 1e-3
-    assert not plant.fell() and out["body_contact"][0] == 0.0
-    # the readout's foot centres are MuJoCo's own (xpos after mj_step is of the step's start: recompute)
-    mujoco.mj_kinematics(plant.model, plant.data)
-    feet = np.array([plant.data.geom_xpos[plant.model.geom(f"{leg}_foot").id] for leg in LEG_NAMES])
-    np.testing.assert_allclose(out["foot_position"].reshape(6, 3), feet, atol=1e-9)
-    # and they stand on the ground (penetration of the soft contact below 1 mm)
-    assert np.abs(feet[:, 2] - YU_SIM.leg.foot_radius).max() < 1e-3
 
 
 def test_servo_law_is_darts():
@@ -240,32 +217,6 @@ def test_native_step_equals_python_step():
         np.testing.assert_array_equal(value, outs[False][key], err_msg=key)
     assert np.abs(outs[True]["toe_force"]).sum() > 1.0
 
-
-def test_fused_closed_loop_equals_python_master(monkeypatch):
-    """The controller + MuJoCo loop in C (harness/fused.py) records the same numbers as the Python master."""
-    import cpgsim.harness.fused as fused
-    from cpgsim.experiments.runner import build_scenario
-    from cpgsim.harness.simulate import Simulator
-
-    runs, used = {}, {}
-    original = fused.fused_runner
-    for allow in (True, False):
-        def runner(*args, allow=allow):
-            r = original(*args) if allow else None
-            used[allow] = r is not None
-            return r
-
-        monkeypatch.setattr(fused, "fused_runner", runner)
-        setup = build_scenario("step", {"robot.engine": "mujoco"})
-        sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=False).prepare()
-        runs[allow] = sim.run(1.25)  # a chunk boundary inside, a partial last chunk
-    if not used[True]:
-        pytest.skip("no fused loop here (no C compiler or no libmujoco)")
-    assert used == {True: True, False: False}
-    a, b = runs[True], runs[False]
-    assert a.columns == b.columns and len(a.time) == len(b.time) == 1251
-    np.testing.assert_array_equal(a.data, b.data)
-    assert np.abs(a["robot.toe_force"]).max() > 1.0  # walking: forces recorded
 
 
 def test_mjcf_terrain_of_every_feature_has_the_terrains_heights():

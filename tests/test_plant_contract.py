@@ -14,7 +14,7 @@ import pytest
 from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import YU_SIM
 from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
-from cpgsim.robots.description import describe_hexapod
+from cpgsim.robots.description import describe_hexapod, standing_posture
 from cpgsim.robots.registry import CAPABILITIES, ENGINES, make_plant, require
 
 G = 9.81  # m/s^2
@@ -80,11 +80,14 @@ def test_a_standing_robot_carries_its_weight(engine):
         plant.set_inputs({"q_target": plant.q0})
         plant.do_step(plant.time, DT)
     fz = plant.toe_force_world()[:, 2]
-    assert fz.sum() == pytest.approx(weight, rel=0.02)
+    assert fz.sum() == pytest.approx(weight, rel=1e-3)  # issue 57 asks 2 %; docs/engines.md states 0.1 %
     assert np.all(fz > 0.1 * weight / 6), fz  # every foot stands
-    body = plant.get_outputs()["toe_force"].reshape(6, 3)[:, 2]  # body frame: level, so the same
-    assert body.sum() == pytest.approx(weight, rel=0.02)
-    assert not plant.fell()
+    assert np.abs(plant.toe_force_world()[:, :2]).max() < 0.05 * weight  # no sliding
+    out = plant.get_outputs()
+    assert out["toe_force"].reshape(6, 3)[:, 2].sum() == pytest.approx(weight, rel=1e-3)  # body frame, level
+    np.testing.assert_allclose(out["q"], standing_posture(YU_SIM), atol=0.03)
+    assert np.abs(out["body_rpy"]).max() < 1e-3
+    assert not plant.fell() and out["body_contact"][0] == 0.0
     plant.terminate()
 
 
@@ -167,3 +170,44 @@ def test_a_capability_not_declared_is_refused_by_name(engine):
 def test_an_unknown_capability_is_refused_by_name():
     with pytest.raises(ParameterError, match="unknown engine capability 'teleport'"):
         ENGINES["dart"].supports("teleport")
+
+
+@pytest.mark.parametrize("engine", _engines("fused_loop", "native"))
+def test_the_fused_native_and_python_paths_record_the_same_walk(engine, monkeypatch):
+    """The ``step`` scenario's closed loop three ways: controller and plant in one C loop (the master's fast
+    path), the Python master with the plant's C step, and the Python master with the plant's Python step.
+    They record the same numbers bit for bit over 1.25 s (a chunk boundary inside, a partial last chunk)."""
+    import cpgsim.harness.fused as fused
+    from cpgsim.experiments.runner import build_scenario
+    from cpgsim.harness.simulate import Simulator
+
+    runs, used, stepped = {}, {}, {}
+    original = fused.fused_runner
+    for path, native, allow in (("fused", True, True), ("native", True, False), ("python", False, False)):
+        def runner(*args, path=path, allow=allow):
+            r = original(*args) if allow else None
+            used[path] = r is not None
+            return r
+
+        monkeypatch.setattr(fused, "fused_runner", runner)
+        setup = build_scenario("step", {"robot.engine": engine})
+        robot = setup.graph.blocks[setup.robot]
+        robot.native = native
+        stepped[path] = False
+
+        def terminate(robot=robot, path=path, original=robot.terminate):  # did a C step run? (dropped here)
+            stepped[path] |= robot.native_step is not None
+            original()
+        robot.terminate = terminate
+        sim = Simulator(setup.graph, dt=DT, record=setup.record, step_thread=False).prepare()
+        runs[path] = sim.run(1.25)
+    if not used["fused"]:
+        pytest.skip(f"engine {engine!r}: no fused loop here (no C compiler or no C step)")
+    assert used == {"fused": True, "native": False, "python": False}
+    assert stepped == {"fused": True, "native": True, "python": False}
+    ref = runs["python"]
+    assert len(ref.time) == 1251
+    for path in ("fused", "native"):
+        assert runs[path].columns == ref.columns
+        np.testing.assert_array_equal(runs[path].data, ref.data, err_msg=path)
+    assert np.abs(ref["robot.toe_force"]).max() > 1.0  # walking: forces recorded

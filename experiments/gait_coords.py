@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import dataclasses
 
-import dartpy as dart
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from cpgsim.harness.compile import CompiledModel
 from cpgsim.harness.simulate import Snapshot
@@ -40,17 +40,19 @@ LEGS = ("L1", "L2", "L3", "R1", "R2", "R3")
 
 
 def body_pose(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(translation, roll pitch yaw)`` of the body from the free joint's generalized positions."""
-    tf = dart.dynamics.FreeJoint.convertToTransform(positions[:6])
-    return np.array(tf.translation()), rpy_from_rotation(np.array(tf.rotation()))
+    """``(translation, roll pitch yaw)`` of the body from the free joint's generalized positions: DART's
+    ``FreeJoint`` keeps ``(rotation vector, translation)``, the rotation as the exponential coordinates of
+    the body's orientation (``FreeJoint::convertToTransform``; checked against it in the tests)."""
+    rotation = Rotation.from_rotvec(np.asarray(positions[:3], dtype=float)).as_matrix()
+    return np.array(positions[3:6], dtype=float), rpy_from_rotation(rotation)
 
 
 def with_body_pose(positions: np.ndarray, translation: np.ndarray, rpy: np.ndarray) -> np.ndarray:
-    tf = dart.math.Isometry3()
-    tf.set_translation(np.asarray(translation, dtype=float))
-    tf.set_rotation(rotation_from_rpy(*rpy))
-    out = positions.copy()
-    out[:6] = dart.dynamics.FreeJoint.convertToPositions(tf)
+    """``positions`` with the free joint's six set to the pose ``translation``, ``rpy`` (the inverse of
+    :func:`body_pose`, as DART's ``FreeJoint::convertToPositions``)."""
+    out = np.array(positions, dtype=float)
+    out[:3] = Rotation.from_matrix(rotation_from_rpy(*rpy)).as_rotvec()
+    out[3:6] = np.asarray(translation, dtype=float)
     return out
 
 

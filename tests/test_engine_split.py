@@ -13,14 +13,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 NEUTRAL = ["robots/__init__.py", "robots/description.py", "robots/ports.py", "robots/plant_base.py",
            "robots/registry.py", "robots/terrain.py", "robots/readout.py", "robots/disturbance.py"]
-# the experiments that need DART's own kinematics (foot positions from the skeleton); every other
-# experiments module works from the description alone
-EXPERIMENTS_WITH_DART = {"experiments/gait_coords.py", "experiments/gait_verify.py"}
 
 
 def _experiments() -> list[str]:
-    return sorted(str(p.relative_to(ROOT)) for p in (ROOT / "experiments").rglob("*.py")
-                  if str(p.relative_to(ROOT)) not in EXPERIMENTS_WITH_DART)
+    """Every experiments module: all work from the description alone (the gait coordinates read DART's free
+    joint with scipy's rotation vectors, checked against dartpy in tests/test_gait_verify.py)."""
+    return sorted(str(p.relative_to(ROOT)) for p in (ROOT / "experiments").rglob("*.py"))
 
 
 def imported_modules(source: str) -> set[str]:
@@ -74,7 +72,7 @@ def test_dart_modules_import_no_mujoco(path):
 
 
 def test_the_lists_name_files_that_exist():
-    for path in NEUTRAL + sorted(EXPERIMENTS_WITH_DART):
+    for path in NEUTRAL:
         assert (ROOT / path).is_file(), path
     assert len(list((ROOT / "robots/mujoco").glob("*.py"))) >= 4
     assert len(list((ROOT / "robots/dart").glob("*.py"))) >= 4

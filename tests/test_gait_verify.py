@@ -191,6 +191,26 @@ def test_hexapod_coordinates_drop_heading_and_position(flat_loop):
     assert "controller.L1.network.z1.x" not in coords.names
 
 
+def test_the_body_pose_reads_darts_free_joint_as_dart_does():
+    """The free joint's (rotation vector, translation) against dartpy's own FreeJoint conversions, both ways,
+    on random poses (rotations up to 3.4 rad, near the rotation vector's branch at pi)."""
+    dart = pytest.importorskip("dartpy")
+    from cpgsim.experiments.gait_coords import body_pose, with_body_pose
+    from cpgsim.robots.description import rotation_from_rpy
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        q = np.r_[rng.normal(size=3) * rng.uniform(0, 3.4) / np.sqrt(3), rng.uniform(-1, 1, 3), rng.normal(size=4)]
+        tf = dart.dynamics.FreeJoint.convertToTransform(q[:6])
+        trans, rpy = body_pose(q)
+        np.testing.assert_allclose(trans, np.array(tf.translation()), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(rotation_from_rpy(*rpy), np.array(tf.rotation()), rtol=0, atol=1e-12)
+        back = with_body_pose(q, trans, rpy)
+        expected = dart.dynamics.FreeJoint.convertToPositions(tf)
+        np.testing.assert_allclose(back[:6], expected, rtol=0, atol=1e-9)
+        assert np.array_equal(back[6:], q[6:])  # the joint angles are left alone
+
+
 def test_verify_gait_bad_input_is_one_line(tmp_path, capsys):
     assert main(["verify", "gait", "-o", str(tmp_path / "a")]) == 2
     assert "needs a SCENARIO" in capsys.readouterr().err

@@ -27,9 +27,10 @@ def _param(type_: str = "Float64", shape: tuple[int, ...] = (2,)) -> ValueParamS
 
 @pytest.mark.parametrize("shape, value, expected", [
     ((2,), [1, 2], (1.0, 2.0)), ((), 3, (3.0,)), ((2, 2), [1, 2, 3, 4], (1.0, 2.0, 3.0, 4.0)),
-    ((2, 2), [[1, 2], [3, 4]], (1.0, 2.0, 3.0, 4.0))])
+    ((2, 2), [[1, 2], [3, 4]], (1.0, 2.0, 3.0, 4.0)), ((2,), [1.5, -2.25], (1.5, -2.25))])
 def test_a_real_parameter_takes_its_size_row_major(shape, value, expected):
-    assert _param(shape=shape).check(value, "fmu") == expected
+    got = _param(shape=shape).check(value, "fmu")
+    assert got == expected and all(type(v) is float for v in got)  # reals stay reals, fractions kept
 
 
 @pytest.mark.parametrize("shape, value, phrase", [
@@ -47,8 +48,9 @@ def test_a_real_parameter_refuses_other_shapes_and_non_finite_values(shape, valu
 def test_an_integer_parameter_is_exact_and_whole():
     big = 2 ** 62 + 1  # no float64 holds it
     assert _param("Int64", ()).check(big, "fmu") == (big,)
-    with pytest.raises(ParameterError, match="values must be integers"):
-        _param("Int32", ()).check(1.5, "fmu")
+    for fraction in (1.5, [1, 2.4], [-0.4, 3]):  # above and below the nearest integer
+        with pytest.raises(ParameterError, match="values must be integers"):
+            _param("Int32", () if fraction == 1.5 else (2,)).check(fraction, "fmu")
 
 
 def test_a_string_parameter_takes_only_a_string():
@@ -184,6 +186,16 @@ def test_a_clean_document_in_each_encoding_xml_requires_is_accepted(encoding, de
     and a declared single-byte encoding: the same clean document passes the checks."""
     body = BODY.format('<ModelVariables>' + '<V n="\u00e9"/>' * 3 + '</ModelVariables>')
     _check_xml(encoded(DECL.format(declared) + "<!--" + "c" * 2000 + "-->" + body, encoding), Path("m.fmu"))
+
+
+def test_an_encoding_declared_within_the_first_kibibyte_is_read():
+    """The declaration is looked for in the document's first 1024 bytes: one whose closing quote is the
+    1024th byte still names the encoding (a single-byte one, so the accented name decodes)."""
+    head = '<?xml version="1.0"'
+    tail = 'encoding="ISO-8859-1"'
+    decl = head + " " * (1024 - len(head) - len(tail)) + tail
+    assert len(decl) == 1024
+    _check_xml((decl + "?>" + BODY.format('<V n="\u00e9"/>')).encode("latin-1"), Path("m.fmu"))
 
 
 def test_a_long_xml_declaration_still_names_the_encoding():

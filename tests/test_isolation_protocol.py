@@ -75,10 +75,10 @@ def wait_until(predicate, seconds: float = 10.0) -> bool:
     return predicate()
 
 
-def odd_sleep(folder: Path) -> str:
+def odd_sleep(folder: Path, extra: str = "") -> str:
     """``sleep`` under a name that holds ``)`` and stat-like fields: ``/proc/PID/stat`` shows a process's
     name in parentheses, so only a parse from the *last* ``)`` reads its state and parent right."""
-    link = folder / "a) T 1 (b"
+    link = folder / f"a) T 1 (b{extra}"
     if not link.exists():
         link.symlink_to(SLEEP)
     return str(link)
@@ -273,6 +273,17 @@ def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fm
     assert err.count(f"cpgsim: warning: FMU spam.fmu (block 'talker') printed {printed} bytes; the "
                      f"{printed - 1000} bytes after the first 1000 were not shown") == 1
     assert err.startswith("x" * 1000) and len(err) < 1000 + 300
+    assert_gone(rt)
+
+
+def test_waiting_for_a_slow_call_does_not_spin(fmus, tmp_path):
+    """The parent waits for a slow answer in the kernel (polls that back off to 5 a second), not in a busy
+    loop: over a one-second wait it uses a small fraction of a second of CPU."""
+    rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=1.0)
+    cpu = time.process_time()
+    with pytest.raises(FmuTimeoutError):
+        rt.do_step(0.05, 0.05)
+    assert time.process_time() - cpu < 0.25, "the wait for the child's answer kept a core busy"
     assert_gone(rt)
 
 
@@ -540,8 +551,9 @@ def test_signal_names():
     assert _signal_name(3) == "exit status 3"
 
 
-def test_stopped_reads_the_state_after_the_name(tmp_path):
-    proc = subprocess.Popen([odd_sleep(tmp_path), "30"])
+@pytest.mark.parametrize("extra", ["", "x", "xy", "xyz"])  # the state's offset in every residue modulo 4
+def test_stopped_reads_the_state_after_the_name(tmp_path, extra):
+    proc = subprocess.Popen([odd_sleep(tmp_path, extra), "30"])
     try:
         assert wait_until(lambda: Path(f"/proc/{proc.pid}/stat").read_bytes().rsplit(b")", 1)[1].split()[0]
                           == b"S")

@@ -20,9 +20,10 @@ GOOD = [("modelDescription.xml", b"<fmiModelDescription/>"), ("binaries/linux64/
 
 
 def _bad(kind: str) -> zipfile.ZipInfo | tuple[str, bytes]:
-    if kind in ("dotdot", "absolute", "backslash", "drive"):  # (a NUL in a name: Python's zipfile cuts it there)
+    # (a NUL in a name: Python's zipfile cuts it there)
+    if kind in ("dotdot", "absolute", "backslash", "drive", "bare drive"):
         name = {"dotdot": "resources/../../escape.txt", "absolute": "/etc/escape", "backslash": "resources\\x.txt",
-                "drive": "C:/escape.txt"}[kind]
+                "drive": "C:/escape.txt", "bare drive": "C:"}[kind]
         return name, b"x"
     info = zipfile.ZipInfo("resources/special")
     if kind == "symlink":
@@ -32,7 +33,7 @@ def _bad(kind: str) -> zipfile.ZipInfo | tuple[str, bytes]:
     return info
 
 
-KINDS = ["dotdot", "absolute", "backslash", "drive", "symlink", "fifo"]
+KINDS = ["dotdot", "absolute", "backslash", "drive", "bare drive", "symlink", "fifo"]
 
 
 def _archive(path: Path, members: list) -> Path:
@@ -76,6 +77,28 @@ def test_a_duplicate_with_the_same_bytes_is_taken_once(tmp_path):
     path = _archive(tmp_path / "m.fmu", [*GOOD, GOOD[2]])
     with zipfile.ZipFile(path) as zf:
         assert [i.filename for i in archive.check_archive(zf, path)] == [n for n, _ in GOOD]
+
+
+@pytest.mark.filterwarnings("ignore:Duplicate name")
+def test_a_large_duplicate_with_the_same_bytes_is_taken_once(tmp_path):
+    """Two copies of 2.5 MiB (compared a read at a time) are one member."""
+    import random
+
+    big = ("resources/big.bin", random.Random(3).randbytes((5 << 20) // 2))
+    path = _archive(tmp_path / "m.fmu", [*GOOD, big, big])
+    with zipfile.ZipFile(path) as zf:
+        assert [i.filename for i in archive.check_archive(zf, path)] == [n for n, _ in GOOD] + [big[0]]
+
+
+def test_names_with_dots_and_punctuation_are_ordinary_members(tmp_path):
+    """Only a path part that is exactly '..' escapes; '-x', '!y', 'a..b' and '..hidden' are names."""
+    names = ["resources/-x.txt", "resources/!y", "resources/a..b", "resources/..hidden", "resources/#1"]
+    path = _archive(tmp_path / "m.fmu", GOOD + [(n, n.encode()) for n in names])
+    dest = archive.safe_extract(path, tmp_path)
+    try:
+        assert [(dest / n).read_bytes() for n in names] == [n.encode() for n in names]
+    finally:
+        archive.remove_tree(dest)
 
 
 @pytest.mark.parametrize("where", [0, 1, 3])
@@ -298,13 +321,14 @@ def _crc_twin(data: bytes) -> bytes:
 
 
 @pytest.mark.filterwarnings("ignore:Duplicate name")  # zipfile warns when the test writes the twin
+@pytest.mark.parametrize("first", [0x00, 0xFF])  # the copies' first difference: the later copy's byte above, below
 @pytest.mark.parametrize("twin", ["same size and CRC-32", "same size"])
-def test_a_repeated_name_with_other_bytes_is_refused_even_with_the_same_size_and_crc(tmp_path, twin):
+def test_a_repeated_name_with_other_bytes_is_refused_even_with_the_same_size_and_crc(tmp_path, twin, first):
     """Copies of one name are taken as one only when their bytes are equal: equal sizes and a forged equal
     CRC-32 (four bytes solve it) do not make them the same file."""
     import zlib
 
-    data = bytes(range(200))
+    data = bytes([first]) + bytes(range(1, 200))
     other = _crc_twin(data) if twin.endswith("CRC-32") else bytes(reversed(data))
     assert other != data and len(other) == len(data)
     assert (zlib.crc32(other) == zlib.crc32(data)) == twin.endswith("CRC-32")

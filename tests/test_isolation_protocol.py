@@ -541,6 +541,23 @@ def test_clock_ticks_are_handed_out_once(fmus, tmp_path):
 
 
 # -- helpers of the runner --------------------------------------------------------------------------
+def test_the_child_imports_the_same_copy_of_cpgsim(tmp_path):
+    """A plain folder named cpgsim (a regular install, or one on sys.path by hand) puts its parent first on
+    the child's PYTHONPATH, before what was there; any other folder (an editable install's repository root)
+    leaves PYTHONPATH alone. Bytecode stays off unless the caller set it."""
+    sep = os.pathsep
+    env = isolation.child_environment(tmp_path / "site" / "cpgsim", {"PYTHONPATH": f"/a{sep}{sep}/b", "X": "1"})
+    assert env["PYTHONPATH"] == sep.join([str(tmp_path / "site"), "/a", "/b"]) and env["X"] == "1"
+    assert env["PYTHONDONTWRITEBYTECODE"] == "1"
+    assert isolation.child_environment(tmp_path / "site" / "cpgsim", {})["PYTHONPATH"] == str(tmp_path / "site")
+    env = isolation.child_environment(tmp_path / "checkout", {"PYTHONPATH": "/a", "PYTHONDONTWRITEBYTECODE": ""})
+    assert env == {"PYTHONPATH": "/a", "PYTHONDONTWRITEBYTECODE": ""}
+
+
+def test_the_output_limit_is_the_documented_mebibyte():
+    assert isolation.OUTPUT_LIMIT == 1 << 20  # docs/reliability.md: "capped at 1 MiB (OUTPUT_LIMIT)"
+
+
 def test_signal_names():
     assert _signal_name(None) == "no exit status"
     assert _signal_name(-signal.SIGSEGV) == "signal SIGSEGV"

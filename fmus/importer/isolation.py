@@ -58,6 +58,20 @@ STARTUP_TIMEOUT = 60.0
 """Seconds the child's interpreter may take to start and import numpy and fmpy (a loaded machine)."""
 
 
+def child_environment(package: Path, environ: Mapping[str, str]) -> dict[str, str]:
+    """The isolated child's environment: ``environ`` where the folder holding ``package`` (the ``cpgsim``
+    package's folder) comes first on ``PYTHONPATH`` when the package is a plain folder named ``cpgsim`` (a
+    regular install, or one put on ``sys.path`` by hand: the child must import the same copy), and bytecode
+    is not written unless the caller says otherwise. An editable install (the repository root, another
+    name) is found by the child's own interpreter through its site-packages."""
+    env = dict(environ)
+    if package.name == "cpgsim":
+        paths = [str(package.parent)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+        env["PYTHONPATH"] = os.pathsep.join(paths)
+    env.setdefault("PYTHONDONTWRITEBYTECODE", "1")
+    return env
+
+
 def _signal_name(returncode: int | None) -> str:
     if returncode is None:
         return "no exit status"
@@ -93,13 +107,7 @@ class IsolatedRuntime:
         # the lifeline: the child's watchdog thread reads it; it ends (EOF) when this process closes it or
         # dies, however it dies (SIGKILL included), and the child then ends its whole process tree
         life_read, self._lifeline = os.pipe()
-        env = dict(os.environ)
-        package = Path(__file__).resolve().parents[2]  # the cpgsim package (the repository root when editable)
-        if package.name == "cpgsim":  # a regular install: the folder holding it is an import root for the child
-            paths = [str(package.parent)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
-            env["PYTHONPATH"] = os.pathsep.join(paths)
-        # an editable install is found by the child's own interpreter (sys.executable), through its site-packages
-        env.setdefault("PYTHONDONTWRITEBYTECODE", "1")
+        env = child_environment(Path(__file__).resolve().parents[2], os.environ)
         try:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "cpgsim.fmus.importer.isolation", str(child.fileno()), str(life_read)],
@@ -321,7 +329,7 @@ def _become_subreaper() -> None:
     try:
         import ctypes
 
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1)  # prctl is variadic
     except (OSError, AttributeError):
         pass
 
@@ -453,8 +461,7 @@ def _serve(fd: int) -> None:
     conn.close()
 
 
-if __name__ == "__main__":
-    os.dup2(2, 1)  # anything the FMU prints goes to stderr, never into the protocol
+if __name__ == "__main__":  # stdout and stderr are both the output pipe (Popen); the protocol is the socket
     _become_subreaper()
     threading.Thread(target=_watch_lifeline, args=(int(sys.argv[2]),), daemon=True).start()
     try:

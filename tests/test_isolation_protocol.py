@@ -419,6 +419,7 @@ def test_the_child_loop_answers_each_request_and_reports_each_failure_by_class(m
         ("outputs", ({"load": np.array([1.0])},)),
         ("outputs", ({"slow": np.array([1.0])},)),
         ("frobnicate", ()),
+        ("zap", ("clk", [1.0])),  # unknown requests on either side of the known names
         ("terminate", ()),
     ])
     rt = StandIn.made[0]
@@ -437,7 +438,8 @@ def test_the_child_loop_answers_each_request_and_reports_each_failure_by_class(m
     assert replies[9] == ("err", ("load", "cannot load this"))
     assert replies[10] == ("err", ("FmuTimeoutError", "too slow"))
     assert replies[11] == ("err", ("FmuRuntimeError", "unknown request 'frobnicate'"))
-    assert replies[12] == ("ok", None)
+    assert replies[12] == ("err", ("FmuRuntimeError", "unknown request 'zap'"))
+    assert replies[13] == ("ok", None)
     assert rt.log == [
         ("setup", 0.0, {"k": 2.0}, {"u": 1.0}),
         ("set_inputs", {"u": [3.0]}),

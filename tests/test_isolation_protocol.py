@@ -278,12 +278,13 @@ def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fm
 
 def test_waiting_for_a_slow_call_does_not_spin(fmus, tmp_path):
     """The parent waits for a slow answer in the kernel (polls that back off to 5 a second), not in a busy
-    loop: over a one-second wait it uses a small fraction of a second of CPU."""
+    loop nor in millisecond polls: over a one-second wait the waiting thread uses under 40 ms of CPU (measured
+    here: 4 ms; polling every millisecond, 90 ms; a busy loop, the whole second)."""
     rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=1.0)
-    cpu = time.process_time()
+    cpu = time.thread_time()  # this thread only: the output forwarder's thread is not counted
     with pytest.raises(FmuTimeoutError):
         rt.do_step(0.05, 0.05)
-    assert time.process_time() - cpu < 0.25, "the wait for the child's answer kept a core busy"
+    assert time.thread_time() - cpu < 0.04, "the wait for the child's answer kept a core busy"
     assert_gone(rt)
 
 
@@ -732,11 +733,12 @@ def test_output_up_to_the_limit_is_shown_whole(monkeypatch):
 
 
 def test_output_past_the_limit_is_cut_and_counted_once(monkeypatch):
-    data = (b"0123456789abcdef" * ((OUTPUT_LIMIT + 12_345) // 16 + 1))[:OUTPUT_LIMIT + 12_345]
+    extra = 212_345  # several reads of the pipe after the limit is reached
+    data = (b"0123456789abcdef" * ((OUTPUT_LIMIT + extra) // 16 + 1))[:OUTPUT_LIMIT + extra]
     fw, err = forward(monkeypatch, data)
     assert err.buffer.getvalue() == data[:OUTPUT_LIMIT]
-    assert (fw.shown, fw.dropped) == (OUTPUT_LIMIT, 12_345)
-    warning = (f"cpgsim: warning: FMU x.fmu (block 'b') printed {OUTPUT_LIMIT + 12_345} bytes; the 12345 bytes "
+    assert (fw.shown, fw.dropped) == (OUTPUT_LIMIT, extra)
+    warning = (f"cpgsim: warning: FMU x.fmu (block 'b') printed {OUTPUT_LIMIT + extra} bytes; the {extra} bytes "
                f"after the first {OUTPUT_LIMIT} were not shown")
     assert "".join(err.text) == warning + "\n"
     fw.finish()

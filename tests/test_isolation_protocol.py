@@ -778,3 +778,22 @@ def test_a_call_after_a_step_is_timed_at_the_steps_end(fmus, tmp_path):
         rt.conn = rt._real_conn
         rt.terminate()
     assert_gone(rt)
+
+
+def test_an_input_is_taken_at_set_time_whatever_the_caller_does_with_its_buffer(fmus, tmp_path):
+    """The master reuses its input buffers: an array handed to ``set_inputs`` and changed before the step must
+    reach the FMU with the value it had when it was set (a list is taken too)."""
+    rt = runtime(fmus["good"], tmp_path)
+    try:
+        rt.setup(0.0)
+        rt.set_inputs({"u": [0.5]})
+        rt.do_step(0.0, 0.25)
+        assert rt.get_outputs()["y"].tolist() == [0.125]  # k u h = 1 x 0.5 x 0.25
+        buffer = np.array([1.0])
+        rt.set_inputs({"u": buffer})
+        buffer[0] = 99.0  # after set_inputs, before the step
+        rt.do_step(0.25, 0.25)
+        assert rt.get_outputs()["y"].tolist() == [0.125 + 0.25]
+    finally:
+        rt.terminate()
+    assert_gone(rt)

@@ -797,3 +797,44 @@ def test_an_input_is_taken_at_set_time_whatever_the_caller_does_with_its_buffer(
     finally:
         rt.terminate()
     assert_gone(rt)
+
+
+FORK_THEN_CRASH = r"""
+#elif defined(H_FORKSEGV)
+    pid_t pid = fork();
+    if (pid == 0) { sleep(600); _exit(0); }  /* inherits the child's socket and keeps it open */
+    FILE *f = fopen(getenv("CPGSIM_TEST_PIDFILE"), "w");
+    if (f) { fprintf(f, "%d\n", (int)pid); fclose(f); }
+    raise(SIGSEGV);
+#elif defined(H_CLOSEFDS)"""
+
+
+def test_a_crash_is_seen_while_a_process_the_fmu_started_holds_the_socket(tmp_path, monkeypatch):
+    """The FMU forks (the new process inherits the child's end of the socket, so the parent sees no end of
+    file) and then crashes: the parent still reports the crash as such, not as a timeout, and the forked
+    process ends with the run."""
+    import shutil
+
+    from test_fuzz_fmus import C_SOURCE
+
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    src = tmp_path / "forksegv.c"
+    src.write_text("#include <stdio.h>\n" + C_SOURCE.replace("#elif defined(H_CLOSEFDS)", FORK_THEN_CRASH, 1))
+    lib = tmp_path / "forksegv.so"
+    subprocess.run([cc, "-shared", "-fPIC", "-O1", "-DH_FORKSEGV", "-DAT_DOSTEP", str(src), "-o", str(lib)],
+                   check=True, capture_output=True)
+    pidfile = tmp_path / "pid"
+    monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
+    rt = at_hostile_time(c_fmu(tmp_path / "forksegv.fmu", library=lib), tmp_path, timeout=30)
+    start = time.monotonic()
+    with pytest.raises(FmuCrashedError, match=r"crashed \(signal SIGSEGV\) during step at t=0.05 s"):
+        rt.do_step(0.05, 0.05)
+    assert time.monotonic() - start < 20, "the crash was found only by the watchdog"
+    forked = int(pidfile.read_text())
+    try:
+        assert wait_until(lambda: not alive(forked), 5), "the process the FMU forked outlived the run"
+    finally:
+        os.kill(forked, signal.SIGKILL) if alive(forked) else None
+    assert_gone(rt)

@@ -99,10 +99,11 @@ def test_wheel_installs_only_cpgsim(wheel):
     assert "cpgsim = cpgsim.cli.main:main" in entry_points
 
 
-@pytest.mark.slow
-def test_wheel_beside_a_package_named_harness(wheel, tmp_path):
-    """A fresh venv gets the wheel and someone else's ``harness``; both import, cpgsim runs a simulation."""
-    env_dir = tmp_path / "venv"
+def install_wheel(wheel: Path, env_dir: Path) -> Path:
+    """A fresh venv at ``env_dir`` (no pip, no system site-packages) with only ``wheel`` installed, offline;
+    the test environment's dependencies (numpy, casadi, ...) as plain paths of a ``.pth`` file, whose own
+    ``.pth`` files are not run, so this project's editable install there stays invisible. Returns the venv's
+    site-packages."""
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True, timeout=120)
     py = env_dir / "bin" / "python"
     proc = subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "--no-index",
@@ -110,12 +111,19 @@ def test_wheel_beside_a_package_named_harness(wheel, tmp_path):
     assert proc.returncode == 0, proc.stderr
     site = Path(subprocess.check_output([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                                         text=True).strip())
-    (site / "harness").mkdir()
-    (site / "harness" / "__init__.py").write_text("OWNER = 'someone else'\n")
-    # the test environment's dependencies (numpy, casadi, ...) as a plain path: its .pth files are not run,
-    # so this project's own editable install there stays invisible
     deps = [p for p in sys.path if p.endswith(("site-packages", "dist-packages"))]
     (site / "deps.pth").write_text("".join(p + "\n" for p in deps))
+    return site
+
+
+@pytest.mark.slow
+def test_wheel_beside_a_package_named_harness(wheel, tmp_path):
+    """A fresh venv gets the wheel and someone else's ``harness``; both import, cpgsim runs a simulation."""
+    env_dir = tmp_path / "venv"
+    site = install_wheel(wheel, env_dir)
+    py = env_dir / "bin" / "python"
+    (site / "harness").mkdir()
+    (site / "harness" / "__init__.py").write_text("OWNER = 'someone else'\n")
     code = ("import harness, cpgsim\n"
             "from cpgsim.components.networks import leader_follower_network\n"
             "assert harness.OWNER == 'someone else'\n"
@@ -135,15 +143,7 @@ def wheel_venv(wheel, tmp_path_factory) -> Path:
     dependencies (numpy, casadi, mujoco, dartpy, ...) as plain paths of a ``.pth`` file, whose own ``.pth``
     files are not run, so this checkout's editable install there stays invisible. Offline."""
     env_dir = tmp_path_factory.mktemp("wheel_venv") / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True, timeout=120)
-    py = env_dir / "bin" / "python"
-    proc = subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "--no-deps", "--no-index",
-                           "-q", str(wheel)], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    site = Path(subprocess.check_output([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                                        text=True).strip())
-    deps = [p for p in sys.path if p.endswith(("site-packages", "dist-packages"))]
-    (site / "deps.pth").write_text("".join(p + "\n" for p in deps))
+    install_wheel(wheel, env_dir)
     return env_dir
 
 

@@ -211,15 +211,22 @@ def test_a_child_that_dies_in_a_step_is_one_error_naming_fmu_block_call_time_and
     assert_gone(rt)
 
 
-def test_a_hanging_step_is_killed_at_the_timeout(fmus, tmp_path):
-    rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=0.4)
+def test_a_hanging_step_is_killed_at_the_timeout_without_spinning(fmus, tmp_path):
+    """A step that hangs ends at the timeout in one line, the child killed at once (the lifeline), and the
+    parent waits for the answer in the kernel (polls that back off to 5 a second), not in a busy loop nor in
+    millisecond polls: over the one-second wait the waiting thread uses under 40 ms of CPU (measured here:
+    4 ms; polling every millisecond, 90 ms; a busy loop, the whole second)."""
+    rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=1.0)
     start = time.monotonic()
+    cpu = time.thread_time()  # this thread only: the output forwarder's thread is not counted
     with pytest.raises(FmuTimeoutError) as err:
         rt.do_step(0.05, 0.05)
+    spent = time.thread_time() - cpu
     waited = time.monotonic() - start
     assert str(err.value) == (f"FMU sleep.fmu (block 'plant', isolated process pid {rt.proc.pid}): step at "
-                              f"t=0.05 s took longer than 0.4 s (--fmu-timeout); the process was killed")
-    assert 0.4 <= waited < 5.0  # the lifeline ends the child at once, far before the FMU's 600 s sleep
+                              f"t=0.05 s took longer than 1 s (--fmu-timeout); the process was killed")
+    assert 1.0 <= waited < 5.6  # the lifeline ends the child at once, far before the FMU's 600 s sleep
+    assert spent < 0.04, "the wait for the child's answer kept a core busy"
     assert_gone(rt)
 
 
@@ -273,18 +280,6 @@ def test_an_fmu_printing_past_the_limit_is_cut_and_reported_when_the_run_ends(fm
     assert err.count(f"cpgsim: warning: FMU spam.fmu (block 'talker') printed {printed} bytes; the "
                      f"{printed - 1000} bytes after the first 1000 were not shown") == 1
     assert err.startswith("x" * 1000) and len(err) < 1000 + 300
-    assert_gone(rt)
-
-
-def test_waiting_for_a_slow_call_does_not_spin(fmus, tmp_path):
-    """The parent waits for a slow answer in the kernel (polls that back off to 5 a second), not in a busy
-    loop nor in millisecond polls: over a one-second wait the waiting thread uses under 40 ms of CPU (measured
-    here: 4 ms; polling every millisecond, 90 ms; a busy loop, the whole second)."""
-    rt = at_hostile_time(fmus["SLEEP"], tmp_path, timeout=1.0)
-    cpu = time.thread_time()  # this thread only: the output forwarder's thread is not counted
-    with pytest.raises(FmuTimeoutError):
-        rt.do_step(0.05, 0.05)
-    assert time.thread_time() - cpu < 0.04, "the wait for the child's answer kept a core busy"
     assert_gone(rt)
 
 

@@ -23,7 +23,9 @@ from __future__ import annotations
 import ast
 import functools
 import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 PACKAGE = "cpgsim"
 
@@ -54,20 +56,25 @@ def _module_name(path: Path) -> str | None:
     return ".".join([PACKAGE, *parts])
 
 
+def _per_file_version(read: Callable[..., frozenset]) -> Callable[..., frozenset]:
+    """``read(path, *args)`` done once per process and version of the file at ``path``: the result is kept
+    under the file's size and modification time, so the closures of many block modules (one per compile)
+    share the package's parses; a file that cannot be read gives nothing."""
+    cached = functools.lru_cache(maxsize=4096)(lambda path, version, *args: read(path, *args))
+
+    @functools.wraps(read)
+    def per_version(path: Path, *args: Any) -> frozenset:
+        try:
+            st = path.stat()
+        except OSError:
+            return frozenset()
+        return cached(path, (st.st_size, st.st_mtime_ns), *args)
+    return per_version
+
+
+@_per_file_version
 def _imported_names(path: Path, own: str | None) -> frozenset[str]:
-    """Dotted module names (and ``module.attribute`` candidates) imported anywhere in ``path``.
-
-    Each file is parsed once per process and version: the result is kept under the file's size and
-    modification time, so the closures of many block modules (one per compile) share the package's parses."""
-    try:
-        st = path.stat()
-    except OSError:
-        return frozenset()
-    return _parsed_imports(path, own, st.st_size, st.st_mtime_ns)
-
-
-@functools.lru_cache(maxsize=4096)
-def _parsed_imports(path: Path, own: str | None, size: int, mtime_ns: int) -> frozenset[str]:
+    """Dotted module names (and ``module.attribute`` candidates) imported anywhere in ``path``."""
     try:
         tree = ast.parse(path.read_bytes(), filename=str(path))
     except (OSError, SyntaxError, ValueError):
@@ -93,20 +100,10 @@ _C_NAME = re.compile(rb"""["']([^"'\n]{1,255}\.[ch])["']""")
 _INCLUDE = re.compile(r'^\s*#\s*include\s*"([^"]+)"', re.MULTILINE)
 
 
+@_per_file_version
 def c_files(path: Path) -> frozenset[Path]:
     """The C files the module at ``path`` names (string literals naming an existing ``.c``/``.h`` file relative
-    to its folder), with the files they ``#include "..."`` (relative to the including file), transitively.
-
-    Kept per file version (size, modification time) like :func:`_imported_names`."""
-    try:
-        st = path.stat()
-    except OSError:
-        return frozenset()
-    return _c_files(path, st.st_size, st.st_mtime_ns)
-
-
-@functools.lru_cache(maxsize=4096)
-def _c_files(path: Path, size: int, mtime_ns: int) -> frozenset[Path]:
+    to its folder), with the files they ``#include "..."`` (relative to the including file), transitively."""
     try:
         data = path.read_bytes()
     except OSError:

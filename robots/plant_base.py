@@ -3,14 +3,18 @@
 :class:`HexapodPlant` holds the engine-neutral part of the plant block (Yu 2019, Sec. 5: the servos track
 the joint targets of the CPG's linear converter; Fukuhara 2022 reads the vertical toe forces): the
 constructor arguments every engine takes, the parameters and ports (:mod:`cpgsim.robots.ports`), taking the
-joint targets, the world steps per macro step, the compiled readout bound on :class:`PlantBuffers`, the
-outputs, the fall test, pushes and amputated legs, and the fused-loop request's indices. An engine's plant
-supplies the rest (the engine contract, docs/architecture.md):
+joint targets, the macro step (world steps per macro step, the toe forces averaged and the contact flags
+or-ed over them, the pushes each step covers, the settle phase), the servo law, the compiled readout bound on
+:class:`PlantBuffers`, the outputs, the fall test, pushes and amputated legs, and the fused-loop request's
+indices. An engine's plant supplies the rest (the engine contract, docs/architecture.md):
 
-- ``_build(t0)``: build the engine's model of the robot on the terrain, place it, set the servos; fill
-  the buffers' ``pos``/``vel`` layout (``POS_SIZE``; ``READOUT_ROOT`` names the root joint's coordinates);
-- ``_step(t, dt, n)``: ``n`` engine steps with the targets held, pushes applied, contact readings summed
-  (averaged over the sub-steps) into the buffers;
+- ``setup(t0)``: build the engine's model of the robot on the terrain, place it, set the
+  servos; fill the buffers' ``pos``/``vel`` layout (``POS_SIZE``; ``READOUT_ROOT`` names the root joint's
+  coordinates); then :meth:`HexapodPlant._settle` and the first outputs;
+- ``_apply_servo(q_target, velocity)``: the servo law's targets onto the engine's actuators;
+- ``_world_step(pushes)``: one engine step with the servo inputs held and the pushes on the body;
+- ``read_contacts()``: the last engine step's contacts into the buffers;
+- ``_native_steps(n)`` (optional): ``n`` engine steps through the engine's C step;
 - ``_read_state()``: the engine's generalized positions and velocities into the buffers;
 - ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
 - ``snapshot``/``restore`` (:class:`~cpgsim.harness.contracts.ResumableBlock`) and ``fused_loop``
@@ -85,6 +89,7 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
 
     time_step: float
     buffers: PlantBuffers
+    native_step: object | None
 
     def __init__(self, name: str, geometry: RobotGeometry, terrain: Terrain | None, q0: Sequence[float] | None,
                  body_height: float | None, sense_shank: bool, settle: float,
@@ -148,6 +153,87 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
                 raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
             self._steps_per[dt] = n
         return n
+
+    # -- the macro step (the same in every engine) ---------------------------------------------------
+    def do_step(self, t: float, dt: float) -> None:
+        """Advance ``[t, t + dt]``: ``dt / time_step`` engine steps with the servo targets held (the engine's C
+        step when it has one and no push is set, else :meth:`_python_steps`), then the outputs."""
+        self._check_step(t)
+        n = self.steps_for(dt)
+        self._update_servo(dt)
+        if self.native_step is None or self.pushes or not self._native_steps(n):
+            self._python_steps(t, n)
+            self.update_outputs()
+        self._t = t + dt
+        self._n_steps += n
+
+    def _python_steps(self, t: float, n: int) -> None:
+        """``n`` engine steps from ``t`` in Python, each with the pushes it covers; the toe forces are the mean
+        over the steps and the contact flags are set when any step saw the contact (what a macro step longer
+        than the engine step reports)."""
+        if n == 1 and not self.pushes:
+            self._world_step(())
+            self.read_contacts()
+            return
+        h = self.time_step
+        total = np.zeros(18)
+        body = False
+        link = np.zeros(6, dtype=bool)
+        for i in range(n):
+            self._world_step(self.pushes_at(t + i * h))
+            self.read_contacts()
+            total += self._force_world
+            body |= self._body_contact
+            link |= self._link_contact
+        self._force_world[:] = total / n
+        self._body_contact = body
+        self._link_contact[:] = link  # in place: a C step holds this buffer
+
+    def _settle(self, seconds: float) -> None:
+        """Simulate ``seconds`` with the targets held at ``q0`` before the clock starts (no pushes: they are
+        timed from ``t0``)."""
+        for _ in range(int(round(seconds / self.time_step))):
+            self._update_servo(self.time_step)
+            if self.native_step is None or not self._native_steps(1):
+                self._world_step(())
+                self.read_contacts()
+
+    def _native_steps(self, n: int) -> bool:
+        """``n`` engine steps through the engine's C step, leaving the contact readings and the outputs current;
+        False (nothing done) when the C step cannot take this macro step."""
+        return False
+
+    def _world_step(self, pushes: Sequence[Push]) -> None:
+        """One engine step with the servo inputs held and ``pushes`` on the body."""
+        raise NotImplementedError
+
+    def read_contacts(self) -> None:
+        """The last engine step's contacts into the buffers: per leg the ground force on the foot (world frame,
+        the force on the robot), the body and link contact flags."""
+        raise NotImplementedError
+
+    # -- the servo law (Yu 2019, Sec. 5) -------------------------------------------------------------
+    def _update_servo(self, dt: float) -> None:
+        """The servos' inputs for the next engine steps, when the targets changed (or a moving target is fed
+        forward). Every engine applies one law per joint,
+
+            ``tau = -kp (q + h qd - q_target) - kd qd  [+ kd dq_target/dt with velocity_ff]``,
+
+        ``h`` the engine step (its spring part integrated implicitly, as DART does its joint springs), the
+        target velocity a backward difference of the held targets over the macro step ``dt``. The engine's
+        :meth:`_apply_servo` maps the targets (and that velocity, or None) onto its actuators."""
+        if self._target_changed or self._ff_active:
+            velocity = None
+            if self.values["velocity_ff"]:
+                velocity = (self._q_target - self._q_target_prev) / dt
+                self._ff_active = bool(np.any(velocity != 0.0))
+            self._apply_servo(self._q_target, velocity)
+            self._q_target_prev = self._q_target
+            self._target_changed = False
+
+    def _apply_servo(self, q_target: np.ndarray, velocity: np.ndarray | None) -> None:
+        """Set the engine's servo inputs for the law of :meth:`_update_servo`."""
+        raise NotImplementedError
 
     def _check_step(self, t: float) -> None:
         if not self.is_set_up:

@@ -142,11 +142,11 @@ def test_force_servo_equals_moving_rest_position_servo():
         robot = DartHexapod()
         robot.setup(0.0)
         if moving_rest:
-            def rest_servo(dt: float, r=robot) -> None:  # the forces stay 0, the springs move
-                for joint, q in zip(r.model.joints, r._q_target, strict=True):
+            def rest_servo(q_target, velocity, r=robot) -> None:  # the forces stay 0, the springs move
+                for joint, q in zip(r.model.joints, q_target, strict=True):
                     joint.setRestPosition(0, float(q))
                 r._forces[:] = 0.0
-            robot._update_servo_forces = rest_servo
+            robot._apply_servo = rest_servo
         for k in range(400):
             robot.set_inputs({"q_target": targets[k // 100]})
             robot.do_step(k * 1e-3, 1e-3)

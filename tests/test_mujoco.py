@@ -100,7 +100,7 @@ def test_servo_law_is_darts():
     data, model = plant.data, plant.model
     target = plant.q0 + 0.1
     plant.set_inputs({"q_target": target})
-    plant._update_ctrl(1e-3)
+    plant._update_servo(1e-3)
     data.qvel[6:] = np.linspace(-1, 1, 18)
     mujoco.mj_forward(model, data)
     q, qd, h = data.qpos[7:], data.qvel[6:], plant.time_step

@@ -301,17 +301,6 @@ class DartHexapod(HexapodPlant):
             if native.checks_left:
                 self.check_native_step()
 
-    def _settle(self, seconds: float) -> None:
-        """Simulate ``seconds`` with the targets held (before the clock starts; no pushes)."""
-        for _ in range(int(round(seconds / self.time_step))):
-            self._update_servo_forces(self.time_step)
-            if self.native_step is not None:  # the same operations in C (its outputs are read again after)
-                self._step_native()
-                continue
-            self._skel.setForces(self._forces)
-            self.world.step()
-            self.read_contacts()
-
     def _register(self, shape: dart.dynamics.Shape, code: int) -> None:
         self._shapes.append(shape)
         self._shape_leg[id(shape)] = code
@@ -334,60 +323,34 @@ class DartHexapod(HexapodPlant):
         self._objects = []
         self._object_code = {}
 
-    # -- stepping ---------------------------------------------------------------------------------
-    def do_step(self, t: float, dt: float) -> None:
-        """Advance ``[t, t + dt]``: ``dt / time_step`` world steps with the servo targets held."""
-        self._check_step(t)
-        n = self.steps_for(dt)
-        self._update_servo_forces(dt)
-        world, skel, forces = self.world, self._skel, self._forces
-        if self.native_step is not None and n == 1 and not self.pushes:
-            self._step_native()
-            self._t = t + dt
-            self._n_steps += 1
-            return
-        if n == 1 and not self.pushes:
-            skel.setForces(forces)
-            world.step()
-            self.read_contacts()
-        else:
-            body_node = self.model.body
-            total = np.zeros(18)
-            body = False
-            link = np.zeros(6, dtype=bool)
-            for i in range(n):
-                skel.setForces(forces)  # world.step() clears them, and the external forces too
-                for push in self.pushes_at(t + i * self.time_step):
-                    body_node.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
-                world.step()
-                self.read_contacts()
-                total += self._force_world
-                body |= self._body_contact
-                link |= self._link_contact
-            self._force_world[:] = total / n
-            self._body_contact = body
-            self._link_contact[:] = link  # in place: the C step holds this buffer
-        self._t = t + dt
-        self._n_steps += n
-        self.update_outputs()
+    # -- stepping (the macro step, averaging and servo law: HexapodPlant) ------------------------------
+    def _native_steps(self, n: int) -> bool:
+        """One world step through the C step (which also runs the readout); it takes no longer macro steps."""
+        if n != 1:
+            return False
+        self._step_native()
+        return True
 
-    def _update_servo_forces(self, dt: float) -> None:
-        """Joint forces for the next world steps: ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).
+    def _world_step(self, pushes: Sequence[Push]) -> None:
+        """``setForces`` (``world.step()`` clears them, and the external forces too), the pushes as external
+        forces on the body, ``world.step()``."""
+        self._skel.setForces(self._forces)
+        for push in pushes:
+            self.model.body.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
+        self.world.step()
+
+    def _apply_servo(self, q_target: np.ndarray, velocity: np.ndarray | None) -> None:
+        """Joint forces ``kp q_target`` (+ ``kd dq_target/dt`` with ``velocity_ff``).
 
         DART's joint spring, at rest position 0, adds ``-kp (q + h qd) - kd qd`` implicitly, so the total
         is the servo law ``-kp (q + h qd - q_target) - kd qd`` of a spring whose rest position is the
         target -- one ``setForces`` call instead of 18 ``setRestPosition`` calls.
         """
-        if self._target_changed or self._ff_active:
-            v = self.values
-            legs = self._forces[6:]
-            np.multiply(self._q_target, v["kp"], out=legs)
-            if v["velocity_ff"]:
-                vel = (self._q_target - self._q_target_prev) / dt
-                self._ff_active = bool(np.any(vel != 0.0))
-                legs += v["kd"] * vel
-            self._q_target_prev = self._q_target
-            self._target_changed = False
+        v = self.values
+        legs = self._forces[6:]
+        np.multiply(q_target, v["kp"], out=legs)
+        if velocity is not None:
+            legs += v["kd"] * velocity
 
     def _object_code_of(self, obj) -> int:
         """Code of a collision object (leg index, ``CONTACT_LINK + leg``, ``CONTACT_BODY`` or
@@ -461,7 +424,7 @@ class DartHexapod(HexapodPlant):
 
     def take_c_loop_state(self, t: float, q_target: np.ndarray, changed: bool, updated: bool) -> None:
         """The Python side brought up to date after the C loop stepped the plant to ``t`` (targets ``q_target``;
-        ``updated``: some step took a new target, as :meth:`_update_servo_forces` does)."""
+        ``updated``: some step took a new target, as :meth:`_update_servo` does)."""
         self._n_steps += int(round((t - self._t) / self.time_step))
         self._t = t
         if updated:

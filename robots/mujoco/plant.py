@@ -141,9 +141,7 @@ class MujocoHexapod(HexapodPlant):
         if resume is not None:
             self.restore(resume)
             return
-        for _ in range(int(round(self.settle / self.time_step))):
-            self._update_ctrl(self.time_step)
-            self._substeps(1)
+        self._settle(self.settle)
         data.time = float(t0)
         self._t = float(t0)
         self.update_outputs()
@@ -194,73 +192,43 @@ class MujocoHexapod(HexapodPlant):
         self._n_steps = snap.n_steps
         self.update_outputs()
 
-    # -- stepping ---------------------------------------------------------------------------------
-    def _update_ctrl(self, dt: float) -> None:
-        """``ctrl = q_target`` (+ ``kd/kp * dq_target/dt`` with ``velocity_ff``)."""
-        if self._target_changed or self._ff_active:
+    # -- stepping (the macro step, averaging and servo law: HexapodPlant) ------------------------------
+    def _apply_servo(self, q_target: np.ndarray, velocity: np.ndarray | None) -> None:
+        """``ctrl = q_target`` (+ ``kd/kp * dq_target/dt`` with ``velocity_ff``): the actuators' gain and bias
+        (:meth:`_apply_gains`) make that the servo law."""
+        ctrl = q_target.copy()
+        if velocity is not None:
             v = self.values
-            ctrl = self._q_target.copy()
-            if v["velocity_ff"]:
-                vel = (self._q_target - self._q_target_prev) / dt
-                self._ff_active = bool(np.any(vel != 0.0))
-                ctrl += v["kd"] / v["kp"] * vel
-            self.data.ctrl[:] = ctrl
-            self._q_target_prev = self._q_target
-            self._target_changed = False
+            ctrl += v["kd"] / v["kp"] * velocity
+        self.data.ctrl[:] = ctrl
 
-    def do_step(self, t: float, dt: float) -> None:
-        """Advance ``[t, t + dt]``: ``dt / time_step`` MuJoCo steps with the servo targets held."""
-        self._check_step(t)
-        n = self.steps_for(dt)
-        self._update_ctrl(dt)
-        self._substeps(n)
-        self._t = t + dt
-        self._n_steps += n
+    def _native_steps(self, n: int) -> bool:
+        """``n`` MuJoCo steps in C (the contact sums averaged there), then the outputs."""
+        native = self.native_step
+        native.run(n)
+        self._force_world[:] = native.force
+        flags = native.flags
+        self._body_contact = bool(flags[0])
+        self._link_contact[:] = flags[1:] > 0.5
         self.update_outputs()
+        return True
 
-    def _substeps(self, n: int) -> None:
-        """``n`` MuJoCo steps; the contact forces averaged and the contact flags or-ed over them."""
-        if self.native_step is not None:
-            native = self.native_step
-            native.run(n)
-            self._force_world[:] = native.force
-            flags = native.flags
-            self._body_contact = bool(flags[0])
-            self._link_contact[:] = flags[1:] > 0.5
-            return
-        model, data = self.model, self.data
-        if n == 1 and not self.pushes:
-            mujoco.mj_step(model, data)
-            self._read_contacts()
-            return
-        total = np.zeros(18)
-        body = False
-        link = np.zeros(6, dtype=bool)
-        for _ in range(n):
-            if self.pushes:
-                self._set_push_wrench()
-            mujoco.mj_step(model, data)
-            self._read_contacts()
-            total += self._force_world
-            body |= self._body_contact
-            link |= self._link_contact
-        if self.pushes:
-            data.xfrc_applied[self._body_id] = 0.0
-        self._force_world[:] = total / n
-        self._body_contact = body
-        self._link_contact[:] = link
-
-    def _set_push_wrench(self) -> None:
-        """The pushes active at the next MuJoCo step as the body's ``xfrc_applied``: the force at the body's
+    def _world_step(self, pushes: Sequence[Push]) -> None:
+        """One ``mj_step``; the pushes as the body's ``xfrc_applied`` for that step: the force at the body's
         centre of mass plus the torque of its offset from there."""
+        if not pushes:
+            mujoco.mj_step(self.model, self.data)
+            return
         data, b = self.data, self._body_id
         wrench = np.zeros(6)
-        for push in self.pushes_at(float(data.time)):
+        for push in pushes:
             force = np.asarray(push.force_N)
             point = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(push.point_m)
             wrench[:3] += force
             wrench[3:] += np.cross(point - data.xipos[b], force)
         data.xfrc_applied[b] = wrench
+        mujoco.mj_step(self.model, data)
+        data.xfrc_applied[b] = 0.0
 
     # -- the closed loop in C (cpgsim.harness.fused) ----------------------------------------------------
     def fused_loop(self, request: FusedRequest):
@@ -290,7 +258,7 @@ class MujocoHexapod(HexapodPlant):
         self._body_contact = bool(flags[0])
         self._link_contact[:] = flags[1:] > 0.5
 
-    def _read_contacts(self) -> None:
+    def read_contacts(self) -> None:
         """Sum the contact forces on the robot per leg (world frame)."""
         model, data = self.model, self.data
         f = self._force_world

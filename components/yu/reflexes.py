@@ -104,6 +104,8 @@ results).
 
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 
 from cpgsim.components.core import Block, Equations, Symbols
@@ -130,22 +132,34 @@ def elevator_descent_rate(x1_apex: float, eps: float = 0.1, b: float = 4.0,
     import math
 
     import numpy as np
+
+    x1_peak, t, x1, y1, x2 = _descent_orbit(float(eps), float(b), tuple(float(w) for w in omega), float(k))
+    sw = np.flatnonzero(y1 > 0)
+    t_end = t[sw[-1]]
+    t_max = t[sw[np.argmax(x2[sw])]]
+    later = sw[x1[sw] >= x1_apex * x1_peak]
+    if not later.size or not math.isfinite(x1_apex):
+        raise ValueError(f"x1_apex = {x1_apex} is not reached in a swing")
+    return float((t_end - t_max) / max(t_end - t[later[0]], 1e-9))
+
+
+@functools.lru_cache(maxsize=32)
+def _descent_orbit(eps: float, b: float, omega: tuple[float, float, float], k: float) -> tuple:
+    """The locked orbit over one period at 1 ms steps, ``(x1_peak, t, x1, y1, x2)`` (read-only arrays): it
+    depends on the network only, not on ``x1_apex``, so it is integrated once per network in the process
+    (a few tenths of a second each) and every apex of :func:`elevator_descent_rate` reads it."""
     from scipy.integrate import solve_ivp
 
     from cpgsim.components.yu.converter import _network_rhs
 
-    o = locked_orbit(eps, b, tuple(omega), k)
-    rhs = _network_rhs((eps,) * 3, (b,) * 3, tuple(omega), (k,) * 4)
+    o = locked_orbit(eps, b, omega, k)
+    rhs = _network_rhs((eps,) * 3, (b,) * 3, omega, (k,) * 4)
     s0 = [o.x1_peak, 0.0, o.x2_switch, o.y2_switch, o.x2_switch, o.y2_switch]
     r = solve_ivp(rhs, (0.0, 2 * o.half_period), s0, max_step=1e-3, rtol=1e-10, atol=1e-12)
-    t, x1, y1, x2 = r.t, r.y[0], r.y[1], r.y[2]
-    sw = np.flatnonzero(y1 > 0)
-    t_end = t[sw[-1]]
-    t_max = t[sw[np.argmax(x2[sw])]]
-    later = sw[x1[sw] >= x1_apex * o.x1_peak]
-    if not later.size or not math.isfinite(x1_apex):
-        raise ValueError(f"x1_apex = {x1_apex} is not reached in a swing")
-    return float((t_end - t_max) / max(t_end - t[later[0]], 1e-9))
+    arrays = (r.t, r.y[0], r.y[1], r.y[2])
+    for a in arrays:
+        a.flags.writeable = False
+    return (o.x1_peak, *arrays)
 
 
 class SettableVanDerPolNeuron(VanDerPolNeuron):

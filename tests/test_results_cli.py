@@ -145,15 +145,28 @@ def test_every_result_records_the_code_libraries_and_command_that_made_it(tmp_pa
     from cpgsim import __version__
     from cpgsim.cli.main import main
     from cpgsim.harness.results import Results
+    from cpgsim.harness.results import provenance as provenance_module
 
+    root = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True)
+
+    # The commit is read once per process (the first result of this pytest run, maybe minutes ago) and a commit
+    # may land in this checkout while the suite runs: read it afresh for this run, and compare with HEAD read
+    # just before and just after it (the recorded commit is one of them, or a commit that landed in between).
+    provenance_module._git.cache_clear()
+    before = git("rev-parse", "HEAD")
     out = tmp_path / "r.csv"
     assert main(["simulate", "vdp", "--t-end", "0.05", "-o", str(out)]) == 0
+    after = git("rev-parse", "HEAD")
     prov = Results.load(out).meta["provenance"]
     assert prov["cpgsim"]["version"] == __version__
-    root = Path(__file__).resolve().parents[1]
-    head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True)
-    if head.returncode == 0:
-        assert prov["cpgsim"]["commit"] == head.stdout.strip() and isinstance(prov["cpgsim"]["dirty"], bool)
+    if before.returncode == 0:
+        commit, first, last = prov["cpgsim"]["commit"], before.stdout.strip(), after.stdout.strip()
+        assert re.fullmatch(r"[0-9a-f]{40}", commit) and isinstance(prov["cpgsim"]["dirty"], bool)
+        assert commit in (first, last) or (git("merge-base", "--is-ancestor", first, commit).returncode == 0
+                                           and git("merge-base", "--is-ancestor", commit, last).returncode == 0)
     else:
         assert prov["cpgsim"]["commit"] == "not a git checkout"
     assert prov["libraries"]["numpy"] == np.__version__ and prov["libraries"]["casadi"] == metadata.version("casadi")

@@ -175,9 +175,10 @@ def test_cli_rerun_replaces_the_run_and_failed_criteria_exit_1(tmp_path, monkeyp
     first = read_manifest(out)
     assert first["complete"] and "summary.json" in first["files"] and "gait.png" in first["files"]
     (out / "stale.png").write_text("x")  # not listed: the rerun moves it aside rather than deleting it
-    assert main(["run", "flat", "-o", str(out), "--t-end", "0.2", "--no-progress", "--set",
-                 "criteria.min_distance_m=0"]) == 0
+    assert main(["run", "flat", "-o", str(out), "--t-end", "0.2", "--no-progress", "--no-plots", "--set",
+                 "criteria.min_distance_m=0"]) == 0  # the pictures of the first run are checked above
     summary = json.loads((out / "summary.json").read_text())
+    assert "gait.png" not in read_manifest(out)["files"] and not (out / "gait.png").exists()
     assert summary["t_end"] == pytest.approx(0.2, abs=2e-3)
     assert summary["provenance"]["engine"] == "dart" and summary["provenance"]["cpgsim"]["version"]
     assert not partial_path(out).exists() and not (out / "stale.png").exists()

@@ -6,13 +6,14 @@ terrain.step.side=left, robot.body_mass=4, controller.Fcx=20, t_end=40, a contro
 controller.R1.reflex.x1_apex=0.5 (VALUE is a TOML value; a bare word is a string). --show prints
 the resolved scenario and exits.
 
-Writes results.arrow (Arrow IPC; --csv also results.csv), scenario.toml, summary.json (distance, fell,
-max tilt, stalled, waiting share, success, reflex events) and PNGs (gait diagram, foot paths, toe forces,
-body, snapshots) into the output directory. The run is built in DIR.partial beside it and replaces the
-previous run in DIR only when it is complete; cpgsim never empties a folder it did not write (no .cpgsim-
-run.json manifest), and a second run into a DIR that is being written is refused ("in use"). Exit status
-1 when a criterion of the scenario fails (pytest's convention; the last line names each failed criterion
-with its value and limit). Example: cpgsim run step -o runs/step --set terrain.step.height=0.05 """
+Writes results.arrow (Arrow IPC; --csv also results.csv), scenario.toml, summary.json (distance, fell, max
+tilt, stalled, waiting share, success, reflex events) and PNGs (gait diagram, foot paths, toe forces, body,
+snapshots) with report.html (none with --no-plots) into the output directory. The run is built in
+DIR.partial beside it and replaces the previous run in DIR only when it is complete; cpgsim never empties a
+folder it did not write (no .cpgsim-run.json manifest), and a second run into a DIR that is being written
+is refused ("in use"). Exit status 1 when a criterion of the scenario fails (pytest's convention; the last
+line names each failed criterion with its value and limit).
+Example: cpgsim run step -o runs/step --set terrain.step.height=0.05 """
 
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--t-end", type=positive_float, default=None, help="simulated time in s (same as --set t_end=)")
     p.add_argument("--seed", type=int, default=None, help="random seed (same as --set seed=)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-plots", action="store_true", help="write no pictures and no report.html (results, "
+                   "scenario and summary only)")
     p.add_argument("--csv", action="store_true", help="also write results.csv (the results are in results.arrow; "
                    "`cpgsim results DIR/results.arrow --csv` converts later)")
     p.add_argument("--list", action="store_true", help="list the built-in scenarios and exit")
@@ -67,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     failure: SimulationError | None = None
     with run_directory(out, RUN_FILES) as work:  # the previous run there stays until this one is complete
         try:
-            summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress, csv=args.csv)
+            summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress, csv=args.csv,
+                                   plots=not args.no_plots)
         except SimulationError as exc:
             if interruption(exc) is not None:
                 print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")

@@ -48,9 +48,30 @@ def compiler() -> str | None:
     return os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")
 
 
+_LOCAL_INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"[^\n]*$', re.MULTILINE)
+
+
 def c_source(package: str, name: str) -> str:
-    """The text of the package-data C file ``name`` (relative to the folder of ``package``)."""
-    return importlib.resources.files(package).joinpath(name).read_text(encoding="utf-8")
+    """The text of the package-data C file ``name`` (relative to the folder of ``package``), with each
+    ``#include "file"`` that names a file beside it (relative to the including file, as a C compiler resolves
+    it) replaced by that file's text, once per file: the text compiles alone in the cache folder, and the
+    library's name (the digest of the text) changes when a header it includes does."""
+    path = Path(str(importlib.resources.files(package).joinpath(name)))
+    return _expand_includes(path, set())
+
+
+def _expand_includes(path: Path, seen: set[Path]) -> str:
+    seen.add(path.resolve())
+
+    def expand(match: re.Match) -> str:
+        header = path.parent / match.group(1)
+        if not header.is_file():
+            return match.group(0)  # not ours: left for the compiler's include path
+        if header.resolve() in seen:
+            return f"/* {match.group(1)}: included above */"
+        return f"/* {match.group(1)} */\n{_expand_includes(header, seen).rstrip()}\n/* end of {match.group(1)} */"
+
+    return _LOCAL_INCLUDE.sub(expand, path.read_text(encoding="utf-8"))
 
 
 _TABLE = re.compile(r"^static const long long \w+\[\] = \{[^}]*\};$", re.MULTILINE)

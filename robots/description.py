@@ -28,8 +28,10 @@ properties combine its shapes by the parallel-axis theorem (:func:`combine`).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -43,12 +45,23 @@ BODY_COLOR = (0.35, 0.40, 0.50)
 LEG_COLORS = ((0.80, 0.35, 0.25), (0.25, 0.55, 0.80))  # left, right
 FOOT_COLOR = (0.15, 0.15, 0.15)
 
+CONTACT_CODES_HEADER = "c/plant_contacts.h"
+"""Where the contact codes are defined, for Python and for every engine's C loop (relative to this folder)."""
+
+
+def _contact_codes() -> dict[str, int]:
+    """The ``CPGSIM_CONTACT_*`` enum of :data:`CONTACT_CODES_HEADER`: the one definition of the codes."""
+    text = (Path(__file__).parent / CONTACT_CODES_HEADER).read_text(encoding="utf-8")
+    return {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_CONTACT_(\w+)\s*=\s*(\d+)", text)}
+
+
 # Contact codes of the robot's shapes, as the plants (and their C steps) sum contacts: a leg index 0-5 for
 # a sensed toe (the foot sphere, and the tibia box with ``sense_shank``), CONTACT_LINK + leg for the leg's
 # other links, CONTACT_BODY for the body box, CONTACT_OTHER for anything that is not the robot.
-CONTACT_LINK = 10
-CONTACT_BODY = 100
-CONTACT_OTHER = 1000
+_CODES = _contact_codes()
+CONTACT_LINK = _CODES["LINK"]
+CONTACT_BODY = _CODES["BODY"]
+CONTACT_OTHER = _CODES["OTHER"]
 
 
 @dataclass(frozen=True)

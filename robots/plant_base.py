@@ -13,7 +13,8 @@ indices. An engine's plant supplies the rest (the engine contract, docs/architec
   coordinates); then :meth:`HexapodPlant._settle` and the first outputs;
 - ``_apply_servo(q_target, velocity)``: the servo law's targets onto the engine's actuators;
 - ``_world_step(pushes)``: one engine step with the servo inputs held and the pushes on the body;
-- ``read_contacts()``: the last engine step's contacts into the buffers;
+- ``_robot_contacts()``, ``_contact_force(contact)``: the last engine step's contacts that touch the robot
+  (its shape's code, the force's sign) and a contact's force (world frame), for :meth:`HexapodPlant.read_contacts`;
 - ``_native_steps(n)`` (optional): ``n`` engine steps through the engine's C step;
 - ``_read_state()``: the engine's generalized positions and velocities into the buffers;
 - ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
@@ -27,9 +28,10 @@ the contract tests (tests/test_plant_contract.py) run the same checks on every r
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+import struct
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -37,6 +39,7 @@ from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import RobotGeometry
 from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
+from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK
 from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
 from cpgsim.robots.ports import PORT_SLICES, READOUT_SIZE, declare_plant
 from cpgsim.robots.readout import readout_function
@@ -208,8 +211,37 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         raise NotImplementedError
 
     def read_contacts(self) -> None:
-        """The last engine step's contacts into the buffers: per leg the ground force on the foot (world frame,
-        the force on the robot), the body and link contact flags."""
+        """The last engine step's contacts into the buffers, by the code of the robot's shape in each
+        (:meth:`cpgsim.robots.description.ShapeSpec.contact_code`): a sensed toe's force is added to its leg's
+        sum (world frame, the force on the robot), a body contact sets the body flag, any other link's sets its
+        leg's link flag; contacts between two shapes that are not the robot's are not read."""
+        f = self._force_list
+        f[:] = _ZEROS18
+        body = False
+        link = self._link_contact
+        link[:] = False
+        for code, sign, contact in self._robot_contacts():
+            if code < CONTACT_LINK:
+                f0, f1, f2 = self._contact_force(contact)
+                k = 3 * code
+                f[k] += sign * f0
+                f[k + 1] += sign * f1
+                f[k + 2] += sign * f2
+            elif code == CONTACT_BODY:
+                body = True
+            else:
+                link[code - CONTACT_LINK] = True  # a coxa/femur (or unsensed shank) touched something
+        _PACK18(self._force_bytes, 0, *f)  # 0.25 us; a numpy slice assignment from a list takes 0.8
+        self._body_contact = body
+
+    def _robot_contacts(self) -> Iterable[tuple[int, float, Any]]:
+        """``(code, sign, contact)`` for each contact of the last engine step that touches the robot: the code
+        of the robot's shape in it, ``sign`` +1 when the engine's contact force acts on that shape and -1 when
+        it acts on the other one, and what :meth:`_contact_force` reads the force from."""
+        raise NotImplementedError
+
+    def _contact_force(self, contact: Any) -> Sequence[float]:
+        """A contact's force in the world frame (3 floats), signed as the engine reports it."""
         raise NotImplementedError
 
     # -- the servo law (Yu 2019, Sec. 5) -------------------------------------------------------------
@@ -274,6 +306,8 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         b = self.buffers = PlantBuffers(np.zeros(self.POS_SIZE), np.zeros(24))
         self._force_world, self._link_contact, self._contact = b.force_world, b.link_contact, b.contact
         self._pos, self._vel, self._readout_out = b.pos, b.vel, b.out
+        self._force_list = [0.0] * 18  # read_contacts' sums, packed into force_world at once
+        self._force_bytes = memoryview(b.force_world).cast("B")
         fn = readout_for(self.geometry, self.READOUT_ROOT)
         try:
             self.readout = NativeFunction(fn, [b.pos, b.vel, b.force_world, b.contact], [b.out])
@@ -368,3 +402,5 @@ def readout_for(geometry: RobotGeometry, root: str):
 
 
 _READOUTS: dict[tuple[str, str], object] = {}
+_ZEROS18 = [0.0] * 18
+_PACK18 = struct.Struct("18d").pack_into

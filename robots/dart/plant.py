@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -55,7 +54,7 @@ from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.dart import native as dart_native
 from cpgsim.robots.dart.ground import add_terrain
 from cpgsim.robots.dart.model import HexapodModel, build_hexapod
-from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, CONTACT_OTHER, GRAVITY, describe_hexapod
+from cpgsim.robots.description import CONTACT_OTHER, GRAVITY, describe_hexapod
 from cpgsim.robots.disturbance import Push
 from cpgsim.robots.plant_base import HexapodPlant
 from cpgsim.robots.terrain import Terrain
@@ -179,9 +178,7 @@ class DartHexapod(HexapodPlant):
         self._skel = model.skeleton
         self._reset_readings()
         self._forces = np.zeros(model.skeleton.getNumDofs())
-        self._force_list = [0.0] * 18
         self._bind_readout()
-        self._force_bytes = memoryview(self._force_world).cast("B")
         self._bind_native()
         self._amputate()
         resume = self._take_resume(t0)
@@ -366,41 +363,28 @@ class DartHexapod(HexapodPlant):
                 self._drop_native(exc, stacklevel=3)
         return code
 
-    def read_contacts(self) -> None:
-        """Sum the last collision result's contact forces per leg (world frame, force on the robot)."""
-        f = self._force_list
-        f[:] = _ZEROS18
-        body = False
-        link = self._link_contact
-        link[:] = False
+    def _robot_contacts(self):
+        """The last collision result's contacts with a robot shape. ``c.force`` acts on object 1; the DART
+        detector lists the terrain first, so object 2 is looked at first."""
         lookup = self._object_code.get
         for c in self.world.getLastCollisionResult().getContacts():
-            # c.force acts on object 1; the DART detector lists the terrain first, so look at object 2 first
             o2 = c.collisionObject2
             code = lookup(id(o2))
             if code is None:
                 code = self._object_code_of(o2)
-            sign = -1.0
-            if code == CONTACT_OTHER:
-                o1 = c.collisionObject1
-                code = lookup(id(o1))
-                if code is None:
-                    code = self._object_code_of(o1)
-                if code == CONTACT_OTHER:
-                    continue
-                sign = 1.0
-            if code < CONTACT_LINK:
-                f0, f1, f2 = c.force.tolist()
-                k = 3 * code
-                f[k] += sign * f0
-                f[k + 1] += sign * f1
-                f[k + 2] += sign * f2
-            elif code == CONTACT_BODY:
-                body = True
-            else:
-                link[code - CONTACT_LINK] = True  # a coxa/femur (or unsensed shank) touched something
-        _PACK18(self._force_bytes, 0, *f)  # 0.25 us; a numpy slice assignment from a list takes 0.8
-        self._body_contact = body
+            if code != CONTACT_OTHER:
+                yield code, -1.0, c
+                continue
+            o1 = c.collisionObject1
+            code = lookup(id(o1))
+            if code is None:
+                code = self._object_code_of(o1)
+            if code != CONTACT_OTHER:
+                yield code, 1.0, c
+
+    @staticmethod
+    def _contact_force(contact) -> list[float]:
+        return contact.force.tolist()
 
     def _read_state(self) -> None:
         skel = self._skel
@@ -482,6 +466,3 @@ class PlantSnapshot:
         vel = self.velocities + tau * (other.velocities - self.velocities)
         return dataclasses.replace(other, positions=pos, velocities=vel)
 
-
-_ZEROS18 = [0.0] * 18
-_PACK18 = struct.Struct("18d").pack_into

@@ -34,7 +34,7 @@ from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
 from cpgsim.harness.contracts import FusedRequest
 from cpgsim.harness.native import NativeUnavailable
-from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, CONTACT_OTHER, describe_hexapod, foot_positions_body
+from cpgsim.robots.description import CONTACT_OTHER, describe_hexapod, foot_positions_body
 from cpgsim.robots.disturbance import Push
 from cpgsim.robots.mujoco.mjcf import ContactModel, mjcf
 from cpgsim.robots.plant_base import HexapodPlant
@@ -125,6 +125,7 @@ class MujocoHexapod(HexapodPlant):
         self._geom_code = np.full(model.ngeom, CONTACT_OTHER, dtype=np.int64)
         for spec in describe_hexapod(self.geometry).shapes():
             self._geom_code[model.geom(spec.name).id] = spec.contact_code(self.sense_shank)
+        self._geom_codes = self._geom_code.tolist()  # Python ints: the per-contact lookups of _robot_contacts
         self._reset_readings()
         self._cf = np.zeros(6)
         self._bind_readout()
@@ -258,34 +259,27 @@ class MujocoHexapod(HexapodPlant):
         self._body_contact = bool(flags[0])
         self._link_contact[:] = flags[1:] > 0.5
 
-    def read_contacts(self) -> None:
-        """Sum the contact forces on the robot per leg (world frame)."""
-        model, data = self.model, self.data
-        f = self._force_world
-        f[:] = 0.0
-        self._link_contact[:] = False
-        body = False
-        codes = self._geom_code
-        cf = self._cf
+    def _robot_contacts(self):
+        """The active contacts with a robot geom: the contact frame's normal points from ``geom1`` to ``geom2``
+        and ``mj_contactForce`` gives the force ``geom1`` exerts on ``geom2``, so a robot ``geom2`` has sign +1."""
+        codes = self._geom_codes
+        data = self.data
         for k in range(data.ncon):
             c = data.contact[k]
-            g1, g2 = int(c.geom1), int(c.geom2)
-            code1, code2 = codes[g1], codes[g2]
-            if code2 != CONTACT_OTHER:  # the force geom1 exerts on geom2 is the force on the robot
-                code, sign = code2, 1.0
-            elif code1 != CONTACT_OTHER:
-                code, sign = code1, -1.0
-            else:
+            code = codes[c.geom2]
+            if code != CONTACT_OTHER:
+                yield code, 1.0, (k, c)
                 continue
-            if code < CONTACT_LINK:
-                mujoco.mj_contactForce(model, data, k, cf)
-                world = c.frame.reshape(3, 3).T @ cf[:3]
-                f[3 * code:3 * code + 3] += sign * world
-            elif code == CONTACT_BODY:
-                body = True
-            else:
-                self._link_contact[code - CONTACT_LINK] = True
-        self._body_contact = body
+            code = codes[c.geom1]
+            if code != CONTACT_OTHER:
+                yield code, -1.0, (k, c)
+
+    def _contact_force(self, contact) -> list[float]:
+        """``mj_contactForce`` (contact frame: normal, two tangents) rotated into the world frame."""
+        k, c = contact
+        cf = self._cf
+        mujoco.mj_contactForce(self.model, self.data, k, cf)
+        return (c.frame.reshape(3, 3).T @ cf[:3]).tolist()
 
     def _read_state(self) -> None:
         self._pos[:] = self.data.qpos

@@ -3,6 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include "../../c/plant_contacts.h"
 
 typedef struct { double *data; ptrdiff_t rows; } vecxd;  /* Eigen::VectorXd's storage */
 typedef void (*world_step_t)(void *, _Bool);
@@ -15,7 +16,7 @@ typedef double (*get_dof_t)(const void *, size_t);
 typedef size_t (*num_dofs_t)(const void *);
 typedef int (*feval_t)(void *);
 
-enum { LINK = 10, BODY = 100, OTHER = 1000, MAX_OBJECTS = 256 };
+enum { MAX_OBJECTS = 256 };
 /* offsets in dart::collision::Contact: defined by cpgsim.robots.dart.native.LAYOUT (prepended to this file by
    native.library_source(), checked against the installed dartpy when the library loads) */
 #if !defined(CPGSIM_DART_CONTACT_FORCE) || !defined(CPGSIM_DART_CONTACT_OBJECT1) || !defined(CPGSIM_DART_CONTACT_OBJECT2)
@@ -64,25 +65,19 @@ static int read_contacts(plant_ctx *c, double *f, unsigned char *link) {
     for (int k = 0; k < 6; k++) link[k] = 0;
     for (size_t i = 0; i < n; i++) {
         const char *ct = c->api.get_contact(res, i);
+        /* the force acts on object 1; the DART detector lists the terrain first, so object 2 is looked at first */
         int code = code_of(c, *(void *const *)(ct + OBJECT2));
         double sign = -1.0;
         if (code < 0) return 1;
-        if (code == OTHER) {
+        if (code == CPGSIM_CONTACT_OTHER) {
             code = code_of(c, *(void *const *)(ct + OBJECT1));
             if (code < 0) return 1;
-            if (code == OTHER) continue;
+            if (code == CPGSIM_CONTACT_OTHER) continue;
             sign = 1.0;
         }
-        if (code < LINK) {
-            const double *force = (const double *)(ct + FORCE);
-            f[3 * code] += sign * force[0];
-            f[3 * code + 1] += sign * force[1];
-            f[3 * code + 2] += sign * force[2];
-        } else if (code == BODY) {
-            body = 1;
-        } else {
-            link[code - LINK] = 1;
-        }
+        int flag = cpgsim_add_contact(code, sign, (const double *)(ct + FORCE), f);
+        if (flag == 1) body = 1;
+        else if (flag) link[flag - 2] = 1;
     }
     return body ? 2 : 0;
 }

@@ -4,13 +4,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <mujoco/mujoco.h>
-/* codes: 0..5 leg (toe force), 10+leg other leg link, 100 body, 1000 not the robot.
+#include "../../c/plant_contacts.h"
+/* codes: per geom, robots/c/plant_contacts.h (a toe's leg, CPGSIM_CONTACT_LINK + leg, ..._BODY, ..._OTHER).
    force: 18 world-frame ground forces on the feet (mean over the n sub-steps); flags[0] body contact,
    flags[1..6] link contact per leg (any sub-step). Returns the number of sub-steps whose state went
    non-finite (0 normally). */
 static int substeps(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
-  int s, k, i, bad = 0;
-  double total[18], cf[6];
+  int s, k, i, flag, bad = 0;
+  double total[18], cf[6], world[3];
   memset(total, 0, sizeof(total));
   for (i = 0; i < 7; ++i) flags[i] = 0.0;
   for (s = 0; s < n; ++s) {
@@ -20,19 +21,17 @@ static int substeps(const mjModel *m, mjData *d, int n, const int *codes, double
       int g1 = c->geom[0], g2 = c->geom[1], code;
       double sign;
       if (g1 < 0 || g2 < 0) continue;
-      if (codes[g2] != 1000) { code = codes[g2]; sign = 1.0; }
-      else if (codes[g1] != 1000) { code = codes[g1]; sign = -1.0; }
+      /* the contact frame's normal points from geom1 to geom2; mj_contactForce: the force geom1 exerts on geom2 */
+      if (codes[g2] != CPGSIM_CONTACT_OTHER) { code = codes[g2]; sign = 1.0; }
+      else if (codes[g1] != CPGSIM_CONTACT_OTHER) { code = codes[g1]; sign = -1.0; }
       else continue;
-      if (code < 10) {
+      if (code < CPGSIM_CONTACT_LINK) {
         const double *fr = c->frame;
         mj_contactForce(m, d, k, cf);
-        for (i = 0; i < 3; ++i)
-          total[3 * code + i] += sign * (fr[i] * cf[0] + fr[3 + i] * cf[1] + fr[6 + i] * cf[2]);
-      } else if (code == 100) {
-        flags[0] = 1.0;
-      } else {
-        flags[1 + code - 10] = 1.0;
+        for (i = 0; i < 3; ++i) world[i] = fr[i] * cf[0] + fr[3 + i] * cf[1] + fr[6 + i] * cf[2];
       }
+      flag = cpgsim_add_contact(code, sign, world, total);
+      if (flag) flags[flag - 1] = 1.0;
     }
     for (i = 0; i < m->nq; ++i) bad |= !(d->qpos[i] == d->qpos[i] && d->qpos[i] - d->qpos[i] == 0.0);
   }

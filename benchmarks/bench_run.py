@@ -21,7 +21,7 @@ cProfile breakdown of one more run.
 and flat, both on the master thread. ``--native`` instead compares, interleaved on the master thread, the
 controller + DART loop in C (the default: :mod:`cpgsim.robots.dart.fused`), the plant's C step under the
 master's Python loop (:mod:`cpgsim.robots.dart.native`, the fast path refused) and everything in Python
-(``CPGSIM_DART_NATIVE=0``: the code before the C step), and prints the loop / ``world.step`` ratio of each
+(``robot.native = false``: the code before the C step), and prints the loop / ``world.step`` ratio of each
 (``--profile`` then profiles one run of each). ``--scenario`` picks the scenario (default ``flat``).
 
 Run: ``python benchmarks/bench_run.py [--seconds 20] [--repeat 3] [--load 2] [--profile] [--grouping]
@@ -35,7 +35,6 @@ import contextlib
 import cProfile
 import io
 import multiprocessing as mp
-import os
 import pstats
 import time
 from collections.abc import Iterator
@@ -97,9 +96,9 @@ def _timed(method, proxy: TimedWorld):
 
 
 def bench(seconds: float = 20.0, scenario: str = "flat", profile: bool = False,
-          step_thread: bool = True, grouping: str = "auto") -> dict[str, float]:
+          step_thread: bool = True, grouping: str = "auto", native: bool = True) -> dict[str, float]:
     t0 = time.perf_counter()
-    setup = build_scenario(scenario, {})
+    setup = build_scenario(scenario, {"robot.native": native})
     sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread,
                     grouping=grouping).prepare()  # type: ignore[arg-type]
     t_prepare = time.perf_counter() - t0
@@ -195,13 +194,11 @@ def measure_grouping(seconds: float, repeat: int) -> dict[str, list[dict[str, fl
 
 
 @contextlib.contextmanager
-def dart_native(on: bool, fused: bool = True) -> Iterator[None]:
-    """The DART plant's C step on or off (``CPGSIM_DART_NATIVE``) for the runs inside the block; ``fused=False``
-    keeps the master's Python loop (the master's fast path, :mod:`cpgsim.harness.fused`, refused)."""
+def master_fused(fused: bool = True) -> Iterator[None]:
+    """``fused=False``: the runs inside the block keep the master's Python loop (the master's fast path,
+    :mod:`cpgsim.harness.fused`, refused)."""
     import cpgsim.harness.fused as fused_path
 
-    old = os.environ.get("CPGSIM_DART_NATIVE")
-    os.environ["CPGSIM_DART_NATIVE"] = "1" if on else "0"
     runner = fused_path.fused_runner
     if not fused:
         fused_path.fused_runner = lambda *args: None
@@ -209,10 +206,6 @@ def dart_native(on: bool, fused: bool = True) -> Iterator[None]:
         yield
     finally:
         fused_path.fused_runner = runner
-        if old is None:
-            del os.environ["CPGSIM_DART_NATIVE"]
-        else:
-            os.environ["CPGSIM_DART_NATIVE"] = old
 
 
 NATIVE_MODES = {"loop in C (default)": (True, True), "C plant, Python master": (True, False),
@@ -223,9 +216,9 @@ def measure_native(seconds: float, repeat: int, scenario: str) -> dict[str, list
     """The DART plant's C step and its Python loop, master thread, interleaved."""
     runs: dict[str, list[dict[str, float]]] = {m: [] for m in NATIVE_MODES}
     for _ in range(repeat):  # interleaved, so all see the same machine load
-        for mode, on in NATIVE_MODES.items():
-            with dart_native(*on):
-                runs[mode].append(bench(seconds, scenario, step_thread=False))
+        for mode, (native, fused) in NATIVE_MODES.items():
+            with master_fused(fused):
+                runs[mode].append(bench(seconds, scenario, step_thread=False, native=native))
     return runs
 
 
@@ -292,9 +285,9 @@ def main(argv: list[str] | None = None) -> None:
         report_loop_ratio(runs)
         print(f"RATIO loop in C / all Python real-time factor = {ratio:.2f} (above 1: the C loop is faster)")
         if args.profile:
-            for mode, on in NATIVE_MODES.items():
-                with dart_native(*on):
-                    r = bench(args.seconds, args.scenario, profile=True, step_thread=False)
+            for mode, (native, fused) in NATIVE_MODES.items():
+                with master_fused(fused):
+                    r = bench(args.seconds, args.scenario, profile=True, step_thread=False, native=native)
                 print(f"cProfile run, {mode} (overhead inflates Python frames): wall {r['wall']:.2f} s")
                 print(r["profile"])
         return

@@ -53,6 +53,7 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
             raise
         raise better from None
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
+    setup.graph.blocks[setup.robot].native = scenario.doc["robot"]["native"]  # read at setup
     if scenario.doc["disturbance"]:
         from cpgsim.robots.disturbance import as_pushes
 

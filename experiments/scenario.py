@@ -136,6 +136,8 @@ SCHEMA: dict[str, Any] = {
     "robot": {
         "preset": Field(str, "yu-sim", choices=ROBOT_PRESETS, doc="geometry preset"),
         "engine": Field(str, "dart", choices=ROBOT_ENGINES, doc="physics engine of the plant (docs/engines.md)"),
+        "native": Field(bool, True, doc="step the plant through its C step when one can be built (false: its "
+                                        "Python step, the reference; same numbers, slower)"),
         **{k: Field(float, **POSITIVE, doc="geometry override (m, kg)") for k in GEOMETRY_KEYS},
         "kp": Field(float, **POSITIVE, doc="joint servo stiffness N*m/rad"),
         "kd": Field(float, **POSITIVE, doc="joint servo damping N*m*s/rad"),

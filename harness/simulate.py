@@ -95,6 +95,8 @@ class Simulator:
         self.chunk = max(1, int(chunk))
         self.step_thread = step_thread
         self.written: list[Path] = []  # the files the last streamed run wrote
+        self.final_state: tuple[np.ndarray, np.ndarray] | None = None  # (x, z) at the end of the last finished run
+        self._last_t: float | None = None
         self._record_patterns = list(record) if record else None
         self._chunk_fns: dict[int, ca.Function] = {}
         self._step_fn = self.model.step
@@ -131,6 +133,7 @@ class Simulator:
         if resume is not None:
             t0, x0 = self._check_resume(resume), None
         self._last_t = None  # snapshot() refuses a run that did not finish
+        self.final_state = None
         n = horizon_steps(t0, t_end, m.dt)
         columns, units, picks = self._record_layout()
         n_free = sum(port.size for port in m.free_inputs.values())
@@ -210,8 +213,8 @@ class Simulator:
         """The exact state at the end of the last run: its time, the continuous and discrete states (before
         the sampled update at that time, as :attr:`final_state`) and each co-simulation block's own
         (``last_snapshot``, kept when the block terminated). ``run(..., resume=snapshot)`` continues it."""
-        final = getattr(self, "final_state", None)
-        if final is None or getattr(self, "_last_t", None) is None:
+        final = self.final_state
+        if final is None or self._last_t is None:
             raise SimulationError("no finished run to take a snapshot of")
         blocks = {}
         for path, blk in self._cosim_blocks.items():

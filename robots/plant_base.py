@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import struct
+from abc import abstractmethod
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -206,6 +207,7 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         False (nothing done) when the C step cannot take this macro step."""
         return False
 
+    @abstractmethod
     def _world_step(self, pushes: Sequence[Push]) -> None:
         """One engine step with the servo inputs held and ``pushes`` on the body."""
         raise NotImplementedError
@@ -234,12 +236,14 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         _PACK18(self._force_bytes, 0, *f)  # 0.25 us; a numpy slice assignment from a list takes 0.8
         self._body_contact = body
 
+    @abstractmethod
     def _robot_contacts(self) -> Iterable[tuple[int, float, Any]]:
         """``(code, sign, contact)`` for each contact of the last engine step that touches the robot: the code
         of the robot's shape in it, ``sign`` +1 when the engine's contact force acts on that shape and -1 when
         it acts on the other one, and what :meth:`_contact_force` reads the force from."""
         raise NotImplementedError
 
+    @abstractmethod
     def _contact_force(self, contact: Any) -> Sequence[float]:
         """A contact's force in the world frame (3 floats), signed as the engine reports it."""
         raise NotImplementedError
@@ -263,6 +267,7 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
             self._q_target_prev = self._q_target
             self._target_changed = False
 
+    @abstractmethod
     def _apply_servo(self, q_target: np.ndarray, velocity: np.ndarray | None) -> None:
         """Set the engine's servo inputs for the law of :meth:`_update_servo`."""
         raise NotImplementedError
@@ -274,6 +279,7 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
             raise ModelError(f"{self.name}: do_step at t = {t}, but the plant is at t = {self._t}")
 
     @property
+    @abstractmethod
     def is_set_up(self) -> bool:
         raise NotImplementedError
 
@@ -321,6 +327,7 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         """The readout as compiled C (what a C step or fused loop calls), None in CasADi's VM."""
         return self.readout if isinstance(self.readout, NativeFunction) else None
 
+    @abstractmethod
     def _read_state(self) -> None:
         raise NotImplementedError
 
@@ -356,9 +363,11 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
         return touching_height(self.geometry, self.terrain.height_at, feet)
 
     # -- the fall test ----------------------------------------------------------------------------
+    @abstractmethod
     def _body_rotation(self) -> np.ndarray:
         raise NotImplementedError
 
+    @abstractmethod
     def _state_finite(self) -> bool:
         raise NotImplementedError
 

@@ -165,7 +165,7 @@ def test_the_documented_defaults_are_filled_in():
     d = _doc(BASE).doc
     assert d["seed"] == 0 and d["description"] == "" and d["paper"] == "" and d["aliases"] == {}
     assert d["disturbance"] == []
-    assert d["robot"] == {"preset": "yu-sim", "engine": "dart"}
+    assert d["robot"] == {"preset": "yu-sim", "engine": "dart", "native": True}
     assert d["controller"] == {"kind": "yu", "params": {}}
     assert d["terrain"] == {"friction": 1.0, "jitter_m": 0.0}
     assert d["criteria"] == {"no_fall": True, "fall_tilt_deg": 45.0, "max_tilt_deg": 30.0, "no_stall": True,

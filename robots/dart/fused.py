@@ -11,7 +11,7 @@ refuses it, as in the master's loop), and a collision object met for the first t
 Python contact readout (which registers it with the C step). The first
 :attr:`~cpgsim.robots.dart.native.NativeDartStep.CHECK_STEPS` steps of a set-up run one per call, each
 compared with the plant's Python readout (:meth:`~cpgsim.robots.dart.plant.DartHexapod.check_native_step`); a
-difference ends the run with an error naming ``CPGSIM_DART_NATIVE=0`` (the loop cannot go on in Python).
+difference ends the run with an error naming ``robot.native = false`` (the loop cannot go on in Python).
 So the numbers are the Python loop's.
 """
 
@@ -64,7 +64,7 @@ class FusedLoop:
         while k < k1:
             if plant.native_step is not self.native:
                 raise RuntimeError(f"{plant.name}: the C step of DART disagreed with dartpy's bindings; "
-                                   "run with CPGSIM_DART_NATIVE=0")
+                                   "run with robot.native = false (the plant's native=False)")
             checking = self.native.checks_left > 0
             row = k - k0
             rows = self._fn(*self._head, self._rows(self.Y, row), self._rows(self.O, row), k,

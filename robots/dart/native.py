@@ -28,15 +28,15 @@ the library loads, :func:`_load` checks them against the installed dartpy: a rel
 :data:`VERIFIED_DARTPY`, every symbol exported, and a self-test (:func:`_self_test`: a box resting on the
 ground, one world step, the contacts the C reads at those offsets compared bit for bit with dartpy's
 ``getContacts()``). Any failure raises :class:`NativeUnavailable` with one line naming dartpy's version and
-what did not match; the plant warns with it and keeps its Python loop (as ``CPGSIM_DART_NATIVE=0``).
+what did not match; the plant warns with it and keeps its Python loop (as ``native=False``).
 
-``CPGSIM_DART_NATIVE=0`` keeps the plant's Python loop (benchmarks compare the two in one process).
+The plant's ``native=False`` (a scenario's ``robot.native = false``) keeps its Python loop (benchmarks
+compare the two in one process).
 """
 
 from __future__ import annotations
 
 import ctypes
-import os
 
 import dartpy as dart
 import numpy as np
@@ -96,11 +96,6 @@ def library_source() -> str:
     defines = "".join(f"#define CPGSIM_DART_{key.upper()} {value}\n" for key, value in LAYOUT.items()
                       if key.startswith("contact_"))
     return defines + SOURCE
-
-
-def enabled() -> bool:
-    """The C step is used unless ``CPGSIM_DART_NATIVE=0``."""
-    return os.environ.get("CPGSIM_DART_NATIVE", "1") != "0"
 
 
 def address(obj: object) -> int:

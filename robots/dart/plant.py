@@ -28,7 +28,7 @@ plant 1000 times per simulated second. With a C compiler, ``do_step`` is one C c
 the readout, through the DART symbols dartpy exports), and with a compiled controller and no other
 co-simulation block the whole loop runs in C, chunks of 100 macro steps per call
 (:meth:`DartHexapod.fused_loop`, :mod:`cpgsim.robots.dart.fused`). The Python loop below stays the
-reference and the fallback (``CPGSIM_DART_NATIVE=0``, pushes, several world steps per macro step; the C
+reference and the fallback (``native=False``, pushes, several world steps per macro step; the C
 step is checked against it over each set-up's first steps): one ``setForces`` for the servos; collision
 objects identified by their (kept-alive) wrappers' ``id()`` after the first sight (the terrain is usually
 object 1, so object 2 is looked at first); every output (foot centres, body-frame toe forces,
@@ -79,8 +79,8 @@ class DartHexapod(HexapodPlant):
     - ``time_step``: the DART world step (s, default 1 ms); ``do_step``'s ``dt`` must be a
       multiple of it;
     - ``native``: step the world through the C step (:mod:`cpgsim.robots.dart.native`) when it can be built
-      (``True``), or always in Python (``False``); ``None`` (default): as the environment variable
-      ``CPGSIM_DART_NATIVE`` says at :meth:`setup` (C unless it is ``0``).
+      (``True``, default), or always in Python (``False``: the reference the C step is checked against); a
+      scenario sets it as ``robot.native``.
 
     Amputated legs' shapes are taken out of the world's collision group after the world is built, before
     the settle phase.
@@ -94,13 +94,13 @@ class DartHexapod(HexapodPlant):
                  q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
                  time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
                  disturbances: Sequence[Push | Mapping] | None = None, amputated: Sequence[int] = (),
-                 native: bool | None = None, **params: float) -> None:
+                 native: bool = True, **params: float) -> None:
         if detector not in DETECTORS:
             raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
         if not (math.isfinite(time_step) and time_step > 0):
             raise ParameterError(f"time_step must be > 0, got {time_step!r}")
         self.detector = detector
-        self.native = None if native is None else bool(native)
+        self.native = bool(native)
         self.time_step = float(time_step)
         self.world: dart.simulation.World | None = None
         self.model: HexapodModel | None = None
@@ -245,7 +245,7 @@ class DartHexapod(HexapodPlant):
     def _bind_native(self) -> None:
         """The C step (:mod:`cpgsim.robots.dart.native`) on this plant's world and buffers, when it works."""
         self.native_step = None
-        if not (dart_native.enabled() if self.native is None else self.native):
+        if not self.native:
             return
         readout = self.compiled_readout.c_entry() if self.compiled_readout is not None else None
         try:

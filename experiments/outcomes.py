@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from cpgsim.harness.results import Results
+from cpgsim.robots.description import FALL_TILT_DEG, fallen
 
 
 def tilt_deg(res: Results, robot: str) -> np.ndarray:
@@ -41,12 +42,13 @@ def tilt_deg(res: Results, robot: str) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1.0, 1.0)))
 
 
-def fall(res: Results, robot: str, fall_tilt_deg: float = 45.0) -> tuple[bool, float | None, str]:
-    """(fell, time, reason): the body touched anything or tilted past ``fall_tilt_deg``."""
+def fall(res: Results, robot: str, fall_tilt_deg: float = FALL_TILT_DEG) -> tuple[bool, float | None, str]:
+    """(fell, time, reason): the first sample :func:`cpgsim.robots.description.fallen` calls a fall (the body
+    touched anything or tilted past ``fall_tilt_deg``)."""
     tilt = tilt_deg(res, robot)
     key = f"{robot}.body_contact"
     contact = res[key].ravel() > 0.5 if key in res else np.zeros(len(tilt), bool)
-    bad = (tilt > fall_tilt_deg) | contact | ~np.isfinite(tilt)
+    bad = fallen(tilt, contact, fall_tilt_deg)
     if not bad.any():
         return False, None, ""
     k = int(np.argmax(bad))
@@ -130,7 +132,8 @@ def end_state(res: Results, robot: str, window_s: float = 5.0) -> dict[str, Any]
     return out
 
 
-def crossing(res: Results, robot: str, far_edge: float, margin: float, fall_tilt_deg: float = 45.0) -> dict[str, Any]:
+def crossing(res: Results, robot: str, far_edge: float, margin: float,
+             fall_tilt_deg: float = FALL_TILT_DEG) -> dict[str, Any]:
     """The ``criteria.cross`` check, for every controller: the body centre reaches ``far_edge + margin``
     (forward, y) before any fall. ``success`` plus ``crossed_time_s``, ``goal_y_m`` and ``max_y_m``."""
     fell, fell_t, _ = fall(res, robot, fall_tilt_deg)
@@ -150,7 +153,7 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
     pos = res[f"{robot}.body_position"]
     has_waits = waiting is not None
     waiting = np.zeros(len(t), bool) if waiting is None else np.asarray(waiting, bool).reshape(len(t))
-    fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", 45.0)))
+    fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", FALL_TILT_DEG)))
     tilt = tilt_deg(res, robot)
     stalled, stall_t = stall(t, pos[:, 1], waiting, float(criteria.get("stall_window_s", 5.0)),
                              float(criteria.get("stall_progress_m", 0.01)))

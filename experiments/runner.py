@@ -31,6 +31,7 @@ from cpgsim.experiments.yu import scenarios as yu
 from cpgsim.harness.errors import interruption
 from cpgsim.harness.results import Results, atomic_write
 from cpgsim.harness.simulate import SimulationError, Simulator
+from cpgsim.robots.description import FALL_TILT_DEG
 
 
 def scenario_names() -> list[str]:
@@ -63,7 +64,8 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
     return setup
 
 
-def fell_from(res: Results, robot: str, max_tilt: float = math.pi / 4) -> tuple[bool, float | None, str]:
+def fell_from(res: Results, robot: str,
+              max_tilt: float = math.radians(FALL_TILT_DEG)) -> tuple[bool, float | None, str]:
     """(fell, time, reason): body touched the ground or tilted over ``max_tilt`` (rad)."""
     return outcomes.fall(res, robot, math.degrees(max_tilt))
 
@@ -146,7 +148,7 @@ def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = Non
 
         feature = setup.terrain.params["features"][criteria["cross"]]
         crossed = outcomes.crossing(res, setup.robot, far_edge_y(feature), float(criteria.get("cross_margin_m", 0.0)),
-                                    float(criteria.get("fall_tilt_deg", 45.0)))
+                                    float(criteria.get("fall_tilt_deg", FALL_TILT_DEG)))
         checks["cross"] = crossed.pop("success")
     result = outcomes.evaluate(res, setup.robot, criteria, waiting, checks)
     result.update(crossed)

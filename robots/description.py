@@ -298,3 +298,17 @@ def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
 def tilt_angle(rotation: np.ndarray) -> float:
     """Angle (rad) between the body's ``z`` axis and the world vertical."""
     return math.acos(max(-1.0, min(1.0, float(rotation[2, 2]))))
+
+
+FALL_TILT_DEG = 45.0
+"""A body tilted past this (degrees from the vertical) has fallen."""
+
+
+def fallen(tilt_deg: np.ndarray | float, body_contact: np.ndarray | bool,
+           max_tilt_deg: float = FALL_TILT_DEG) -> np.ndarray:
+    """The one fall test, on a live plant (:meth:`cpgsim.robots.plant_base.HexapodPlant.fell`) and on recorded
+    results (:func:`cpgsim.experiments.outcomes.fall`), scalar or per sample: the body touched anything,
+    tilted past ``max_tilt_deg`` or its tilt is not a number."""
+    tilt = np.asarray(tilt_deg, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return (tilt > max_tilt_deg) | np.asarray(body_contact, dtype=bool) | ~np.isfinite(tilt)

@@ -40,7 +40,7 @@ from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import RobotGeometry
 from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
-from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK
+from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, FALL_TILT_DEG, fallen, tilt_angle
 from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
 from cpgsim.robots.ports import PORT_SLICES, READOUT_SIZE, declare_plant
 from cpgsim.robots.readout import readout_function
@@ -371,17 +371,15 @@ class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
     def _state_finite(self) -> bool:
         raise NotImplementedError
 
-    def fell(self, max_tilt: float = math.pi / 4) -> bool:
-        """The robot has fallen: body touched the ground, tilt above ``max_tilt`` or non-finite state."""
-        from cpgsim.robots.description import tilt_angle
-
+    def fell(self, max_tilt: float = math.radians(FALL_TILT_DEG)) -> bool:
+        """The robot has fallen (:func:`cpgsim.robots.description.fallen`: the body touched anything or tilted
+        past ``max_tilt``, rad), or its state is not finite."""
         if not self.is_set_up:
             return False
-        if self._body_contact:
-            return True
         if not self._state_finite():
             return True
-        return tilt_angle(self._body_rotation()) > max_tilt
+        tilt = math.degrees(tilt_angle(self._body_rotation()))
+        return bool(fallen(tilt, self._body_contact, math.degrees(max_tilt)))
 
     # -- exact state (ResumableBlock) ---------------------------------------------------------------
     def resume_from(self, snap) -> None:

@@ -23,11 +23,31 @@ the fast path at any chunk boundary.
 
 from __future__ import annotations
 
+import re
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from enum import IntEnum
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+
+FUSED_STATUS_HEADER = "c/fused_status.h"
+"""Where the fused loops' status codes are defined, for Python and every engine's C loop (relative to here)."""
+
+
+def _fused_statuses() -> dict[str, int]:
+    text = (Path(__file__).parent / FUSED_STATUS_HEADER).read_text(encoding="utf-8")
+    return {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_FUSED_(\w+)\s*=\s*(\d+)", text)}
+
+
+FusedStatus = IntEnum("FusedStatus", _fused_statuses(), module=__name__)
+FusedStatus.__doc__ = """What a fused loop's call ended with (``harness/c/fused_status.h``, the one definition):
+``DONE``; ``CONTROLLER_DIVERGED`` (the controller's state went non-finite at the last recorded row, the plant
+not stepped for it); ``EVALUATION_ERROR`` (the controller step or the plant's readout failed);
+``PLANT_DIVERGED`` (the engine's state went non-finite or out of range after the last recorded row). An
+engine's loop object handles ``TARGET_NOT_FINITE`` and ``NEW_CONTACT_OBJECT`` itself (through the plant's
+Python) and never returns them."""
 
 
 class ResumableBlock(ABC):
@@ -97,9 +117,9 @@ class FusedLoop(Protocol):
     """Each output port's columns in ``O``."""
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
-        """Macro steps ``k0 .. k1-1`` (at most a chunk): ``(rows, status, Y, O)`` -- the rows done, the status
-        (0 done, 1 the controller's state went non-finite at the last row, 2 an evaluation error, 3 the block's
-        own state went non-finite), the recorded signals and the block's output vectors per row."""
+        """Macro steps ``k0 .. k1-1`` (at most a chunk): ``(rows, status, Y, O)`` -- the rows done, a
+        :class:`FusedStatus` (``DONE``, ``CONTROLLER_DIVERGED``, ``EVALUATION_ERROR``, ``PLANT_DIVERGED``), the
+        recorded signals and the block's output vectors per row."""
         ...
 
 

@@ -9,7 +9,7 @@ same order as the Python loop of :func:`cpgsim.harness.master.run_master` (block
 with commit, record, block inputs from ``y``, block step), so the results are the same numbers. Between
 chunks the recorder streams, the progress bar moves and Ctrl-C is seen. The last row (``t_end``: no step)
 is left to the ordinary loop. The contract (:mod:`cpgsim.harness.contracts`) lives here, in the engine layer,
-and the robots implement it: this layer imports no robot. The runner's status 3 (the
+and the robots implement it: this layer imports no robot. The runner's ``FusedStatus.PLANT_DIVERGED`` (the
 plant's own state diverged) is an error of the block, named as such. A runner made on a trial thread of
 :func:`cpgsim.robots.mujoco.batch.run_batch` advances its chunks together with the other trials' (one C call
 per round, on threads): this loop does not change.
@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cpgsim.harness.contracts import FusedLoop, FusedLoopBlock, FusedRequest
+from cpgsim.harness.contracts import FusedLoop, FusedLoopBlock, FusedRequest, FusedStatus
 
 CHUNK = 100
 """Macro steps per C call (0.1 s simulated at 1 kHz)."""
@@ -63,6 +63,52 @@ class TimeGrid:
         return self.values.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
+class FusedLoopBase:
+    """What every engine's :class:`~cpgsim.harness.contracts.FusedLoop` shares: how it is built and chunked.
+
+    Built from the plant block and the master's :class:`~cpgsim.harness.contracts.FusedRequest` (and the
+    index arrays of :meth:`FusedRequest.indices`). Ownership, for the loop's life: ``indices`` (``u_idx``,
+    ``o_idx``, ``target_idx``, ``yi`` as contiguous int64: the C loop reads them), ``Y`` (a chunk's recorded
+    signals, one row per macro step) and ``O`` (the plant's output vector per row) are this object's; ``u``
+    and ``y`` are the master's, the controller's context is the bound step's, and the plant's buffers
+    (``plant.buffers``) are the plant's; the C loop only borrows them during a call. :meth:`run` clamps a
+    call to one chunk, hands the engine's :meth:`_run_chunk` the time grid as a C pointer, and returns the
+    status as a :class:`~cpgsim.harness.contracts.FusedStatus`. After each call the engine brings the plant's
+    Python side up to date through the plant's ``take_fused_steps(t, q_target, target_changed)``."""
+
+    def __init__(self, plant: Any, request: FusedRequest, u_idx: np.ndarray, o_idx: np.ndarray,
+                 target_idx: np.ndarray, chunk: int = CHUNK) -> None:
+        self.plant = plant
+        self.request = request
+        self.output_slices = plant.output_slices
+        self.indices = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, target_idx, request.yi)]
+        self.Y = np.zeros((chunk, max(1, len(request.yi))))
+        self.O = np.zeros((chunk, plant.buffers.out.size))
+        self.chunk = chunk
+        self.status = ctypes.c_int(0)
+        self.grid = TimeGrid()
+
+    def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, FusedStatus, np.ndarray, np.ndarray]:
+        """Macro steps ``k0 .. k1-1`` (at most a chunk); see :class:`~cpgsim.harness.contracts.FusedLoop`."""
+        k1 = min(k1, k0 + self.chunk)
+        rows, status = self._run_chunk(k0, k1, times, self.grid.pointer(times))
+        return rows, FusedStatus(status), self.Y[:rows], self.O[:rows]
+
+    def _run_chunk(self, k0: int, k1: int, times: np.ndarray, times_p: Any) -> tuple[int, int]:
+        """The engine's C loop over macro steps ``k0 .. k1-1``: ``(rows recorded, status)``."""
+        raise NotImplementedError
+
+    def index_pointers(self) -> tuple:
+        """``indices`` as C ``long long *`` (``u_idx``, ``o_idx``, ``target_idx``, ``yi``)."""
+        lp = ctypes.POINTER(ctypes.c_longlong)
+        return tuple(a.ctypes.data_as(lp) for a in self.indices)
+
+    @staticmethod
+    def double_pointer(a: np.ndarray, row: int = 0) -> Any:
+        """A C ``double *`` to row ``row`` of a contiguous float64 array (its first element by default)."""
+        return ctypes.cast(a.ctypes.data + row * (a.strides[0] if a.ndim > 1 else 0), ctypes.POINTER(ctypes.c_double))
+
+
 def column_runs(columns: np.ndarray) -> list[tuple[slice, slice]]:
     """``(columns slice, positions slice)`` for each run of consecutive column numbers in ``columns``.
 
@@ -95,11 +141,11 @@ def run_fused(runner: FusedLoop, plan: Any, rec: Any, times: np.ndarray, n: int,
         for _path, port, cols, elems in plan.c_fancy:
             data[:, cols] = outs[:, slices[port]][:, elems]
         rec.n = k + rows
-        if status == 1:
+        if status == FusedStatus.CONTROLLER_DIVERGED:
             on_diverged()
-        if status == 2:
+        if status == FusedStatus.EVALUATION_ERROR:
             raise RuntimeError("compiled step function reported an evaluation error")
-        if status == 3:
+        if status == FusedStatus.PLANT_DIVERGED:
             raise FloatingPointError(f"the physics engine's state went non-finite or out of range after "
                                      f"t = {float(times[k + rows - 1]):.6g} s (the plant diverged)")
         progress_bar.update(rows)

@@ -77,3 +77,28 @@ def test_python_codes_are_the_headers():
 def test_the_header_is_part_of_every_key_its_readers_are_part_of(module):
     closure = module_closure(str(Path(cpgsim.__file__).parent / module))
     assert str(HEADER.resolve()) in closure
+
+
+FUSED_HEADER = Path(cpgsim.__file__).parent / "harness" / "c" / "fused_status.h"
+
+
+def test_the_fused_status_enum_is_the_headers():
+    """One status-code enum for every fused loop: Python's FusedStatus is read from harness/c/fused_status.h,
+    the master's outcomes are 0-3 and the engine-internal ones follow."""
+    from cpgsim.harness.contracts import FusedStatus
+
+    codes = {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_FUSED_(\w+)\s*=\s*(\d+)", FUSED_HEADER.read_text())}
+    assert {s.name: s.value for s in FusedStatus} == codes
+    master = ("DONE", "CONTROLLER_DIVERGED", "EVALUATION_ERROR", "PLANT_DIVERGED")
+    assert [FusedStatus[n] for n in master] == [0, 1, 2, 3]
+    assert len(set(codes.values())) == len(codes)
+
+
+@pytest.mark.parametrize("package_name, name", [("cpgsim.robots.mujoco", "c/mujoco_loop.c"),
+                                                ("cpgsim.robots.dart", "c/dart_loop.c")])
+def test_each_fused_loop_sets_its_status_from_the_enum(package_name, name):
+    raw = (Path(cpgsim.__file__).parent / package_name.split(".", 1)[1].replace(".", "/") / name).read_text()
+    assert '#include "../../../harness/c/fused_status.h"' in raw
+    assert re.findall(r"status = CPGSIM_FUSED_\w+", raw)
+    assert not re.search(r"status = \d", raw), "a status written as a bare number"
+    assert "CPGSIM_FUSED_DONE" in c_source(package_name, name)

@@ -21,78 +21,66 @@ import ctypes
 
 import numpy as np
 
-from cpgsim.harness.contracts import FusedRequest
-from cpgsim.harness.fused import TimeGrid
+from cpgsim.harness.contracts import FusedRequest, FusedStatus
+from cpgsim.harness.fused import FusedLoopBase
 from cpgsim.robots.dart.native import NativeDartStep
 
 
-class FusedLoop:
+class FusedLoop(FusedLoopBase):
     """One plant's world and one controller's bound step, looped in C (see the module docstring)."""
 
     def __init__(self, plant, native: NativeDartStep, request: FusedRequest, u_idx: np.ndarray, o_idx: np.ndarray,
-                 qt_idx: np.ndarray, chunk: int = 100) -> None:
-        self.plant, self.native = plant, native
-        self.output_slices = plant.output_slices
+                 qt_idx: np.ndarray) -> None:
+        super().__init__(plant, request, u_idx, o_idx, qt_idx)
+        self.native = native
         dp = ctypes.POINTER(ctypes.c_double)
-        lp = ctypes.POINTER(ctypes.c_longlong)
-        yi = request.yi
-        self._keep = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, qt_idx, yi)]
-        self._y, self._qt_idx = request.y, np.asarray(qt_idx)
         out = plant.buffers.out
-        self.Y = np.zeros((chunk, max(1, len(yi))))
-        self.O = np.zeros((chunk, out.size))
-        self.chunk = chunk
         q_target, changed = plant.servo_state
-        self.q_target = q_target.copy()  # the C loop's target (copied to the plant after each call)
+        self.q_target = q_target.copy()  # the C loop's targets (handed to the plant after each call)
         self._changed = ctypes.c_int(int(changed))
         self._updated = ctypes.c_int(0)
-        self._status = ctypes.c_int(0)
         self._fn = native.library.cpgsim_dart_loop
-        u_i, o_i, q_i, y_i = (a.ctypes.data_as(lp) for a in self._keep)
+        u_i, o_i, q_i, y_i = self.index_pointers()
         self._head = (native.context, ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx,
                       request.nz, request.u.ctypes.data_as(dp), request.y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
                       out.ctypes.data_as(dp), out.size, q_i, self.q_target.ctypes.data_as(dp),
-                      ctypes.byref(self._changed), ctypes.byref(self._updated), float(plant.values["kp"]), len(yi),
-                      y_i)
-        self._grid = TimeGrid()
+                      ctypes.byref(self._changed), ctypes.byref(self._updated), float(plant.values["kp"]),
+                      len(request.yi), y_i)
+        self._qt_idx = np.asarray(qt_idx)
 
-    def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
-        """Macro steps ``k0 .. k1-1`` (at most a chunk); see the module docstring."""
-        k1 = min(k1, k0 + self.chunk)
-        times_p = self._grid.pointer(times)
-        plant, k, status = self.plant, k0, 0
+    def _run_chunk(self, k0: int, k1: int, times: np.ndarray, times_p) -> tuple[int, int]:
+        """Macro steps ``k0 .. k1-1``; the statuses the plant's Python handles are handled here (see the module
+        docstring), so only ``DONE``, ``CONTROLLER_DIVERGED`` and ``EVALUATION_ERROR`` come back."""
+        plant, k, status = self.plant, k0, FusedStatus.DONE
         while k < k1:
             if plant.native_step is not self.native:
                 raise RuntimeError(f"{plant.name}: the C step of DART disagreed with dartpy's bindings; "
                                    "run with robot.native = false (the plant's native=False)")
             checking = self.native.checks_left > 0
             row = k - k0
-            rows = self._fn(*self._head, self._rows(self.Y, row), self._rows(self.O, row), k,
-                            k + 1 if checking else k1, times_p, ctypes.byref(self._status))
-            status = self._status.value
+            rows = self._fn(*self._head, self.double_pointer(self.Y, row), self.double_pointer(self.O, row), k,
+                            k + 1 if checking else k1, times_p, ctypes.byref(self.status))
+            status = self.status.value
             k += rows
-            self._sync(k - 1 if status in (1, 4) else k)  # 1, 4: the last row recorded, its plant step not done
-            if status in (1, 2):
+            # the last row recorded but its plant step not done: the plant stays at that row's time
+            self._sync(k - 1 if status in (FusedStatus.CONTROLLER_DIVERGED, FusedStatus.TARGET_NOT_FINITE) else k)
+            if status in (FusedStatus.CONTROLLER_DIVERGED, FusedStatus.EVALUATION_ERROR):
                 break
-            if status == 4:  # a target not finite: the plant refuses it (ModelError), as in the master's loop
-                plant.set_inputs({"q_target": self._y[self._qt_idx].copy()})
+            if status == FusedStatus.TARGET_NOT_FINITE:  # the plant refuses it (ModelError), as in the master's loop
+                plant.set_inputs({"q_target": self.request.y[self._qt_idx].copy()})
                 plant.do_step(float(times[k - 1]), float(times[k] - times[k - 1]))
                 q_target, changed = plant.servo_state
                 self.q_target[:] = q_target
                 self._changed.value = int(changed)
-            elif status == 5:  # the world step met a collision object for the first time
+            elif status == FusedStatus.NEW_CONTACT_OBJECT:  # the world step met a collision object for the first time
                 plant.read_contacts()
                 plant.update_outputs()
             elif checking:
                 plant.check_native_step()
-            status = 0
-        return k - k0, status, self.Y[:k - k0], self.O[:k - k0]
-
-    @staticmethod
-    def _rows(a: np.ndarray, row: int):
-        return ctypes.cast(a.ctypes.data + row * a.strides[0], ctypes.POINTER(ctypes.c_double))
+            status = FusedStatus.DONE
+        return k - k0, status
 
     def _sync(self, k: int) -> None:
         """The plant's Python state once the C loop has stepped it to ``times[k]``."""
-        updated, self._updated.value = self._updated.value, 0
-        self.plant.take_c_loop_state(float(self._grid.values[k]), self.q_target, bool(self._changed.value), updated > 0)
+        self._updated.value = 0
+        self.plant.take_fused_steps(float(self.grid.values[k]), self.q_target, bool(self._changed.value))

@@ -406,23 +406,6 @@ class DartHexapod(HexapodPlant):
 
         return FusedLoop(self, self.native_step, request, *indices)
 
-    def take_c_loop_state(self, t: float, q_target: np.ndarray, changed: bool, updated: bool) -> None:
-        """The Python side brought up to date after the C loop stepped the plant to ``t`` (targets ``q_target``;
-        ``updated``: some step took a new target, as :meth:`_update_servo` does)."""
-        self._n_steps += int(round((t - self._t) / self.time_step))
-        self._t = t
-        if updated:
-            self._q_target = q_target.copy()
-            self._q_target_prev = self._q_target
-        self._target_changed = changed
-        self._body_contact = bool(self._contact[0])
-
-    @property
-    def servo_state(self) -> tuple[np.ndarray, bool]:
-        """``(q_target, target_changed)``: the targets the servos hold and whether the next step must apply
-        them (what a fused loop starts from)."""
-        return self._q_target, self._target_changed
-
     # -- the fall test ----------------------------------------------------------------------------
     def _state_finite(self) -> bool:
         return bool(np.all(np.isfinite(self._skel.getPositions())))

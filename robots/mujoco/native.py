@@ -23,8 +23,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cpgsim.harness.contracts import FusedRequest
-from cpgsim.harness.fused import TimeGrid
+from cpgsim.harness.contracts import FusedRequest, FusedStatus
+from cpgsim.harness.fused import FusedLoopBase
 from cpgsim.harness.toolchain import (
     NativeUnavailable,
     Prototypes,
@@ -124,45 +124,34 @@ class NativeMujocoStep:
         return self._fn(m, d, n, *self._ptrs) == 0
 
 
-class FusedLoop:
+class FusedLoop(FusedLoopBase):
     """The controller's bound compiled step and the plant in one C loop (:func:`cpgsim_mj_loop`).
 
-    Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`. ``run(k0, k1, times)`` does macro
-    steps ``k0 .. k1-1`` and returns ``(rows, status, Y, O)``: the rows recorded, the status (0 done, 1 the
-    controller's state went non-finite at the last row, 2 an evaluation error, 3 MuJoCo's state went
-    non-finite or out of range after the last row), the recorded signals ``y[yi]`` and the plant's output
-    vectors per row (columns: ``slices``). Made on a trial thread of a
-    :class:`~cpgsim.robots.mujoco.batch.Batch`, it hands each chunk to the batch, which advances it with the
-    other trials' chunks in one ``cpgsim_mj_batch`` call: the same C loop on the same buffers, so the same
-    numbers.
+    Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`; a
+    :class:`~cpgsim.harness.fused.FusedLoopBase` (``run(k0, k1, times)`` returns ``(rows, status, Y, O)``; the
+    status may be ``PLANT_DIVERGED``: MuJoCo's state went non-finite or out of range after the last row).
+    Made on a trial thread of a :class:`~cpgsim.robots.mujoco.batch.Batch`, it hands each chunk to the batch,
+    which advances it with the other trials' chunks in one ``cpgsim_mj_batch`` call: the same C loop on the
+    same buffers, so the same numbers.
     """
 
     def __init__(self, plant, native: NativeMujocoStep, request: FusedRequest, u_idx: np.ndarray,
-                 o_idx: np.ndarray, qt_idx: np.ndarray, chunk: int = 100) -> None:
-        self.plant, self.native = plant, native
-        self.output_slices = plant.output_slices
-        self._dt = request.dt
+                 o_idx: np.ndarray, qt_idx: np.ndarray) -> None:
+        super().__init__(plant, request, u_idx, o_idx, qt_idx)
+        self.native = native
         b = plant.buffers
         feval, fctx = plant.compiled_readout.c_entry()  # the readout compiled on the plant's buffers
         dp = ctypes.POINTER(ctypes.c_double)
-        lp = ctypes.POINTER(ctypes.c_longlong)
-        yi = request.yi
-        self._keep = [np.ascontiguousarray(a, dtype=np.int64) for a in (u_idx, o_idx, qt_idx, yi)]
-        self.Y = np.zeros((chunk, max(1, len(yi))))
-        self.O = np.zeros((chunk, b.out.size))
-        self.chunk = chunk
-        self._status = ctypes.c_int(0)
         lib = native.library
         self._fn = lib.cpgsim_mj_loop
-        u_i, o_i, q_i, y_i = (a.ctypes.data_as(lp) for a in self._keep)
+        u_i, o_i, q_i, y_i = self.index_pointers()
         self._head = (*native.model_data, plant.steps_for(request.dt), *native.sums,
                       ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx, request.nz,
                       request.u.ctypes.data_as(dp), request.y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
                       ctypes.c_void_p(feval), ctypes.c_void_p(fctx), b.pos.ctypes.data_as(dp),
                       b.vel.ctypes.data_as(dp), b.contact.ctypes.data_as(dp),
-                      b.out.ctypes.data_as(dp), b.out.size, q_i, len(yi), y_i,
+                      b.out.ctypes.data_as(dp), b.out.size, q_i, len(request.yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
-        self._grid = TimeGrid()
         self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco.batch
         self.trial = None
         if self.batch is not None:
@@ -176,14 +165,13 @@ class FusedLoop:
             self._free(self.trial)
             self.trial = None
 
-    def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, int, np.ndarray, np.ndarray]:
-        k1 = min(k1, k0 + self.chunk)
-        times_p = self._grid.pointer(times)
+    def _run_chunk(self, k0: int, k1: int, times: np.ndarray, times_p) -> tuple[int, int]:
         if self.batch is not None:  # advanced with the other trials of the batch, in one C call
             rows, status = self.batch.advance(self, k0, k1, times_p, last=k1 >= len(times) - 1)
         else:
-            rows = self._fn(*self._head, k0, k1, times_p, ctypes.byref(self._status))
-            status = self._status.value
-        stepped = rows - (1 if status == 1 else 0)
-        self.plant.take_c_loop_steps(stepped, float(times[k0 + stepped]) if stepped else None, self._dt)
-        return rows, status, self.Y[:rows], self.O[:rows]
+            rows = self._fn(*self._head, k0, k1, times_p, ctypes.byref(self.status))
+            status = self.status.value
+        stepped = rows - (1 if status == FusedStatus.CONTROLLER_DIVERGED else 0)
+        if stepped > 0:
+            self.plant.take_fused_steps(float(times[k0 + stepped]), np.array(self.plant.data.ctrl), False)
+        return rows, status

@@ -246,14 +246,8 @@ class MujocoHexapod(HexapodPlant):
 
         return FusedLoop(self, self.native_step, request, *indices)
 
-    def take_c_loop_steps(self, steps: int, t: float | None, dt: float) -> None:
-        """Bring the Python side up to date after ``steps`` macro steps ``dt`` of the fused loop (ending at ``t``)."""
-        if steps <= 0:
-            return
-        self._t = t
-        self._n_steps += steps * self.steps_for(dt)
-        self._q_target = np.array(self.data.ctrl)
-        self._q_target_prev = self._q_target
+    def _take_fused_readings(self) -> None:
+        """The C loop's contact sums and flags (body, then the six legs' links) into the buffers."""
         flags = self.native_step.flags
         self._force_world[:] = self.native_step.force
         self._body_contact = bool(flags[0])

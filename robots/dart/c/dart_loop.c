@@ -4,6 +4,7 @@
 #include <string.h>
 #include <time.h>
 #include "../../c/plant_contacts.h"
+#include "../../../harness/c/fused_status.h"
 
 typedef struct { double *data; ptrdiff_t rows; } vecxd;  /* Eigen::VectorXd's storage */
 typedef void (*world_step_t)(void *, _Bool);
@@ -165,12 +166,10 @@ static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz
 /* The closed loop of a compiled controller step and this plant for macro steps k0 .. k1-1 (one world step
    each), as the co-simulation master and the plant's Python do them (Jacobi, no feedthrough): u <- plant
    outputs O; controller step at times[k] with commit; record row k (Yrec: y[yi], Orec: O); q_target <-
-   y[qt] (a new target: forces[6 + i] = kp q_target[i], as DartHexapod._update_servo_forces); world step,
-   contact sums, outputs (the readout writes O). Returns the rows recorded and sets *status: 0 done, 1 the
-   controller state went non-finite at the last row (plant not stepped), 2 the controller step failed (row
-   not recorded) or the readout failed, 4 a target not finite at the last row (plant not stepped: the
-   caller hands it to the plant's Python), 5 the last row's world step met an unregistered collision object
-   (contacts and outputs not read: the caller reads them). *changed: the plant's "target changed" flag;
+   y[qt] (a new target: forces[6 + i] = kp q_target[i], as DartHexapod._apply_servo); world step,
+   contact sums, outputs (the readout writes O). Returns the rows recorded and sets *status
+   (harness/c/fused_status.h): DONE, CONTROLLER_DIVERGED, EVALUATION_ERROR, TARGET_NOT_FINITE (the caller
+   hands the target to the plant's Python), NEW_CONTACT_OBJECT (the caller reads that step's contacts). *changed: the plant's "target changed" flag;
    *updated counts the steps that took a new target. */
 int cpgsim_dart_loop(void *vc, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                      int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
@@ -200,16 +199,16 @@ static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz
         clock_gettime(CLOCK_MONOTONIC, &t0);
         int rc = commit(sctx, times[k], nx, nz);
         c->ctrl_seconds += seconds_since(&t0);
-        if (rc == 2) { *status = 2; return k - k0; }
+        if (rc == 2) { *status = CPGSIM_FUSED_EVALUATION_ERROR; return k - k0; }
         for (int i = 0; i < npick; ++i) yr[i] = y[yi[i]];
         for (int i = 0; i < nO; ++i) orow[i] = O[i];
-        if (rc == 1) { *status = 1; return k - k0 + 1; }
+        if (rc == 1) { *status = CPGSIM_FUSED_CONTROLLER_DIVERGED; return k - k0 + 1; }
         int finite = 1;
         for (int i = 0; i < 18; ++i) {  /* what the plant's numpy sum might call not finite goes to Python */
             q[i] = y[qt_idx[i]];
             finite &= q[i] - q[i] == 0.0 && q[i] < 1e306 && q[i] > -1e306;
         }
-        if (!finite) { *status = 4; return k - k0 + 1; }
+        if (!finite) { *status = CPGSIM_FUSED_TARGET_NOT_FINITE; return k - k0 + 1; }
         if (*changed || memcmp(q, qt, sizeof q)) {
             memcpy(qt, q, sizeof q);
             for (int i = 0; i < 18; ++i) c->forces.data[6 + i] = qt[i] * kp;
@@ -217,10 +216,10 @@ static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz
         }
         *changed = 0;
         rc = cpgsim_dart_step(c);
-        if (rc == 1) { *status = 5; return k - k0 + 1; }
-        if (rc < 0) { *status = 2; return k - k0 + 1; }
+        if (rc == 1) { *status = CPGSIM_FUSED_NEW_CONTACT_OBJECT; return k - k0 + 1; }
+        if (rc < 0) { *status = CPGSIM_FUSED_EVALUATION_ERROR; return k - k0 + 1; }
     }
-    *status = 0;
+    *status = CPGSIM_FUSED_DONE;
     return k1 - k0;
 }
 

@@ -5,6 +5,7 @@
 #include <string.h>
 #include <mujoco/mujoco.h>
 #include "../../c/plant_contacts.h"
+#include "../../../harness/c/fused_status.h"
 /* codes: per geom, robots/c/plant_contacts.h (a toe's leg, CPGSIM_CONTACT_LINK + leg, ..._BODY, ..._OTHER).
    force: 18 world-frame ground forces on the feet (mean over the n sub-steps); flags[0] body contact,
    flags[1..6] link contact per leg (any sub-step). Returns the number of sub-steps whose state went
@@ -66,10 +67,10 @@ typedef struct {
    co-simulation master does them (Jacobi, no feedthrough): u <- plant outputs O; controller step at
    times[k] with commit (x, z move on when finite); record row k (Yrec: y[yi], Orec: O); ctrl <- y[qt];
    n sub-steps of MuJoCo with the contact sums; O <- readout(qpos, qvel, force, body contact).
-   Sets t->rows (the rows recorded) and t->status: 0 done, 1 the controller state went non-finite at the
-   last recorded row (the plant was not stepped), 2 the controller step failed (row not recorded) or the
-   readout failed (row recorded), 3 MuJoCo's state went non-finite or out of range in the sub-steps after
-   the last recorded row (mj_step warns and resets its data then; the readout is not updated).
+   Sets t->rows (the rows recorded) and t->status (harness/c/fused_status.h): DONE; CONTROLLER_DIVERGED
+   (the plant was not stepped); EVALUATION_ERROR (the controller step failed: row not recorded; or the
+   readout failed: row recorded); PLANT_DIVERGED: MuJoCo's state went non-finite or out of range in the
+   sub-steps after the last recorded row (mj_step warns and resets its data then; the readout is not updated).
    The one loop both entry points run: cpgsim_mj_loop (one trial) and cpgsim_mj_batch (many, threads). */
 static int bad_state_warnings(const mjData *d) {  /* mj_step's count of non-finite/huge qpos, qvel, qacc */
   return d->warning[mjWARN_BADQPOS].number + d->warning[mjWARN_BADQVEL].number + d->warning[mjWARN_BADQACC].number;
@@ -82,24 +83,24 @@ static void trial_loop(cpgsim_mj_trial *t) {
   eval_fn readout = (eval_fn)t->feval;
   const double *y = t->y, *O = t->O;
   int k, i, rc, k0 = t->k0, nbad0;
-  t->status = 0;
+  t->status = CPGSIM_FUSED_DONE;
   for (k = k0; k < t->k1; ++k) {
     double *yr = t->Yrec + (long)(k - k0) * t->npick, *orow = t->Orec + (long)(k - k0) * t->nO;
     for (i = 0; i < t->nmap; ++i) t->u[t->u_idx[i]] = O[t->o_idx[i]];
     rc = commit(t->sctx, t->times[k], t->nx, t->nz);
-    if (rc == 2) { t->status = 2; t->rows = k - k0; return; }
+    if (rc == 2) { t->status = CPGSIM_FUSED_EVALUATION_ERROR; t->rows = k - k0; return; }
     for (i = 0; i < t->npick; ++i) yr[i] = y[t->yi[i]];
     for (i = 0; i < t->nO; ++i) orow[i] = O[i];
-    if (rc == 1) { t->status = 1; t->rows = k - k0 + 1; return; }
+    if (rc == 1) { t->status = CPGSIM_FUSED_CONTROLLER_DIVERGED; t->rows = k - k0 + 1; return; }
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
     nbad0 = bad_state_warnings(d);
     if (substeps(m, d, t->nsub, t->codes, t->force, t->flags) || bad_state_warnings(d) != nbad0) {
-      t->status = 3; t->rows = k - k0 + 1; return;
+      t->status = CPGSIM_FUSED_PLANT_DIVERGED; t->rows = k - k0 + 1; return;
     }
     for (i = 0; i < m->nq; ++i) t->rpos[i] = d->qpos[i];
     for (i = 0; i < m->nv; ++i) t->rvel[i] = d->qvel[i];
     t->rcontact[0] = t->flags[0];
-    if (readout(t->rctx)) { t->status = 2; t->rows = k - k0 + 1; return; }
+    if (readout(t->rctx)) { t->status = CPGSIM_FUSED_EVALUATION_ERROR; t->rows = k - k0 + 1; return; }
   }
   t->rows = t->k1 - k0;
 }
@@ -133,7 +134,7 @@ void *cpgsim_mj_trial_new(const mjModel *m, mjData *d, int nsub, const int *code
 }
 void cpgsim_mj_trial_range(void *p, int k0, int k1, const double *times) {
   cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
-  t->k0 = k0; t->k1 = k1; t->times = times; t->rows = 0; t->status = 0;
+  t->k0 = k0; t->k1 = k1; t->times = times; t->rows = 0; t->status = CPGSIM_FUSED_DONE;
 }
 int cpgsim_mj_trial_result(void *p, int *status) {
   cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;

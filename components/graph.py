@@ -313,7 +313,7 @@ class FlatGraph:
         self.clock_edges: list[tuple[str, str]] = []  # (output clock, input clock) of FMU blocks, by leaf path
         self.clock_order: list[str] = []  # co-simulation blocks with clock sources before their destinations
 
-    def _resolve_out(self, name: str) -> str:
+    def resolve_out(self, name: str) -> str:
         seen = set()
         while name.startswith("@"):
             if name in seen:
@@ -336,14 +336,14 @@ class FlatGraph:
 
     def resolve(self) -> None:
         for dst, src in self.raw_edges:
-            s = self._resolve_out(src)
+            s = self.resolve_out(src)
             for d in self._resolve_in(dst):
                 self.sources[d] = s
         for name in self.inputs:
             for d in self._resolve_in("@" + name):
                 self.sources[d] = "$" + name
         for name in self.outputs:
-            self.output_sources[name] = self._resolve_out("@" + name)
+            self.output_sources[name] = self.resolve_out("@" + name)
         self._insert_conversions()
         self._wire_clocks()
 

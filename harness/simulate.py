@@ -310,7 +310,7 @@ class Simulator:
     def aliases(self) -> dict[str, str]:
         """Exposed graph outputs (nested ``sub.out`` and top-level ``out``) -> the leaf port they show."""
         flat = self.model.flat
-        out = {name: flat._resolve_out("@" + name) for name in flat.aliases_out}
+        out = {name: flat.resolve_out("@" + name) for name in flat.aliases_out}
         out.update(self.model.graph_outputs)
         return {k: v for k, v in out.items() if k != v}
 

@@ -84,11 +84,15 @@ def _check_replaceable(path: Path) -> None:
                            "cpgsim never empties it; choose another -o")
 
 
-def remove_run(path: Path) -> None:
-    """Delete the files a run's manifest lists, then the folders left empty; anything else stays."""
+def remove_run(path: Path) -> bool:
+    """Delete the files a run's manifest lists, then the folders left empty; anything else stays.
+
+    Returns True when ``path`` is gone (or was never there). When files the manifest does not list remain,
+    the manifest stays too (returns False): a folder is never left holding cpgsim's leftovers without the
+    marker that says so, whatever moment the process is killed at (see :func:`_set_aside`)."""
     doc = read_manifest(path)
-    if doc is None:
-        return
+    if doc is None:  # nothing of cpgsim's to delete: only a missing or empty folder is free for a new run
+        return not path.exists() or (path.is_dir() and not path.is_symlink() and not any(path.iterdir()))
     root = path.resolve()
     temporaries = [p.name for p in path.glob(f"{_TMP_PREFIX}*")]  # of an atomic write that was killed
     for name in [*doc["files"], *temporaries]:
@@ -98,6 +102,8 @@ def remove_run(path: Path) -> None:
                 target.unlink()
         except OSError:
             pass
+    if any(p.name != MANIFEST and not p.is_dir() for p in path.rglob("*")):
+        return False  # files cpgsim did not list: keep the marker, the caller sets the folder aside
     (path / MANIFEST).unlink(missing_ok=True)
     for folder in sorted((p for p in path.rglob("*") if p.is_dir() and not p.is_symlink()),
                          key=lambda p: len(p.parts), reverse=True):
@@ -109,6 +115,20 @@ def remove_run(path: Path) -> None:
         path.rmdir()
     except OSError:
         pass
+    return not path.exists()
+
+
+def _set_aside(folder: Path, name: str, what: str) -> Path:
+    """Move ``folder`` (a run of cpgsim's whose own files are deleted but which still holds files its manifest
+    does not list) to ``name.kept-TIME-PID`` beside it, then drop its manifest there: nothing that cpgsim did
+    not write is deleted or overwritten, and the name is free for the next run. The folder carries its
+    manifest until it has been moved, so a kill at any moment leaves a folder cpgsim recognises."""
+    kept = folder.with_name(f"{name}.kept-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}")
+    os.rename(folder, kept)
+    (kept / MANIFEST).unlink(missing_ok=True)
+    print(f"cpgsim: warning: files not written by cpgsim were in {what} ({name}): moved to {kept}",
+          file=sys.stderr)
+    return kept
 
 
 def _remove_unfinished_start(folder: Path) -> None:
@@ -147,12 +167,8 @@ def _swap_in(new: Path, path: Path) -> None:
         os.rename(path, old)
         os.rename(new, path)
         new = old
-    remove_run(new)  # now the previous run
-    if new.exists():
-        kept = path.with_name(f"{path.name}.kept-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}")
-        os.rename(new, kept)
-        print(f"cpgsim: warning: files not written by cpgsim were in the previous run {path}: moved to {kept}",
-              file=sys.stderr)
+    if not remove_run(new):  # ``new`` is the previous run now
+        _set_aside(new, path.name, "the previous run")
 
 
 def lock_path(path: Path) -> Path:
@@ -217,9 +233,8 @@ def run_directory(path: str | Path, expected: list[str]) -> Iterator[Path]:
         _check_replaceable(path)
         work = partial_path(path)
         _check_replaceable(work)
-        remove_run(work)
-        if work.exists():
-            raise ResultsError(f"{work} holds files cpgsim did not write: move them away")
+        if not remove_run(work):  # a killed run's leftovers beside files it did not list (or the user's)
+            _set_aside(work, work.name, "the unfinished run")
         for stale in path.parent.glob(f".{path.name}.partial-new.*"):
             _remove_unfinished_start(stale)
         fresh = path.with_name(f".{path.name}.partial-new.{os.getpid()}")

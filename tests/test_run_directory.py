@@ -267,3 +267,132 @@ def test_the_readmes_run_then_convert_sequence_twice_keeps_one_folder(tmp_path, 
     err = capsys.readouterr().err
     assert "moved to" not in err and "warning" not in err
     assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["demo"]
+
+
+# A run killed at the moment its k-th file is opened (``os.kill(SIGKILL)`` from an audit hook: the same point
+# every time, no sleeps), then the next run into the same folder.
+KILL_AT_FILE = textwrap.dedent("""
+    import os, signal, sys
+    from pathlib import Path
+    out, k = Path(sys.argv[1]), int(sys.argv[2])
+    opened = []
+    def hook(event, args):  # a file opened for writing, or renamed into place (an atomic write)
+        if event == "open" and isinstance(args[0], (str, Path)) and str(args[1]).startswith(("w", "x", "a")):
+            target = args[0]
+        elif event in ("os.rename", "os.replace") and isinstance(args[1], (str, Path)):
+            target = args[1]
+        else:
+            return
+        if Path(target).resolve().parent.name.startswith((out.name + ".partial", "." + out.name + ".partial")):
+            opened.append(target)
+            if len(opened) > k:
+                os.kill(os.getpid(), signal.SIGKILL)
+    sys.addaudithook(hook)
+    if sys.argv[3] == "cli":
+        from cpgsim.cli.main import main
+        main(["run", "flat", "-o", str(out), "--t-end", "0.05", "--no-progress"])
+    else:
+        from cpgsim.cli.commands.run import RUN_FILES
+        from cpgsim.harness.rundir import run_directory
+        with run_directory(out, RUN_FILES) as work:
+            for name in ["scenario.toml", "results.arrow", "gait.png", "elevator_hits.png", "report.html"]:
+                with open(work / name, "w") as f:
+                    f.write(name)
+""")
+
+
+def _kill_at_file(tmp_path: Path, out: Path, k: int, how: str) -> None:
+    script = tmp_path / "kill_at_file.py"
+    script.write_text(KILL_AT_FILE)
+    proc = subprocess.run([sys.executable, str(script), str(out), str(k), how], capture_output=True, timeout=300)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
+
+
+def _assert_taken_over(tmp_path: Path, run: Path) -> None:
+    """Whatever the killed run left is cpgsim's (a manifest in every folder it left), and the next run goes
+    through, with nothing left beside the run."""
+    part = partial_path(run)
+    if part.exists():
+        assert read_manifest(part) is not None and read_manifest(part)["complete"] is False
+    make_run(run, {"summary.json": "next"})
+    assert (run / "summary.json").read_text() == "next" and not part.exists()
+    assert not list(tmp_path.glob("*.kept-*")) and not list(tmp_path.glob(".run.*"))
+
+
+@pytest.mark.parametrize("k", [0, 2, 4, pytest.param(1, marks=pytest.mark.slow),
+                               pytest.param(3, marks=pytest.mark.slow)])
+def test_a_run_killed_after_any_file_leaves_a_partial_run_the_next_one_takes_over(tmp_path, k):
+    """Killed as its k-th file (manifest first) is opened: the partial folder always carries its manifest,
+    listing every file the run writes (elevator_hits.png was missing: a killed `cpgsim demo` left a PNG
+    that no manifest claimed, and every later run refused the folder)."""
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "first"})
+    _kill_at_file(tmp_path, run, k, "files")
+    _assert_taken_over(tmp_path, run)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", [1, 4, 8, 11])
+def test_cpgsim_run_killed_after_any_file_leaves_a_partial_run_the_next_one_takes_over(tmp_path, k):
+    """The same with `cpgsim run flat` itself (about 5 s a kill point: a simulation, plots and a report)."""
+    run = tmp_path / "run"
+    make_run(run, {"summary.json": "first"})
+    _kill_at_file(tmp_path, run, k, "cli")
+    _assert_taken_over(tmp_path, run)
+
+
+@pytest.mark.slow  # about 3 s: a short simulation with its plots and report
+def test_every_file_a_run_writes_is_claimed_by_its_manifest_before_it_is_written(tmp_path):
+    """`cpgsim run`: at the moment each file is opened for writing in the run being built, the partial
+    folder's manifest already lists it (else a kill right then leaves a file that no manifest claims)."""
+    from cpgsim.cli.commands import run as run_command
+
+    out = tmp_path / "run"
+    seen: list[tuple[str, bool]] = []
+    active = [True]
+
+    def hook(event, args):  # a file opened for writing, or renamed into place (an atomic write)
+        if not active[0]:
+            return
+        if event == "open" and isinstance(args[0], (str, Path)) and str(args[1]).startswith(("w", "x", "a")):
+            p = Path(args[0])
+        elif event in ("os.rename", "os.replace") and isinstance(args[1], (str, Path)):
+            p = Path(args[1])
+        else:
+            return
+        if p.parent.name == out.name + ".partial" and p.name != MANIFEST and not p.name.startswith(".cpgsim-tmp."):
+            doc = read_manifest(p.parent)
+            seen.append((p.name, doc is not None and p.name in doc["files"]))
+
+    sys.addaudithook(hook)  # stays installed for the process: switched off below
+    try:
+        main(["run", "flat", "-o", str(out), "--t-end", "0.05", "--no-progress"])
+    finally:
+        active[0] = False
+    assert {"scenario.toml", "summary.json", "gait.png", "report.html"} <= {name for name, _ in seen}
+    assert [name for name, claimed in seen if not claimed] == []
+    assert {"elevator_hits.png", "alpha.png"} <= set(run_command.RUN_FILES)  # written by some scenarios only
+
+
+def test_a_killed_runs_unlisted_file_is_set_aside_never_deleted(tmp_path, capsys):
+    """A partial run of an older cpgsim holding a file its manifest did not list: the next run moves the
+    folder aside (the file is kept, the manifest dropped) and goes through; a `.partial` folder with a file
+    and no manifest at all is still refused, untouched."""
+    run = tmp_path / "run"
+    part = partial_path(run)
+    part.mkdir()
+    (part / MANIFEST).write_text(json.dumps({"cpgsim_run": 1, "complete": False, "files": ["gait.png"]}))
+    (part / "gait.png").write_text("listed")
+    (part / "elevator_hits.png").write_text("not listed")
+    make_run(run, {"summary.json": "next"})
+    assert (run / "summary.json").read_text() == "next" and not part.exists()
+    (kept,) = tmp_path.glob("run.partial.kept-*")
+    assert [p.name for p in kept.iterdir()] == ["elevator_hits.png"]
+    assert "moved to" in capsys.readouterr().err
+
+    part.mkdir()
+    (part / "elevator_hits.png").write_text("whose?")  # what a killed demo of the old code left: no manifest
+    with pytest.raises(ResultsError, match="holds no cpgsim run"):
+        make_run(run, {"summary.json": "again"})
+    assert [p.name for p in part.iterdir()] == ["elevator_hits.png"]
+    assert (run / "summary.json").read_text() == "next"

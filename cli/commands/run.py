@@ -28,8 +28,11 @@ from cpgsim.harness.simulate import SimulationError
 
 RUN_FILES = ["results.arrow", "results.arrow.meta.json", "results.csv", "results.meta.json", "results.npz",
              "scenario.toml", "summary.json", "gait.png", "feet_sagittal.png", "toe_forces.png", "body.png",
-             "snapshots.png", "report.html"]
-"""The files a run may write (listed in a run being built, so a killed one can be replaced later)."""
+             "snapshots.png", "elevator_hits.png", "alpha.png", "report.html"]
+"""The files a run may write, each of them: the manifest of a run being built lists them before the first is
+written, so a run killed at any moment leaves a folder the next run recognises as cpgsim's and takes over
+(``elevator_hits.png`` of a run with elevator reflexes, ``alpha.png`` of the Fukuhara scenarios were missing,
+and a killed demo left a PNG that no manifest claimed)."""
 
 NAME = "run"
 HELP = "run a robot scenario (built-in name or FILE.toml) and make its pictures"

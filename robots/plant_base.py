@@ -18,8 +18,11 @@ indices. An engine's plant supplies the rest (the engine contract, docs/architec
 - ``_native_steps(n)`` (optional): ``n`` engine steps through the engine's C step;
 - ``_read_state()``: the engine's generalized positions and velocities into the buffers;
 - ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
-- ``snapshot``/``restore`` (:class:`~cpgsim.harness.contracts.ResumableBlock`) and ``fused_loop``
-  (:class:`~cpgsim.harness.contracts.FusedLoopBlock`), or a refusal that names the engine.
+- for the capabilities ``snapshot_restore`` and ``fused_loop``: also derive
+  :class:`~cpgsim.harness.contracts.ResumableBlock` (``snapshot``/``restore``; ``resume_from`` is here) and
+  :class:`~cpgsim.harness.contracts.FusedLoopBlock` (``fused_loop``); an engine that does not declare them
+  does not derive them, so the master never asks it (and :func:`cpgsim.robots.registry.require` refuses a
+  run that needs them, naming the engine).
 
 Every capability an engine declares in the registry (:mod:`cpgsim.robots.registry`) it implements here;
 the contract tests (tests/test_plant_contract.py) run the same checks on every registered engine.
@@ -29,7 +32,7 @@ from __future__ import annotations
 
 import math
 import struct
-from abc import abstractmethod
+from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -38,7 +41,6 @@ import numpy as np
 
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import RobotGeometry
-from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
 from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, FALL_TILT_DEG, fallen, tilt_angle
 from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
@@ -64,7 +66,7 @@ class PlantBuffers:
     out: np.ndarray = field(default_factory=lambda: np.zeros(READOUT_SIZE))
 
 
-class HexapodPlant(CoSimBlock, ResumableBlock, FusedLoopBlock):
+class HexapodPlant(CoSimBlock, ABC):
     """The hexapod on a terrain, stepped by the co-simulation master; an engine's plant derives from it.
 
     Constructor arguments every engine takes (fixed for the block's life; parameters go in ``**params``):

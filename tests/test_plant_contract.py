@@ -8,6 +8,9 @@ description times g."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,14 +20,25 @@ from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
 from cpgsim.robots.description import describe_hexapod, standing_posture
 from cpgsim.robots.registry import CAPABILITIES, ENGINES, make_plant, require
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import point_feet_engine  # noqa: E402
+
 G = 9.81  # m/s^2
 DT = 1e-3
+UNDER_TEST = {**ENGINES, point_feet_engine.ENGINE.name: point_feet_engine.ENGINE}
+"""The registered engines and a stand-in third one (tests/point_feet_engine.py: a class and a registry line)."""
+
+
+@pytest.fixture(autouse=True)
+def _third_engine(monkeypatch):
+    """The stand-in engine is in the registry while these tests run, and only then."""
+    monkeypatch.setitem(ENGINES, point_feet_engine.ENGINE.name, point_feet_engine.ENGINE)
 
 
 def _engines(*needs: str) -> list:
-    """Every registered engine (those declaring ``needs``), skipped by name when its package is missing."""
+    """Every engine under test (those declaring ``needs``), skipped by name when its package is missing."""
     params = []
-    for name, eng in ENGINES.items():
+    for name, eng in UNDER_TEST.items():
         if not all(n in eng.capabilities or n in eng.options for n in needs):
             continue
         params.append(pytest.param(name, id=name, marks=pytest.mark.skipif(
@@ -160,9 +174,10 @@ def test_a_capability_not_declared_is_refused_by_name(engine):
         for option in other.options:
             if option in ENGINES[engine].options:
                 continue
-            with pytest.raises(ParameterError, match=rf"{option} \(an option of engine '{other.name}'\) applies to "
-                                                     rf"engine '{other.name}', not '{engine}'"):
+            with pytest.raises(ParameterError, match=rf"{option} \(an option of engine '([\w-]+)'\) applies to "
+                                                     rf"engine '\1', not '{engine}'") as err:
                 make_plant(engine, **{option: "x"})
+            assert option in ENGINES[err.value.args[0].split("'")[1]].options  # the engine named has it
 
 
 def test_an_unknown_capability_is_refused_by_name():
@@ -215,7 +230,7 @@ def _mass() -> float:
     return sum(m.mass for m in describe_hexapod(YU_SIM).mass_properties().values())
 
 
-@pytest.mark.parametrize("engine", _engines())
+@pytest.mark.parametrize("engine", _engines("pushes"))
 def test_a_push_moves_the_flying_robot_by_its_impulse(engine):
     """A 20 N push for 0.1 s on the robot in the air (no contact, servos holding the posture): the robot's
     centre of mass moves ``F T (t - T/2) / m`` along the push by ``t`` = 0.2 s (8.29 cm; the body frame's
@@ -237,7 +252,7 @@ def test_a_push_moves_the_flying_robot_by_its_impulse(engine):
     plant.terminate()
 
 
-@pytest.mark.parametrize("engine", _engines())
+@pytest.mark.parametrize("engine", _engines("pushes", "native"))
 def test_pushes_act_from_t0_not_in_the_settle_phase(engine):
     """The settle phase comes before the run's clock starts: a push timed at 0 s must not act in it (the
     MuJoCo plant's Python sub-steps applied it there before the step moved to the shared base; DART did not)."""
@@ -250,7 +265,7 @@ def test_pushes_act_from_t0_not_in_the_settle_phase(engine):
     np.testing.assert_array_equal(outs[1], outs[0])
 
 
-@pytest.mark.parametrize("engine", _engines())
+@pytest.mark.parametrize("engine", _engines("amputation"))
 def test_an_amputated_leg_touches_nothing_and_the_others_carry_the_weight(engine):
     """Fukuhara 2022, Sec. 3.2: an amputated leg keeps its mass but touches nothing. Standing on the other
     five: the amputated leg's toe force is exactly zero, none of its links is in contact, the five carry the
@@ -276,7 +291,7 @@ def test_an_engine_missing_a_hook_cannot_be_built():
     from cpgsim.robots.plant_base import HexapodPlant
 
     hooks = {"_apply_servo", "_world_step", "_robot_contacts", "_contact_force", "_read_state", "_body_rotation",
-             "_state_finite", "is_set_up", "snapshot", "restore", "fused_loop"}
+             "_state_finite", "is_set_up"}
     assert HexapodPlant.__abstractmethods__ == hooks
     for engine in ENGINES.values():
         if engine.available():
@@ -284,3 +299,18 @@ def test_an_engine_missing_a_hook_cannot_be_built():
     incomplete = type("Incomplete", (HexapodPlant,), {h: None for h in hooks - {"_world_step"}})
     with pytest.raises(TypeError, match="_world_step"):
         incomplete("robot", YU_SIM, None, None, None, True, 0.0, None, ())
+
+
+def test_a_third_engine_is_a_class_and_a_registry_line():
+    """The stand-in engine (tests/point_feet_engine.py) declares no capability: it passes the contract tests
+    every engine must (ports, parameters, a standing robot's weight: above), and every run that needs a
+    capability is refused naming it, before anything is built."""
+    assert point_feet_engine.ENGINE.capabilities == frozenset()
+    plant = make_plant("point-feet")
+    assert not isinstance(plant, ResumableBlock) and not isinstance(plant, FusedLoopBlock)
+    with pytest.raises(ParameterError, match="a run with disturbances needs the pushes capability, which engine "
+                                             "'point-feet' does not have"):
+        make_plant("point-feet", disturbances=[{"start_s": 0.0, "duration_s": 0.1, "force_N": [1.0, 0.0, 0.0]}])
+    with pytest.raises(ParameterError, match="an amputated robot needs the amputation capability, which engine "
+                                             "'point-feet' does not have"):
+        make_plant("point-feet", amputated=[1])

@@ -49,7 +49,7 @@ import numpy as np
 
 from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
-from cpgsim.harness.contracts import FusedRequest
+from cpgsim.harness.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
 from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.dart import native as dart_native
 from cpgsim.robots.dart.ground import add_terrain
@@ -68,7 +68,7 @@ DETECTORS = {
 }
 
 
-class DartHexapod(HexapodPlant):
+class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     """The hexapod on a terrain in a DART world, stepped by the co-simulation master.
 
     Constructor arguments: those of :class:`~cpgsim.robots.plant_base.HexapodPlant` (``geometry`` default

@@ -32,7 +32,7 @@ import numpy as np
 
 from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
-from cpgsim.harness.contracts import FusedRequest
+from cpgsim.harness.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
 from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.description import CONTACT_OTHER, describe_hexapod, foot_positions_body
 from cpgsim.robots.disturbance import Push
@@ -41,7 +41,7 @@ from cpgsim.robots.plant_base import HexapodPlant
 from cpgsim.robots.terrain import Terrain
 
 
-class MujocoHexapod(HexapodPlant):
+class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     """The hexapod on a terrain in MuJoCo, stepped by the co-simulation master (ports: the DART plant's).
 
     Constructor: the arguments of :class:`~cpgsim.robots.plant_base.HexapodPlant` (amputated legs' geoms get

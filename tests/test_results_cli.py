@@ -156,6 +156,7 @@ def test_every_result_records_the_code_libraries_and_command_that_made_it(tmp_pa
     # may land in this checkout while the suite runs: read it afresh for this run, and compare with HEAD read
     # just before and just after it (the recorded commit is one of them, or a commit that landed in between).
     provenance_module._git.cache_clear()
+    provenance_module._static.cache_clear()  # holds _git()'s result too
     before = git("rev-parse", "HEAD")
     out = tmp_path / "r.csv"
     assert main(["simulate", "vdp", "--t-end", "0.05", "-o", str(out)]) == 0

@@ -1,6 +1,7 @@
 """``report.html``: one self-contained page per robot run, made from its results files (``cpgsim report DIR``).
 
-The page opens offline (plotly's JavaScript is inlined): a 3D replay of the robot (body box and legs from
+The page opens offline as one file (plotly.js's partial bundle ``gl3d`` is inlined, gzipped, see
+:data:`PLOTLY_BUNDLE`; under 2 MB for a 10 s run): a 3D replay of the robot (body box and legs from
 the recorded joint angles and body pose, as in DART), the terrain's boxes, the toe forces as arrows and the
 reflex events as markers, with play / pause, speed buttons and a time slider; beside it the linked plots
 (gait diagram with the FSM holds and reflex events, CPG or joint states, vertical toe forces with their
@@ -191,12 +192,23 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
                  for n in ("L1", "L2", "L3", "R1", "R2", "R3")]
         stance, held = np.column_stack(modes) > 0.5, np.zeros((len(t), 6), bool)
     code = stance.astype(int) + 2 * held.astype(int)  # 0 swing, 1 stance, 2 held swing, 3 held stance
-    z = code[fine].T[::-1].tolist()
-    traces: list[dict] = [{"type": "heatmap", "x": ts, "y": labels[::-1], "z": z, "zmin": 0, "zmax": 3,
-                           "colorscale": [[0, "#ffffff"], [0.25, "#ffffff"], [0.25, "#000000"], [0.5, "#000000"],
-                                          [0.5, "#d9d9d9"], [0.75, "#d9d9d9"], [0.75, "#8c8c8c"], [1, "#8c8c8c"]],
-                           "showscale": False, "xaxis": "x", "yaxis": "y", "hovertemplate":
-                           "%{y} t=%{x:.2f}s: %{z} (0 swing, 1 stance, 2 held swing, 3 held stance)<extra></extra>"}]
+    # the gait bars as thick line segments (plotly.js's partial bundle that the page carries has no heatmap)
+    traces: list[dict] = []
+    dt = float(t[fine[1]] - t[fine[0]]) if len(fine) > 1 else 0.0
+    for value, color, text in ((1, "#000000", "stance"), (2, "#d9d9d9", "swing, held by the FSM"),
+                               (3, "#8c8c8c", "stance, held by the FSM")):
+        xs: list = []
+        ys: list = []
+        for i in range(6):
+            on = np.concatenate([[False], code[fine, i] == value, [False]])
+            starts, ends = np.flatnonzero(on[1:] & ~on[:-1]), np.flatnonzero(~on[1:] & on[:-1])
+            for a0, a1 in zip(starts, ends, strict=True):
+                xs += [ts[a0], round(ts[a1 - 1] + dt, 4), None]
+                ys += [labels[i], labels[i], None]
+        if xs:
+            traces.append({"type": "scatter", "x": xs, "y": ys, "mode": "lines", "xaxis": "x", "yaxis": "y",
+                           "line": {"color": color, "width": 14}, "showlegend": False, "name": text,
+                           "hovertemplate": f"%{{y}} t=%{{x:.2f}}s: {text}<extra></extra>"})
     for e in summary.get("reflexes", []):
         traces.append({"type": "scatter", "x": [e["t"]], "y": [labels[e["leg_number"] - 1]], "mode": "markers",
                        "marker": {"symbol": "triangle-down", "size": 9, "color": REFLEX_MARKER}, "xaxis": "x",
@@ -241,6 +253,9 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
         layout[f"xaxis{sx}"] = {"domain": [0, 1], "anchor": f"y{sx}", "range": [ts[0], ts[-1]],
                                 **({"matches": "x"} if r > 1 else {}), "showticklabels": r == 4}
         layout[f"yaxis{sx}"] = {"domain": [lo, hi], "anchor": f"x{sx}"}
+        if r == 1:  # the gait rows: L1 on top, every leg's row whether it has a bar or not
+            layout["yaxis"].update({"type": "category", "categoryorder": "array", "categoryarray": labels[::-1],
+                                    "range": [-0.5, 5.5]})
         layout["annotations"].append({"text": text, "xref": "paper", "yref": "paper", "x": 0, "y": hi + 0.005,
                                       "xanchor": "left", "yanchor": "bottom", "showarrow": False,
                                       "font": {"size": 11}})
@@ -291,9 +306,45 @@ def _json_safe(obj: Any) -> Any:
     return obj
 
 
-def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
+PLOTLY_BUNDLE = Path(__file__).with_name("assets") / "plotly-gl3d.min.js.gz"
+"""plotly.js's partial bundle ``gl3d`` (scatter, scatter3d, mesh3d and the other 3D traces; MIT, its licence in
+``plotly-gl3d.LICENSE`` beside it), gzipped: 0.56 MB, 0.74 MB in base64 inside the page, against 4.8 MB for
+the whole library inlined (``plotly.min.js``). The page decompresses it with the browser's
+``DecompressionStream`` (Chromium 80, Firefox 113, Safari 16.4 on), so it still opens offline as one file."""
+
+# Runs the library (the gzipped partial bundle, when the page carries it), then the page's own script.
+LOADER = """(async () => {
+  const gz = document.getElementById('plotly-gz');
+  const run = code => { const s = document.createElement('script'); s.textContent = code;
+                        document.head.appendChild(s); };
+  if (gz) {
+    const b = atob(gz.textContent.trim()), u = new Uint8Array(b.length);
+    for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i);
+    const stream = new Blob([u]).stream().pipeThrough(new DecompressionStream('gzip'));
+    run(await new Response(stream).text());
+  }
+  run(document.getElementById('cpgsim-main').textContent);
+})().catch(e => {
+  document.body.insertAdjacentHTML('afterbegin', '<p style="color:#b00">this page could not start its plotting '
+    + 'library (' + String(e).replace(/</g, '&lt;') + '): open it in a current browser (Chrome/Edge 80+, '
+    + 'Firefox 113+, Safari 16.4+)</p>');
+});"""
+
+
+def _plotly_tag() -> str:
+    """The plotting library for the page's head: the gzipped partial bundle as base64 (see
+    :data:`PLOTLY_BUNDLE`), or the whole library inlined when the bundle is not installed."""
+    if PLOTLY_BUNDLE.exists():
+        import base64
+
+        return ('<script id="plotly-gz" type="application/octet-stream">'
+                + base64.b64encode(PLOTLY_BUNDLE.read_bytes()).decode("ascii") + "</script>")
     from plotly.offline import get_plotlyjs
 
+    return f"<script>{get_plotlyjs()}</script>"
+
+
+def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
     viewer, plots = _json_safe(viewer), _json_safe(plots)
     data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps, "legs": list(LEG_NAMES),
                        "viewerTraces": VIEWER_TRACES}, separators=(",", ":"),
@@ -311,7 +362,7 @@ pointer-events: none; top: 0; left: 0; height: 0; }}
 table {{ border-collapse: collapse; font-size: 13px; }} th, td {{ border-bottom: 1px solid #ddd; padding: 2px 8px;
 text-align: left; }}
 </style>
-<script>{get_plotlyjs()}</script></head>
+{_plotly_tag()}</head>
 <body data-ready="0"><h2>{html.escape(name)}: {html.escape(verdict)}</h2>
 <div id="top"><div id="left"><div id="viewer"></div>
 <div id="controls"><button id="play">play</button><button id="pause">pause</button>
@@ -320,7 +371,7 @@ text-align: left; }}
 <input id="slider" type="range" min="0" value="0"><span id="clock">0.00 s</span></div>
 <div id="summary">{_summary_html(summary)}</div></div>
 <div id="right"><div id="plotbox"><div id="plots"></div><div id="cursor"></div></div></div></div>
-<script>
+<script id="cpgsim-main" type="text/plain">
 const D = {data};
 const viewer = document.getElementById('viewer'), plots = document.getElementById('plots');
 const slider = document.getElementById('slider'), clock = document.getElementById('clock');
@@ -404,5 +455,6 @@ Promise.all([Plotly.newPlot(viewer, D.viewer.data, D.viewer.layout, {{responsive
   document.body.dataset.readyMs = String(Math.round(performance.now()));
   document.body.dataset.ready = '1';
 }});
-</script></body></html>
+</script>
+<script>{LOADER}</script></body></html>
 """

@@ -65,6 +65,8 @@ def exit_code_of(exc: BaseException) -> tuple[int | None, str]:
     missing = missing_library(exc)
     if missing is not None:
         return 2, missing
+    if isinstance(exc, ModuleNotFoundError) and (exc.name or "").startswith("cpgsim."):
+        return 2, msg  # the user's code names a cpgsim module that is not there (or moved: the message says where)
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         return 1, one_line(f"writing failed: {where}{exc.strerror or exc} (the run's results are incomplete)")

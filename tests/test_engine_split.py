@@ -236,3 +236,41 @@ def test_amputation_results_are_the_same_as_before_the_split(tmp_path, engine):
                           capture_output=True, text=True, timeout=600)
     assert (out / "results.arrow").is_file(), proc.stderr
     assert result_digest(out / "results.arrow") == AMPUTATION_DIGESTS[engine]
+
+
+OLD_PATHS = ["plant", "hexapod", "engines", "dart_native", "dart_fused", "mujoco_plant", "mujoco_native",
+             "mujoco_batch", "mjcf"]
+
+
+@pytest.mark.parametrize("old", OLD_PATHS)
+def test_an_old_module_path_is_one_line_naming_the_new_one(old):
+    """The modules that sat side by side in robots/ before the engines became subpackages: importing one (either
+    way) fails with one line naming where it went, and the place named exists."""
+    import importlib
+    import importlib.util
+
+    with pytest.raises(ModuleNotFoundError) as plain:
+        importlib.import_module(f"cpgsim.robots.{old}")
+    with pytest.raises(ModuleNotFoundError) as from_import:
+        exec(f"from cpgsim.robots import {old}", {})
+    for err in (plain, from_import):
+        message = str(err.value)
+        assert "\n" not in message and message.startswith(f"cpgsim.robots.{old} moved to cpgsim.robots.")
+        assert err.value.name == f"cpgsim.robots.{old}"
+    from cpgsim.cli.common import exit_code_of
+
+    assert exit_code_of(plain.value) == (2, str(plain.value))  # the CLI: bad input, that one line
+    new = str(plain.value).split(" moved to ")[1].split(" ")[0]
+    assert importlib.util.find_spec(new) is not None, new
+    assert not (ROOT / "robots" / f"{old}.py").exists()
+
+
+def test_a_name_that_never_existed_is_an_ordinary_error():
+    import importlib
+
+    with pytest.raises(ModuleNotFoundError, match="No module named 'cpgsim.robots.nothing_here'"):
+        importlib.import_module("cpgsim.robots.nothing_here")
+    with pytest.raises(AttributeError):
+        import cpgsim.robots as robots
+
+        robots.nothing_here  # noqa: B018

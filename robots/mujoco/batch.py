@@ -25,24 +25,16 @@ the same inputs; threads only change which core runs it.
 from __future__ import annotations
 
 import ctypes
-import os
 import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from cpgsim.harness.batch import available_threads
 from cpgsim.robots.mujoco.native import BATCH, library
 
 WAIT_S = 0.002
 """How long a round waits for trials that have not handed in their chunk yet (busy in Python)."""
-
-
-def available_threads() -> int:
-    """CPUs this process may run on, at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 class Batch:

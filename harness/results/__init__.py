@@ -54,6 +54,7 @@ class Results:
 
     def __post_init__(self) -> None:
         self._index = {c: i for i, c in enumerate(self.columns)}
+        self._copies: dict[str, str] = {}  # those of the last .arrow file written (its sidecar lists them)
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "time":
@@ -119,7 +120,8 @@ class Results:
         the files written."""
         path = Path(path)
         if path.suffix == ".arrow":
-            return [self.to_arrow(path), self._write_meta(path)]
+            written = self.to_arrow(path)
+            return [written, self._write_meta(path, {"copies": self._copies} if self._copies else {})]
         if path.suffix == ".csv":
             return [self.to_csv(path), self._write_meta(path)]
         if path.suffix == ".npz":
@@ -136,7 +138,7 @@ class Results:
         f, tmp = temporary_file(path, text=False)
         f.close()
         try:
-            write_table(Path(tmp), self.time, self.columns, self.units, self.data, exact, meta)
+            self._copies = write_table(Path(tmp), self.time, self.columns, self.units, self.data, exact, meta)
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
@@ -171,10 +173,10 @@ class Results:
         atomic_write(path, write, text=False)
         return path
 
-    def _write_meta(self, path: Path) -> Path:
+    def _write_meta(self, path: Path, extra: Mapping[str, Any] | None = None) -> Path:
         meta_path = sidecar_path(path)
         doc = {"columns": self.columns, "units": self.units, "complete": self.complete,
-               "message": self.message, "rows": len(self.time), **csv_meta(self.meta)}
+               "message": self.message, "rows": len(self.time), **csv_meta(self.meta), **(extra or {})}
         atomic_write(meta_path, lambda f: json.dump(doc, f, indent=2), text=True)
         return meta_path
 
@@ -226,7 +228,11 @@ class Results:
             meta_path = path.with_suffix(".meta.json")  # written before Arrow had a sidecar of its own
         side = json.loads(meta_path.read_text()) if meta_path.exists() else {}
         meta = {**doc["meta"], **side}
-        for key in ("units", "columns", "rows", "integer_columns"):
+        if doc["columns"] is None:  # killed before its first batch: the columns the sidecar names, no row
+            doc["columns"] = list(side.get("columns", []))
+            doc["units"] = list(side.get("units", ["1"] * len(doc["columns"])))
+            doc["data"] = np.zeros((0, len(doc["columns"])))
+        for key in ("units", "columns", "rows", "integer_columns", "copies"):  # copies: restored by read_table
             meta.pop(key, None)
         if doc["exact"]:
             meta["exact_integers"] = doc["exact"]
@@ -384,6 +390,7 @@ class ResultsWriter:
         self.flush_seconds = float(flush_seconds)
         self._file = None
         self._arrow: Any = None  # an arrow.ArrowStream for a .arrow target
+        self._copies: dict[str, str] = {}  # its copies (copy -> source), for the final sidecar
         self._background: BackgroundWriter | None = None  # its writer thread
         self._pending: list[tuple[np.ndarray, Mapping[int, Sequence[int]] | None]] = []
         self._rows = 0
@@ -426,6 +433,9 @@ class ResultsWriter:
     def _write_meta(self, complete: bool, message: str, rows: int | None) -> None:
         doc = {"columns": self.columns, "units": self.units, "complete": complete, "message": message,
                "rows": rows, **csv_meta(self.meta)}
+        doc.pop("copies", None)
+        if self._copies:
+            doc["copies"] = self._copies
         atomic_write(sidecar_path(self.stream_path), lambda f: json.dump(doc, f, indent=2), text=True)
 
     def append(self, time: np.ndarray, rows: np.ndarray, exact: Mapping[int, Sequence[int]] | None = None) -> None:
@@ -517,4 +527,5 @@ class ResultsWriter:
             finally:
                 arrow, self._arrow = self._arrow, None
                 arrow.close() if ended else arrow.abandon()
+                self._copies = dict(arrow.copies)
 

@@ -18,6 +18,15 @@ stream, no magic) are read too.
 
 Whether the run finished, and why not, is in the sidecar ``FILE.arrow.meta.json``: the file itself is
 started before the outcome is known.
+
+Each signal is stored once. A column that is a bit-for-bit copy of an earlier column in the first batch
+written (a mux output repeating a per-leg signal) is a *copy*: the schema's ``cpgsim`` JSON lists it under
+``copies`` (copy -> source column; the sidecar too) and its field is nullable with ``copy_of`` in its
+metadata. In each batch the copy is written as nulls where it still equals its source bit for bit, and
+with its own values where it does not (a batch is one or the other), so a copy that diverges later in
+the run loses nothing. :func:`read_table` restores the copies (``coalesce(copy, source)``); a reader
+without cpgsim does the same in a few lines (docs/results.md). A stream killed before its first batch
+is an empty file (its columns are in the sidecar).
 """
 
 from __future__ import annotations
@@ -45,15 +54,41 @@ def _pa():
 
 
 def schema(columns: Sequence[str], units: Sequence[str], integer_columns: Mapping[str, str],
-           meta: Mapping[str, Any]) -> Any:
-    """The Arrow schema of a results table: ``time`` then ``columns`` (typed by ``integer_columns``)."""
+           meta: Mapping[str, Any], copies: Mapping[str, str] | None = None) -> Any:
+    """The Arrow schema of a results table: ``time`` then ``columns`` (typed by ``integer_columns``);
+    ``copies`` (copy -> source, module docstring) become nullable fields and the ``copies`` of the metadata."""
     pa = _pa()
+    copies = dict(copies or {})
     fields = [pa.field("time", pa.float64(), nullable=False, metadata={"unit": "s"})]
     for name, unit in zip(columns, units, strict=True):
         kind = integer_columns.get(name)
         typ = pa.int64() if kind == "int64" else pa.uint64() if kind == "uint64" else pa.float64()
-        fields.append(pa.field(name, typ, nullable=False, metadata={"unit": unit}))
-    return pa.schema(fields, metadata={"cpgsim": json.dumps(dict(meta), default=str)})
+        if name in copies:
+            fields.append(pa.field(name, typ, nullable=True, metadata={"unit": unit, "copy_of": copies[name]}))
+        else:
+            fields.append(pa.field(name, typ, nullable=False, metadata={"unit": unit}))
+    doc = {k: v for k, v in meta.items() if k != "copies"}
+    if copies:
+        doc["copies"] = copies
+    return pa.schema(fields, metadata={"cpgsim": json.dumps(doc, default=str)})
+
+
+def find_copies(names: Sequence[str], columns: np.ndarray, integer_columns: Mapping[str, str]) -> dict[str, str]:
+    """The float columns of ``columns`` (one row per column: ``time`` then ``names``) that are a bit-for-bit
+    copy of an earlier float column: copy -> source (the first column holding those values)."""
+    if columns.shape[1] == 0:
+        return {}
+    first: dict[bytes, str] = {}
+    copies: dict[str, str] = {}
+    for j, name in enumerate(names, start=1):
+        if name in integer_columns:
+            continue
+        key = columns[j].tobytes()
+        if key in first:
+            copies[name] = first[key]
+        else:
+            first[key] = name
+    return copies
 
 
 MAGIC = b"ARROW1\0\0"
@@ -67,16 +102,30 @@ class ArrowStream:
                  integer_columns: Mapping[str, str], meta: Mapping[str, Any]) -> None:
         pa = _pa()
         self.path = Path(path)
-        self.schema = schema(columns, units, integer_columns, meta)
+        self._names, self._units = list(columns), list(units)
+        self._integer_columns, self._meta = dict(integer_columns), dict(meta)
+        self.copies: dict[str, str] = {}
+        """copy -> source column, fixed by the first batch (module docstring)."""
+        self._copy_index: dict[int, int] = {}  # the same as schema positions
+        self.schema: Any = None  # known at the first batch (which columns are copies)
+        self._writer: Any = None
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)  # the umask applies
         self._file = os.fdopen(fd, "wb", buffering=0)
         # an unbuffered Python file behind a 1 MB Arrow buffer: pyarrow gathers a batch's many small
         # buffers there and hands them over in large writes; buffers are compressed on the calling thread
         # (use_threads=False: a background writer must take one core at most, whatever the machine's load)
         self._sink = pa.output_stream(self._file, buffer_size=1 << 20)
+
+    def _start(self, columns: np.ndarray | None) -> None:
+        """Write the schema, with the copies found in the first batch's ``columns`` (None: no batch)."""
+        pa = _pa()
+        if columns is not None and columns.shape[1] > 0:
+            self.copies = find_copies(self._names, columns, self._integer_columns)
+        index = {name: j for j, name in enumerate(self._names, start=1)}
+        self._copy_index = {index[c]: index[s] for c, s in self.copies.items()}
+        self.schema = schema(self._names, self._units, self._integer_columns, self._meta, self.copies)
         options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
         self._writer = pa.ipc.new_file(self._sink, self.schema, options=options)
-        self._sync()
 
     def _sync(self) -> None:
         self._sink.flush()
@@ -97,11 +146,17 @@ class ArrowStream:
         """``table`` as a record batch of this stream's schema (Python work: done on the caller's thread)."""
         pa = _pa()
         columns = np.ascontiguousarray(np.asarray(table, dtype=np.float64).T)  # one copy: columns contiguous
+        if self._writer is None:
+            self._start(columns)
         arrays = []
+        n = columns.shape[1]
         for j, field in enumerate(self.schema):
             if pa.types.is_integer(field.type):
                 values = exact[j] if exact and j in exact else columns[j]
                 arrays.append(pa.array([int(v) for v in values], type=field.type))
+            elif j in self._copy_index and np.array_equal(columns[j].view(np.uint64),
+                                                          columns[self._copy_index[j]].view(np.uint64)):
+                arrays.append(pa.nulls(n, pa.float64()))  # still its source's values, bit for bit
             else:
                 # the column's bytes as the array's buffer (no copy; pa.array would go through its pandas
                 # compatibility layer, importing pandas on the first call, 0.3 s in the middle of a run)
@@ -111,6 +166,8 @@ class ArrowStream:
     def close(self) -> None:
         """Write the footer (the file is now a complete Arrow IPC file) and close it."""
         try:
+            if self._writer is None:  # no batch: the schema alone
+                self._start(None)
             self._writer.close()
             self._sync()
         finally:
@@ -126,8 +183,10 @@ class ArrowStream:
 
 
 def write_table(path: Path, time: np.ndarray, columns: Sequence[str], units: Sequence[str], data: np.ndarray,
-                exact: Mapping[str, Mapping[str, Any]], meta: Mapping[str, Any], rows_per_batch: int = 65536) -> None:
-    """A whole table into ``path`` (the caller makes it atomic: ``path`` is a temporary file)."""
+                exact: Mapping[str, Mapping[str, Any]], meta: Mapping[str, Any],
+                rows_per_batch: int = 65536) -> dict[str, str]:
+    """A whole table into ``path`` (the caller makes it atomic: ``path`` is a temporary file); returns its
+    copies (copy -> source, module docstring)."""
     index = {c: j + 1 for j, c in enumerate(columns)}
     stream = ArrowStream(path, columns, units, {c: d["dtype"] for c, d in exact.items() if c in index}, meta)
     table = np.column_stack([time, data]) if data.size else np.asarray(time, dtype=float)[:, None]
@@ -140,6 +199,7 @@ def write_table(path: Path, time: np.ndarray, columns: Sequence[str], units: Seq
         stream.abandon()
         raise
     stream.close()
+    return stream.copies
 
 
 def read_table(path: Path) -> dict[str, Any]:
@@ -152,6 +212,9 @@ def read_table(path: Path) -> dict[str, Any]:
             head = fh.read(len(MAGIC))
     except OSError as exc:
         raise ResultsError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    if not head:  # a stream killed before its first batch: no schema yet (the sidecar has the columns)
+        return {"time": np.zeros(0), "columns": None, "units": None, "data": None, "exact": {}, "meta": {},
+                "ended": False}
     if head == MAGIC:
         try:  # a complete file: its footer lists the batches
             reader = pa.ipc.open_file(pa.memory_map(str(path), "r"))
@@ -185,6 +248,10 @@ def _decoded(path: Path, sch: Any, batches: list, ended: bool) -> dict[str, Any]
     if not sch.names or sch.names[0] != "time":
         raise ResultsError(f"{path}: first column must be 'time'")
     table = pa.Table.from_batches(batches, schema=sch)
+    meta = json.loads((sch.metadata or {}).get(b"cpgsim", b"{}"))
+    copies = meta.pop("copies", None) or {}
+    if copies and table.num_rows:
+        table = restore_copies(table, copies)
     columns = sch.names[1:]
     units = [(f.metadata or {}).get(b"unit", b"1").decode() for f in sch][1:]
     time = table.column(0).to_numpy() if table.num_rows else np.zeros(0)
@@ -198,6 +265,16 @@ def _decoded(path: Path, sch: Any, batches: list, ended: bool) -> dict[str, Any]
             data[:, j] = np.asarray(values, dtype=float)
         elif table.num_rows:
             data[:, j] = col.to_numpy()
-    meta = json.loads((sch.metadata or {}).get(b"cpgsim", b"{}"))
     return {"time": np.asarray(time, dtype=float), "columns": columns, "units": units, "data": data,
             "exact": exact, "meta": meta, "ended": ended}
+
+
+def restore_copies(table: Any, copies: Mapping[str, str]) -> Any:
+    """``table`` (pyarrow) with each copy's nulls filled from its source column (module docstring): the
+    snippet docs/results.md gives readers without cpgsim."""
+    pc = __import__("pyarrow.compute").compute
+    for name, source in copies.items():
+        j = table.schema.get_field_index(name)
+        table = table.set_column(j, table.schema.field(j).with_nullable(False),
+                                 pc.coalesce(table.column(name), table.column(source)))
+    return table

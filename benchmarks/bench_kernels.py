@@ -23,7 +23,6 @@ Run: ``python benchmarks/bench_kernels.py [--sizes 600,6000] [--seconds 2] [--re
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -31,8 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-os.environ.setdefault("CPGSIM_COMPILE_CACHE", "0")  # the schedule is not kept by cached models
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cpgsim.components import memo  # noqa: E402
+
+memo.set_caching(False)  # the schedule is not kept by cached models
 
 from bench_scale import DT, columns, networks  # noqa: E402
 

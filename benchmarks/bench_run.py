@@ -8,7 +8,7 @@ is everything else in the run: the
 co-simulation master loop, the controller's compiled C step, the plant's contact readout and
 outputs, recording. Compilation and setup are excluded (timed separately). Two configurations run
 interleaved in the same process: the controller's compiled step on a worker thread
-(``CPGSIM_STEP_THREAD=1``, :class:`cpgsim.harness.native.ThreadedStep`) and on the master's own thread (the
+(``step_thread=True``, :class:`cpgsim.harness.native.ThreadedStep`) and on the master's own thread (the
 default); medians are printed. Both run twice: on the machine as it is ("idle") and with ``--load``
 busy-looping processes started by the benchmark itself ("loaded", default 2: one per core of the
 benchmark machine), and the thread / no-thread ratio is printed for each.

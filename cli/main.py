@@ -62,6 +62,8 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
         prog="cpgsim", description="Compose, verify, export and co-simulate CPG legged-robot controllers.")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of an error (also: environment variable CPGSIM_DEBUG=1)")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="neither read nor write the per-user caches (compiled models, memoised results)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     infos = [m for m in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name)
@@ -111,6 +113,10 @@ def _main(argv: list[str]) -> int:
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM while the command's modules load
         return _interrupted(None, next((a for a in argv if not a.startswith("-")), ""), exc, None)
     command = getattr(args, "command", None) or "cpgsim"
+    if args.no_cache:
+        from cpgsim.components import memo
+
+        memo.set_caching(False)
     try:
         code = int(args._run(args) or 0)
         sys.stdout.flush()

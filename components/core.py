@@ -478,3 +478,8 @@ class CoSimBlock(_Declared):
 
     def terminate(self) -> None:
         """Release resources (default: nothing)."""
+
+    def execution_info(self) -> dict[str, Any]:
+        """Which code path this block runs, after :meth:`setup` (recorded in the run's results metadata under
+        ``execution.blocks``); empty by default."""
+        return {}

@@ -6,7 +6,7 @@ invalidates every entry). Only functions of plain numbers returning a flat dict 
 memoised; a missing, damaged or unwritable cache only costs the computation.
 
 ``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
-``CPGSIM_COMPILE_CACHE=0`` turns caching off (also this memo).
+:func:`set_caching` (``cpgsim --no-cache``) turns caching off for the process (also this memo).
 """
 
 from __future__ import annotations
@@ -67,8 +67,18 @@ def _remove_fallback(folder: Path, owner_pid: int) -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
+_CACHING = [True]
+
+
 def caching_enabled() -> bool:
-    return os.environ.get("CPGSIM_COMPILE_CACHE", "1").strip() != "0"
+    """Whether the per-user caches (compiled models, :func:`disk_memo`) are used in this process."""
+    return _CACHING[0]
+
+
+def set_caching(enabled: bool) -> None:
+    """Use the per-user caches in this process (default) or not: ``cpgsim --no-cache``. A single graph's
+    compile chooses for itself with ``compile_graph(..., cache=False)`` / ``Simulator(..., cache=False)``."""
+    _CACHING[0] = bool(enabled)
 
 
 @functools.cache

@@ -73,7 +73,7 @@ def fell_from(res: Results, robot: str,
 def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
                  sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
                  step_thread: bool | None = None, save_results: bool = True, csv: bool = False,
-                 **kw: Any) -> dict[str, Any]:
+                 prefault: bool = True, **kw: Any) -> dict[str, Any]:
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
@@ -89,7 +89,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     if setup.scenario is not None:
         atomic_write(out / "scenario.toml", lambda f: f.write(setup.scenario.to_toml()), text=True)
     setup_wall0 = time.perf_counter()
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread).prepare()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread, prefault=prefault).prepare()
     setup_wall = time.perf_counter() - setup_wall0
     error: SimulationError | None = None
     wall0 = time.perf_counter()
@@ -110,6 +110,7 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         res.save(out / "results.csv")  # with its own sidecar results.meta.json (results.arrow has its .arrow.meta.json)
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
+    summary["execution"] = res.meta.get("execution", {})  # which path ran: step, fused loop, engine, C step
     from cpgsim.harness.results.provenance import provenance
 
     summary["provenance"] = res.meta["provenance"] = provenance(setup.info.get("engine"))

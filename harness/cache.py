@@ -14,7 +14,7 @@ one that fails its check, is recompiled and replaced. The C libraries built from
 separately by the hash of their source (:mod:`cpgsim.harness.native`).
 
 ``CPGSIM_CACHE`` sets the folder (default ``$XDG_CACHE_HOME/cpgsim`` or ``~/.cache/cpgsim``);
-``CPGSIM_COMPILE_CACHE=0`` turns the model cache off.
+``compile_graph(..., cache=False)`` or :func:`cpgsim.components.memo.set_caching` turns the model cache off.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ import numpy as np
 from cpgsim.components import memo
 from cpgsim.components.core import Block, ModelError, Port
 from cpgsim.components.graph import FlatGraph, Graph, as_graph
-from cpgsim.harness import cache
+from cpgsim.harness import cache as model_cache
 from cpgsim.harness.compiler import c_form, casadi_form, kinds
 from cpgsim.harness.compiler.layout import Layout, Slot
 from cpgsim.harness.compiler.schedule import Schedule, build_schedule
@@ -107,13 +107,16 @@ and keeps the step one expression (``benchmarks/bench_scale.py``)."""
 
 
 def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
-                  grouping: Literal["auto", "flat", "kinds"] = "auto") -> CompiledModel:
+                  grouping: Literal["auto", "flat", "kinds"] = "auto", cache: bool = True) -> CompiledModel:
     """Flatten and compile ``item`` (a graph, or a single block wrapped in one).
 
     ``grouping``: ``"flat"`` inlines every block instance into one expression graph; ``"kinds"``
     compiles each kind of identical instances once and loops over them (:mod:`cpgsim.harness.compiler`), so
     code size and compile time no longer grow with the number of instances; ``"auto"`` picks
-    ``"kinds"`` for graphs of at least :data:`GROUPED_MIN_BLOCKS` equation blocks.
+    ``"kinds"`` for graphs of at least :data:`GROUPED_MIN_BLOCKS` equation blocks. ``cache``: look the
+    model up in (and store it to) the per-user compile cache (:mod:`cpgsim.harness.cache`; also off for the
+    whole process with :func:`cpgsim.components.memo.set_caching`); the model's ``from_cache`` says whether
+    it came from there.
     """
     if grouping not in ("auto", "flat", "kinds"):
         raise ModelError(f"grouping must be 'auto', 'flat' or 'kinds', got {grouping!r}")
@@ -124,15 +127,15 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     flat = graph.flatten()
     grouping = _resolve_grouping(flat, grouping)
     signatures = kinds.leaf_signatures(flat)  # for the cache key, and the kinds reuse them
-    if not memo.caching_enabled():
+    if not (cache and memo.caching_enabled()):
         return _build(flat, dt, int(substeps), grouping, signatures)
-    key = cache.model_key(flat, dt, int(substeps), grouping, signatures, list(compiler_sources()))
-    entry = cache.load(key)
+    key = model_cache.model_key(flat, dt, int(substeps), grouping, signatures, list(compiler_sources()))
+    entry = model_cache.load(key)
     if entry is not None:
         return _from_cache(Wiring(flat, dt, int(substeps), signatures), entry)
     model = _build(flat, dt, int(substeps), grouping, signatures)
     fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
-    cache.store(key, fns, model.c_step_source(), model.feed, model.grouping)
+    model_cache.store(key, fns, model.c_step_source(), model.feed, model.grouping)
     return model
 
 
@@ -149,7 +152,7 @@ def model_key(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     """The compiled-model cache key :func:`compile_graph` uses for these arguments
     (:func:`cpgsim.harness.cache.model_key` over the computed :func:`compiler_sources`)."""
     flat = as_graph(item).flatten()
-    return cache.model_key(flat, dt, int(check_substeps(substeps)), _resolve_grouping(flat, grouping),
+    return model_cache.model_key(flat, dt, int(check_substeps(substeps)), _resolve_grouping(flat, grouping),
                            kinds.leaf_signatures(flat), list(compiler_sources()))
 
 

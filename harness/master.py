@@ -183,11 +183,14 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
             stage = (path, "setup")
             blk.setup(t_list[0])
             started.append(blk)
+        execution = rec.meta.setdefault("execution", {})
+        execution["blocks"] = {path: blk.execution_info() for path, blk in cs.items()}
         k0 = 0
         if commit and n > 0:
             from cpgsim.harness.fused import fused_runner, run_fused
 
             fused = fused_runner(plan, cs, step, u, y, x.size, z.size, dt)
+            execution["fused_loop"] = fused is not None
             if fused is not None:  # the block runs the loop with the compiled step in C (harness/fused.py)
                 stage = (next(iter(cs)), "do_step")
                 k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)

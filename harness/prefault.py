@@ -15,13 +15,12 @@ as the loop's own faults would). It stays one window ahead of the writer: a run 
 signal, a divergence, a block ending it) has mapped at most one window it never writes, and what
 ``np.empty`` only reserved for a long horizon is still committed row by row as the run goes, as before.
 Where the call is not available (another system, an older kernel), for tables under :data:`MIN_BYTES`,
-or with ``CPGSIM_PREFAULT=0``, nothing happens and the loop faults its pages in itself.
+or with ``Simulator(prefault=False)`` (``--no-prefault``), nothing happens and the loop faults its pages in itself.
 """
 
 from __future__ import annotations
 
 import ctypes
-import os
 import queue
 import sys
 import threading
@@ -64,12 +63,11 @@ class RowPrefetcher:
     thread (at most the one window it may be mapping) and must run before the table can be freed.
     """
 
-    def __init__(self, table: np.ndarray) -> None:
+    def __init__(self, table: np.ndarray, enabled: bool = True) -> None:
         self.table = table
         rows = table.shape[0]
         row_bytes = max(1, table.nbytes // max(rows, 1))
-        self.active = (_MADVISE is not None and table.nbytes >= MIN_BYTES and table.flags.c_contiguous
-                       and os.environ.get("CPGSIM_PREFAULT") != "0")
+        self.active = (enabled and _MADVISE is not None and table.nbytes >= MIN_BYTES and table.flags.c_contiguous)
         self.rows_per_window = max(1, WINDOW_BYTES // row_bytes) if self.active else max(rows, 1)
         self._row_bytes = row_bytes
         self._asked = 0  # rows below this are mapped or asked for

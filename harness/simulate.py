@@ -24,6 +24,7 @@ from typing import Any, Literal
 import casadi as ca
 import numpy as np
 
+from cpgsim.components import memo
 from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.harness import prefault
@@ -65,19 +66,25 @@ class Simulator:
     CasADi looped in C, :mod:`cpgsim.harness.native`), ``"casadi"`` (``mapaccum``), or ``"auto"`` (native
     when a C compiler works). ``grouping`` is :func:`~cpgsim.harness.compile.compile_graph`'s (``"auto"``:
     identical instances looped from 64 equation blocks on). ``jit`` compiles the per-step function used by
-    the co-simulation master with the C compiler. ``step_thread`` runs the compiled step of a co-simulation on a
-    worker thread (:class:`cpgsim.harness.native.ThreadedStep`); ``None`` (default) keeps it on the master's
-    thread unless the environment sets ``CPGSIM_STEP_THREAD=1``. The worker pays on an idle machine
-    (1.0-1.4x faster robot runs) but its hand-off busy-waits, which on a loaded machine takes the core the
-    master needs (2.3x slower at load 4-5, 5-7x at load 7-15: ``benchmarks/bench_run.py``), so a default
-    that must never be slower than one thread cannot turn it on.
+    the co-simulation master with the C compiler. ``step_thread=True`` runs the compiled step of a co-simulation
+    on a worker thread (:class:`cpgsim.harness.native.ThreadedStep`; it also turns the fused C loop off); the
+    default keeps it on the master's thread (``cpgsim run --step-thread`` turns it on). The worker pays on an
+    idle machine (1.0-1.4x faster robot runs) but its hand-off busy-waits, which on a loaded machine takes the
+    core the master needs (2.3x slower at load 4-5, 5-7x at load 7-15: ``benchmarks/bench_run.py``), so a
+    default that must never be slower than one thread cannot turn it on. ``prefault``: map a large results
+    table a window ahead of the loop on a thread (:mod:`cpgsim.harness.prefault`; ``--no-prefault``);
+    ``cache``: :func:`~cpgsim.harness.compile.compile_graph`'s. Each run's results metadata (and a robot
+    run's summary) record under ``"execution"`` which path ran: the step (C or CasADi), the fused loop, the
+    step thread, prefault, whether the model came from the compile cache, and each co-simulation block's own
+    (a plant's engine and whether its C step ran).
     """
 
     def __init__(self, graph: Graph | Block, dt: float = 1e-3, substeps: int = 1,
                  params: Mapping[str, Any] | None = None, record: Sequence[str] | None = None,
                  order: Literal["jacobi", "gauss-seidel"] = "jacobi", jit: bool = False,
                  backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000,
-                 step_thread: bool | None = None, grouping: Literal["auto", "flat", "kinds"] = "auto") -> None:
+                 step_thread: bool | None = None, grouping: Literal["auto", "flat", "kinds"] = "auto",
+                 prefault: bool = True, cache: bool = True) -> None:
         if order not in ("jacobi", "gauss-seidel"):
             raise ModelError(f"co-simulation order must be 'jacobi' or 'gauss-seidel', got {order!r}")
         if isinstance(graph, Graph) and params:
@@ -85,7 +92,9 @@ class Simulator:
                 graph.set_param(path, value)
         elif params:
             graph.set(**params)
-        self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping)
+        self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping, cache=cache)
+        self.prefault = bool(prefault)
+        self.cache_used = bool(cache) and memo.caching_enabled()
         if backend not in ("auto", "native", "casadi"):
             raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")
         self.order = order
@@ -145,11 +154,13 @@ class Simulator:
         p = m.p0.copy()
         u_free = self._free_input_matrix(inputs or {}, times)
         self._exact_free = self._exact_free_inputs(inputs or {})
-        rec = _Recorder(times, columns, units)
+        rec = _Recorder(times, columns, units, self.prefault)
         rec.aliases = dict(self._recorded_aliases)
         from cpgsim.harness.results.provenance import provenance
 
         rec.meta = {"provenance": provenance(), **(meta or {})}  # code, libraries, machine, command
+        rec.meta["execution"] = {"compile_cache": "hit" if m.from_cache else "miss" if self.cache_used else "off",
+                                 "prefault": rec.prefetch.active}  # the run adds the step's path
         integer_columns = self._integer_columns(columns)
         if integer_columns:  # the stream's sidecar says from the start which columns hold exact integers
             rec.meta["integer_columns"] = integer_columns
@@ -381,12 +392,6 @@ class Simulator:
         return self._bound
 
     def _use_step_thread(self) -> bool:
-        env = os.environ.get("CPGSIM_STEP_THREAD", "").strip()
-        if env:
-            if env not in ("0", "1"):
-                raise ModelError(f"CPGSIM_STEP_THREAD must be 0 (step on the master thread) or 1 (worker thread), "
-                                 f"got {env!r}")
-            return env == "1"
         return bool(self.step_thread)
 
     def _native(self, always: bool = False):
@@ -434,6 +439,7 @@ class Simulator:
         # the C loop takes the whole horizon in one call unless a progress bar or a stream needs rows sooner,
         # or a large table is mapped a window ahead of it (harness/prefault.py)
         chunk = self.chunk if (progress or self._native() is None) else n
+        rec.meta["execution"]["step"] = "C horizon loop" if self._native() is not None else "CasADi mapaccum"
         if rec.prefetch.active:
             chunk = min(chunk, rec.prefetch.rows_per_window)
         k = 0
@@ -480,6 +486,10 @@ class Simulator:
         y = np.zeros(m.signals_layout.size)
         x_next, z_next = np.zeros_like(x), np.zeros_like(z)
         step = self._step_caller(x, z, u, p, x_next, z_next, y)
+        from cpgsim.harness.native import BoundStep, ThreadedStep
+
+        rec.meta["execution"].update({"step": "C" if isinstance(step, BoundStep) else "CasADi",
+                                      "step_thread": isinstance(step, ThreadedStep), "fused_loop": False})
 
         def block_error(path: str, what: str, exc: Exception) -> CoSimulationError:
             return CoSimulationError(
@@ -569,9 +579,10 @@ class _CasadiStep:
 class _Recorder:
     """Preallocated result rows, truncated to what was written."""
 
-    def __init__(self, times: np.ndarray, columns: list[str], units: list[str]) -> None:
+    def __init__(self, times: np.ndarray, columns: list[str], units: list[str], prefault_rows: bool = True) -> None:
         self.data = np.empty((len(times), len(columns)))  # rows past ``n`` are never read
-        self.prefetch = prefault.RowPrefetcher(self.data)  # large tables: the next rows mapped on another thread
+        # large tables: the next rows mapped on another thread
+        self.prefetch = prefault.RowPrefetcher(self.data, enabled=prefault_rows)
         self.times = times
         self.n = 0
         self.columns = columns

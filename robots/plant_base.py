@@ -395,6 +395,10 @@ class HexapodPlant(CoSimBlock, ABC):
             raise ModelError(f"{self.name}: resuming a state saved at t = {resume.t} in a run from t0 = {t0}")
         return resume
 
+    def execution_info(self) -> dict[str, Any]:
+        """The engine and whether its C step runs (``native`` asked for it; it may be unavailable)."""
+        return {"engine": self.engine, "native_step": self.native_step is not None}
+
     @property
     def servo_state(self) -> tuple[np.ndarray, bool]:
         """``(q_target, target_changed)``: the targets the servos hold and whether the next step must apply

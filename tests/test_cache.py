@@ -17,7 +17,6 @@ from cpgsim.harness.simulate import Simulator
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("CPGSIM_CACHE", str(tmp_path / "cache"))
-    monkeypatch.delenv("CPGSIM_COMPILE_CACHE", raising=False)
     return tmp_path / "cache"
 
 
@@ -45,17 +44,13 @@ def test_parameter_values_are_data_not_part_of_the_key(private_cache):
     cached = Simulator(g, backend="casadi").run(2.0)
     default = Simulator(hexapod_network(), backend="casadi").run(2.0)
     assert not np.allclose(cached["leg1.z1.x"], default["leg1.z1.x"])
-    import os
-
-    os.environ["CPGSIM_COMPILE_CACHE"] = "0"
-    try:
-        g2 = hexapod_network()
-        g2.set_param("*.z1.omega", 1.0)
-        fresh = Simulator(g2, backend="casadi")
-        assert not fresh.model.from_cache
-        assert np.array_equal(fresh.run(2.0).data, cached.data)
-    finally:
-        del os.environ["CPGSIM_COMPILE_CACHE"]
+    g2 = hexapod_network()
+    g2.set_param("*.z1.omega", 1.0)
+    fresh = Simulator(g2, backend="casadi", cache=False)
+    assert not fresh.model.from_cache
+    run = fresh.run(2.0)
+    assert np.array_equal(run.data, cached.data)
+    assert run.meta["execution"]["compile_cache"] == "off" and cached.meta["execution"]["compile_cache"] == "hit"
 
 
 def test_structural_changes_miss(private_cache):
@@ -85,8 +80,13 @@ def test_damaged_entry_is_recompiled(private_cache):
 
 
 def test_cache_can_be_turned_off(private_cache, monkeypatch):
-    monkeypatch.setenv("CPGSIM_COMPILE_CACHE", "0")
-    compile_graph(hexapod_network())
+    compile_graph(hexapod_network(), cache=False)
+    assert not compile_graph(hexapod_network(), cache=False).from_cache
+    assert not (private_cache / "models").exists()
+    from cpgsim.components import memo
+
+    monkeypatch.setattr(memo, "_CACHING", [True])
+    memo.set_caching(False)  # cpgsim --no-cache: the whole process
     assert not compile_graph(hexapod_network()).from_cache
     assert not (private_cache / "models").exists()
 
@@ -107,7 +107,9 @@ def test_locked_orbit_memo_matches_the_computation(private_cache, monkeypatch):
     memo = converter.locked_orbit(0.1, 4.0, converter.TABLE1_OMEGA, 0.1)
     assert list((private_cache / "memo").glob("*.json"))
     converter._locked_orbit_disk.cache_clear()
-    monkeypatch.setenv("CPGSIM_COMPILE_CACHE", "0")
+    from cpgsim.components import memo as memo_module
+
+    monkeypatch.setattr(memo_module, "_CACHING", [False])
     computed = converter.locked_orbit(0.1, 4.0, converter.TABLE1_OMEGA, 0.1)
     converter._locked_orbit_disk.cache_clear()
     assert memo == computed

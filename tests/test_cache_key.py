@@ -29,7 +29,6 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("CPGSIM_CACHE", str(tmp_path / "cache"))
-    monkeypatch.delenv("CPGSIM_COMPILE_CACHE", raising=False)
 
 
 def _graph(gain: float = 2.0, unit: str = "1", wire: str = "x1"):

@@ -12,7 +12,7 @@ import pytest
 
 from cpgsim.cli import catalog
 from cpgsim.components.basic import Gain, Integrator
-from cpgsim.components.core import CoSimBlock, ModelError
+from cpgsim.components.core import CoSimBlock
 from cpgsim.components.graph import Graph
 from cpgsim.harness.compile import compile_graph
 from cpgsim.harness.native import NativeFunction
@@ -76,7 +76,6 @@ def test_threaded_step_gives_bit_identical_results_and_stops_its_thread():
 def test_step_thread_is_off_by_default_even_for_large_steps(monkeypatch):
     """The worker thread's hand-off busy-waits and made loaded machines 2-7x slower: never the default,
     not even for the six-leg controller's step (the size that used to switch it on)."""
-    monkeypatch.delenv("CPGSIM_STEP_THREAD", raising=False)
     from cpgsim.components.yu.leg import hexapod_controller
     from cpgsim.harness.simulate import NATIVE_AUTO_MAX_INSTRUCTIONS
 
@@ -87,18 +86,18 @@ def test_step_thread_is_off_by_default_even_for_large_steps(monkeypatch):
     assert compile_graph(hexapod_controller(), grouping="flat").step.n_instructions() > NATIVE_AUTO_MAX_INSTRUCTIONS
 
 
-def test_step_thread_environment_override(monkeypatch):
-    monkeypatch.setenv("CPGSIM_STEP_THREAD", "1")
-    sim = Simulator(_leg_with_pulses(), step_thread=False)
-    sim.run(0.05)
-    assert type(sim._bound).__name__ == "ThreadedStep"
-    monkeypatch.setenv("CPGSIM_STEP_THREAD", "0")
-    sim = Simulator(_leg_with_pulses(), step_thread=True)
-    sim.run(0.05)
-    assert type(sim._bound).__name__ == "BoundStep"
-    monkeypatch.setenv("CPGSIM_STEP_THREAD", "yes")
-    with pytest.raises(ModelError, match="CPGSIM_STEP_THREAD must be 0 .* or 1"):
-        Simulator(_leg_with_pulses()).run(0.05)
+def test_step_thread_is_the_argument_and_the_results_say_which_ran(monkeypatch):
+    """``step_thread`` decides (the environment variable that once overrode it is not read); both give the
+    same numbers, and each run's results record which path ran."""
+    runs = {}
+    for threaded in (True, False):
+        monkeypatch.setenv("CPGSIM_STEP_THREAD", "0" if threaded else "1")
+        sim = Simulator(_leg_with_pulses(), step_thread=threaded)
+        res = sim.run(0.05)
+        assert type(sim._bound).__name__ == ("ThreadedStep" if threaded else "BoundStep")
+        assert res.meta["execution"]["step_thread"] is threaded and res.meta["execution"]["step"] == "C"
+        runs[threaded] = res.data
+    assert np.array_equal(runs[True], runs[False])
 
 
 @pytest.mark.parametrize("threaded", [False, True])

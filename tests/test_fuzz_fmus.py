@@ -336,7 +336,7 @@ def run_cli(args: list[str] | tuple[str, ...], folder: Path, timeout: float = 90
     """``python -m cpgsim.cli.main ARGS`` with ``folder`` as working directory, TMPDIR and HOME."""
     tmp = folder / "tmp"
     tmp.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, PYTHONPATH=str(ROOT), TMPDIR=str(tmp), HOME=str(folder), CPGSIM_STEP_THREAD="0",
+    env = dict(os.environ, PYTHONPATH=str(ROOT), TMPDIR=str(tmp), HOME=str(folder),
                PYTHONDONTWRITEBYTECODE="1")
     env.pop("CPGSIM_DEBUG", None)
     env["CPGSIM_CACHE"] = str(folder / "cache")

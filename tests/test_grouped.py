@@ -25,7 +25,9 @@ from cpgsim.harness.simulate import Simulator
 @pytest.fixture(autouse=True)
 def no_model_cache(monkeypatch):
     """Compile every time: these tests look at the schedule, which a cached model does not keep."""
-    monkeypatch.setenv("CPGSIM_COMPILE_CACHE", "0")
+    from cpgsim.components import memo
+
+    monkeypatch.setattr(memo, "_CACHING", [False])
 
 
 def networks(n: int, modes: bool = False) -> Graph:

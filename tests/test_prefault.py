@@ -37,7 +37,6 @@ def populate_supported() -> bool:
 
 @pytest.fixture()
 def needs_populate(monkeypatch):
-    monkeypatch.delenv("CPGSIM_PREFAULT", raising=False)
     if not populate_supported():
         pytest.skip("this kernel has no MADV_POPULATE_WRITE (before Linux 5.14): the loop faults pages in")
 
@@ -61,25 +60,23 @@ def test_the_windows_ahead_of_the_writer_are_mapped_and_nothing_further(needs_po
 
 def test_a_run_with_a_large_table_gives_the_same_numbers_with_and_without_it(needs_populate, monkeypatch):
     """The horizon runs a window per C call when a table is mapped ahead: the same rows bit for bit as one
-    call for the whole horizon (``CPGSIM_PREFAULT=0``)."""
+    call for the whole horizon (``Simulator(prefault=False)``); the results say which ran."""
     from cpgsim.components.library import network_array
     from cpgsim.harness.simulate import Simulator
 
-    sim = Simulator(network_array(600))  # every signal recorded: 5,400 columns
     runs = {}
-    for setting in ("1", "0"):
-        monkeypatch.setenv("CPGSIM_PREFAULT", setting)
-        res = sim.run(2.0)
+    for setting in (True, False):
+        res = Simulator(network_array(600), prefault=setting).run(2.0)  # every signal recorded: 5,400 columns
         assert res.data.nbytes >= prefault.MIN_BYTES and res.complete
+        assert res.meta["execution"]["prefault"] is setting
         runs[setting] = res.data
-    assert np.ptp(runs["1"][:, 1:], axis=0).max() > 0.1 and np.array_equal(runs["1"], runs["0"])
+    assert np.ptp(runs[True][:, 1:], axis=0).max() > 0.1 and np.array_equal(runs[True], runs[False])
 
 
 def test_small_tables_and_the_switch_leave_it_to_the_loop(monkeypatch):
     small = prefault.RowPrefetcher(np.empty((10, 10)))
     assert not small.active and small.rows_per_window == 10
-    monkeypatch.setenv("CPGSIM_PREFAULT", "0")
-    off = prefault.RowPrefetcher(np.empty((2000, 9000)))
+    off = prefault.RowPrefetcher(np.empty((2000, 9000)), enabled=False)
     assert not off.active and off.rows_per_window == 2000
     off.starting(0)
     off.close()

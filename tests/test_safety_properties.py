@@ -34,7 +34,6 @@ FAST = settings(max_examples=60, deadline=None)
 @pytest.fixture(autouse=True)
 def private_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("CPGSIM_CACHE", str(tmp_path / "cache"))
-    monkeypatch.delenv("CPGSIM_COMPILE_CACHE", raising=False)
     private_store._warned.clear()
     return tmp_path / "cache"
 

@@ -46,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-plots", action="store_true", help="write no pictures and no report.html (results, "
                    "scenario and summary only)")
+    p.add_argument("--step-thread", action="store_true", help="the controller's compiled step on a worker thread "
+                   "(faster on an idle machine, slower on a loaded one; turns the fused C loop off)")
+    p.add_argument("--no-prefault", action="store_true", help="do not map a large results table ahead of the loop")
     p.add_argument("--csv", action="store_true", help="also write results.csv (the results are in results.arrow; "
                    "`cpgsim results DIR/results.arrow --csv` converts later)")
     p.add_argument("--list", action="store_true", help="list the built-in scenarios and exit")
@@ -74,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     with run_directory(out, RUN_FILES) as work:  # the previous run there stays until this one is complete
         try:
             summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress, csv=args.csv,
-                                   plots=not args.no_plots)
+                                   plots=not args.no_plots, step_thread=args.step_thread,
+                                   prefault=not args.no_prefault)
         except SimulationError as exc:
             if interruption(exc) is not None:
                 print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")

@@ -52,6 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
+    p.add_argument("--step-thread", action="store_true", help="in a co-simulation, the compiled step on a worker "
+                   "thread (faster on an idle machine, slower on a loaded one)")
+    p.add_argument("--no-prefault", action="store_true", help="do not map a large results table ahead of the loop")
     iso = p.add_mutually_exclusive_group()
     iso.add_argument("--isolate", dest="isolate", action="store_const", const=True, default=None,
                      help="run every FMU in a child process (a crashing FMU ends the run with partial results; "
@@ -208,7 +211,8 @@ def _run_into(args: argparse.Namespace, out: Path) -> int:
               f"(--t0/--t-end/--dt/--rtol override it)")
     if not t_end > t0:
         raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
-    sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record)
+    sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record,
+                    step_thread=args.step_thread, prefault=not args.no_prefault)
     from cpgsim.harness.exit_guard import guard_run
 
     try:

@@ -123,6 +123,8 @@ class ArrowStream:
             self.copies = find_copies(self._names, columns, self._integer_columns)
         index = {name: j for j, name in enumerate(self._names, start=1)}
         self._copy_index = {index[c]: index[s] for c, s in self.copies.items()}
+        self._copy_arrays = (np.array(list(self._copy_index), dtype=np.intp),
+                             np.array(list(self._copy_index.values()), dtype=np.intp))
         self.schema = schema(self._names, self._units, self._integer_columns, self._meta, self.copies)
         options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
         self._writer = pa.ipc.new_file(self._sink, self.schema, options=options)
@@ -150,13 +152,18 @@ class ArrowStream:
             self._start(columns)
         arrays = []
         n = columns.shape[1]
+        nulls = pa.nulls(n, pa.float64())  # one all-null array for every copy still equal to its source
+        same: set[int] = set()
+        if self._copy_index:  # bit for bit (a NaN equals the same NaN, 0.0 differs from -0.0); one pass
+            bits = columns.view(np.uint64)
+            copy, source = self._copy_arrays
+            same = set(copy[(bits[copy] == bits[source]).all(axis=1)].tolist())
         for j, field in enumerate(self.schema):
             if pa.types.is_integer(field.type):
                 values = exact[j] if exact and j in exact else columns[j]
                 arrays.append(pa.array([int(v) for v in values], type=field.type))
-            elif j in self._copy_index and np.array_equal(columns[j].view(np.uint64),
-                                                          columns[self._copy_index[j]].view(np.uint64)):
-                arrays.append(pa.nulls(n, pa.float64()))  # still its source's values, bit for bit
+            elif j in same:
+                arrays.append(nulls)  # still its source's values, bit for bit
             else:
                 # the column's bytes as the array's buffer (no copy; pa.array would go through its pandas
                 # compatibility layer, importing pandas on the first call, 0.3 s in the middle of a run)

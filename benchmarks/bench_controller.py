@@ -30,10 +30,7 @@ import time
 
 import numpy as np
 
-from cpgsim.components import memo  # noqa: E402
 from cpgsim.components.yu.leg import hexapod_controller  # noqa: E402
-
-memo.set_caching(False)  # the grouped schedule is not kept by cached models
 from cpgsim.harness import native, toolchain  # noqa: E402
 from cpgsim.harness.compile import compile_graph  # noqa: E402
 from cpgsim.harness.compiler.c_form import c_step_source  # noqa: E402

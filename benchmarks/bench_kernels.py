@@ -31,9 +31,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cpgsim.components import memo  # noqa: E402
 
-memo.set_caching(False)  # the schedule is not kept by cached models
 
 from bench_scale import DT, columns, networks  # noqa: E402
 

@@ -68,11 +68,22 @@ class CompiledModel:
     graph_outputs: dict[str, str]  # graph output -> "block.port" source
     free_inputs: dict[str, Port]  # graph inputs (sources "$name")
     cosim_feeds: dict[str, str]  # cosim input "path.port" -> source ("$in", "eq.port" or "cs.port")
-    schedule: Schedule | None = None  # the kinds and groups it was emitted from (None: loaded from the cache)
     feed: dict[str, dict[str, set[str]]] = field(default_factory=dict)  # block -> output -> inputs it reads directly
     grouped: bool = False
     from_cache: bool = False
     _c_source: str | None = field(default=None, repr=False)
+    _schedule: Schedule | None = field(default=None, repr=False)
+    _wiring: Wiring | None = field(default=None, repr=False)  # a cached model's, to rebuild its schedule
+
+    @property
+    def schedule(self) -> Schedule:
+        """The kinds and groups the model was emitted from. A model loaded from the compile cache builds it
+        from its wiring on first use (:func:`~cpgsim.harness.compiler.schedule.build_schedule`, structure
+        only: no function is emitted again), so it is the schedule a fresh compile has."""
+        if self._schedule is None and self._wiring is not None:
+            self._schedule = build_schedule(self._wiring, nested=self.grouped)
+            self._wiring = None
+        return self._schedule
 
     @property
     def has_discrete(self) -> bool:
@@ -85,7 +96,7 @@ class CompiledModel:
 
     def c_step_source(self) -> str | None:
         """C source of the step for the native backend when it is not CasADi's own code generation."""
-        if self._c_source is None and self.grouped and self.schedule is not None:
+        if self._c_source is None and self.grouped:
             self._c_source = c_form.c_step_source(self.schedule, self.dt, self.substeps)
         return self._c_source
 
@@ -181,7 +192,7 @@ def _model(w: Wiring, fns: dict[str, Any], cosim_feeds: dict[str, str], s: Sched
         signals_layout=w.sig, x0=w.x0, z0=w.z0, p0=w.p0,
         ode=fns["ode"], signals=fns["signals"], discrete=fns["discrete"], step=fns["step"],
         graph_outputs=dict(w.flat.output_sources),
-        free_inputs=dict(w.flat.inputs), cosim_feeds=cosim_feeds, schedule=s, feed=w.feed,
+        free_inputs=dict(w.flat.inputs), cosim_feeds=cosim_feeds, _schedule=s, feed=w.feed,
     )
 
 
@@ -189,6 +200,7 @@ def _from_cache(w: Wiring, entry: dict[str, Any]) -> CompiledModel:
     """The model from a cache entry: layouts and start values rebuilt, functions loaded."""
     w.feed = entry["feed"]
     model = _model(w, entry["functions"], w.cosim_feeds(), None)
+    model._wiring = w
     model.grouped = entry["grouping"] == "kinds"
     model.from_cache = True
     model._c_source = entry["c_source"]

@@ -114,3 +114,39 @@ def test_locked_orbit_memo_matches_the_computation(private_cache, monkeypatch):
     converter._locked_orbit_disk.cache_clear()
     assert memo == computed
     assert abs(computed.half_period - 2.5) < 0.1  # half the leader's period 2 pi / (0.4 pi) = 5 s
+
+
+def _description(model) -> dict:
+    """Every attribute of a compiled model but its functions and where it came from, as comparable text."""
+    import dataclasses
+
+    skip = {"ode", "signals", "discrete", "step", "from_cache", "flat", "_c_source", "_schedule", "_wiring"}
+    return {f.name: repr(getattr(model, f.name)) for f in dataclasses.fields(model) if f.name not in skip}
+
+
+def _schedule_shape(s) -> list:
+    """A schedule as plain data: per signal level, each group's kind, its function's name and size, and its
+    index tables (where each instance reads and writes)."""
+    def group(g) -> tuple:
+        tables = [np.asarray(a).tolist() for a in (g.x_off, g.z_off, g.p_off, g.u_idx, *g.out_off)]
+        return g.kind.label, g.fn.name(), g.fn.n_instructions(), tables, list(g.out_target)
+    return [[group(g) for g in level] for level in s.signal_levels]
+
+
+@pytest.mark.parametrize("grouping", ["flat", "kinds"])
+def test_a_cached_model_is_the_same_object_as_a_fresh_one(private_cache, grouping):
+    """Issue 59: a model loaded from the cache had schedule None where a fresh one had its schedule. Now
+    it has the same attributes and the same schedule (built from its wiring on first use), so the grouped C
+    step it would generate is the same text."""
+    from cpgsim.harness.compiler.c_form import c_step_source
+
+    fresh = compile_graph(hexapod_network(), grouping=grouping, cache=False)
+    compile_graph(hexapod_network(), grouping=grouping)
+    cached = compile_graph(hexapod_network(), grouping=grouping)
+    assert cached.from_cache and not fresh.from_cache
+    assert _description(cached) == _description(fresh)
+    assert cached.schedule is not None
+    assert _schedule_shape(cached.schedule) == _schedule_shape(fresh.schedule)
+    assert [k.label for k in cached.schedule.kinds] == [k.label for k in fresh.schedule.kinds]
+    if grouping == "kinds":
+        assert c_step_source(cached.schedule, cached.dt, cached.substeps) == fresh.c_step_source()

@@ -24,7 +24,7 @@ from cpgsim.harness.simulate import Simulator
 
 @pytest.fixture(autouse=True)
 def no_model_cache(monkeypatch):
-    """Compile every time: these tests look at the schedule, which a cached model does not keep."""
+    """Compile every time: these tests look at fresh compiles (a cached model's schedule: tests/test_cache.py)."""
     from cpgsim.components import memo
 
     monkeypatch.setattr(memo, "_CACHING", [False])

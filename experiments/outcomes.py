@@ -39,7 +39,8 @@ from cpgsim.robots.description import FALL_TILT_DEG, fallen
 def tilt_deg(res: Results, robot: str) -> np.ndarray:
     """Body tilt per sample: the angle between the body's z axis and the world's (degrees)."""
     rpy = res[f"{robot}.body_rpy"]
-    return np.degrees(np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1.0, 1.0)))
+    with np.errstate(invalid="ignore"):  # an infinite angle (a diverged run) gives NaN: fallen() calls it a fall
+        return np.degrees(np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1.0, 1.0)))
 
 
 def fall(res: Results, robot: str, fall_tilt_deg: float = FALL_TILT_DEG) -> tuple[bool, float | None, str]:

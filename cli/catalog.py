@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from cpgsim.components.core import Block, ModelError
+from cpgsim.components.core import Block, ModelError, did_you_mean
 from cpgsim.components.graph import Graph
 
 BUILTIN: dict[str, tuple[str, str]] = {
@@ -112,7 +112,8 @@ def load_graph(spec: str) -> Graph | Block:
             raise GraphNotFound(f"{path} has no function {func!r}")
         builder = getattr(module, func)
     else:
-        raise GraphNotFound(f"unknown graph {spec!r}: use one of {', '.join(names())} or path/to/module.py:function")
+        raise GraphNotFound(f"unknown graph {spec!r}: use one of {', '.join(names())} or path/to/module.py:function"
+                            f"{did_you_mean(spec, names())}")
     return call_builder(builder, spec)
 
 

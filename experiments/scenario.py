@@ -252,17 +252,25 @@ def _read(spec: str | Path) -> tuple[str, str]:
             raise ScenarioError(f"cannot read scenario file {path}: {exc}") from None
     if spec_s not in builtin_names():
         raise ScenarioError(f"unknown scenario {spec_s!r} (built-in: {', '.join(builtin_names())}; "
-                            "or give a FILE.toml)")
+                            f"or give a FILE.toml){did_you_mean(spec_s, builtin_names())}")
     res = resources.files(BUILTIN_PACKAGE) / f"{spec_s}.toml"
-    folder = BUILTIN_PACKAGE.replace(".", "/")
-    return res.read_text(encoding="utf-8"), f"built-in scenario {spec_s} ({folder}/{spec_s}.toml)"
+    return res.read_text(encoding="utf-8"), f"{BUILTIN_SOURCE}{spec_s}"
 
 
 # -- validation --------------------------------------------------------------------------------------
 
+BUILTIN_SOURCE = "built-in scenario "
+"""How a built-in scenario names its source in messages (its file is the package's, not the user's)."""
+
+
 def _where(scenario: Scenario, key: str, overridden: bool) -> str:
-    if key in scenario.overrides:
-        return f" (--set {key}, {scenario.source})"
+    """Where ``key`` came from, for a message: the ``--set`` the user typed for it (or for a key inside it),
+    else the line of the user's own file; a built-in scenario's own text has no line the user wrote."""
+    typed = [k for k in scenario.overrides if k == key or k.startswith(key + ".")]
+    if typed:
+        return f" (--set {', --set '.join(typed)}, {scenario.source})"
+    if scenario.source.startswith(BUILTIN_SOURCE):
+        return f" ({scenario.source})"
     line = line_of(scenario.text, key)
     return f" ({scenario.source}{f', line {line}' if line else ''})"
 
@@ -380,7 +388,7 @@ def _check_features(scenario: Scenario, overridden: bool) -> None:
     try:
         compose({f"terrain.{k}": v for k, v in feats.items()}, scenario.doc["terrain"]["friction"])
     except ParameterError as exc:
-        key = re.search(r"terrain\.[\w\-]+(\.\w+)?", str(exc))
+        key = re.search(r"terrain\.[\w\-]+(\.\w+)?", str(exc))  # the field when the message names one
         at = _where(scenario, key.group(0), overridden) if key else f" ({scenario.source})"
         raise ScenarioError(f"{exc}{at}") from None
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cpgsim.components.core import ParameterError
+from cpgsim.components.core import ParameterError, did_you_mean
 
 SIDES = ("right", "left", "both")
 GROUND_COLOR = (0.55, 0.60, 0.55)
@@ -261,7 +261,8 @@ def _checked(f: dict, where: str) -> dict:
     fields = FEATURES[kind]
     unknown = sorted(set(f) - set(fields) - {"type"})
     if unknown:
-        raise ParameterError(f"{where}: unknown field {unknown[0]!r} for a {kind} (fields: {', '.join(fields)})")
+        raise ParameterError(f"{where}.{unknown[0]}: unknown field {unknown[0]!r} for a {kind} "
+                             f"(fields: {', '.join(fields)}){did_you_mean(unknown[0], fields)}")
     missing = [k for k in fields if k not in f]
     if missing:
         raise ParameterError(f"{where}: a {kind} needs {', '.join(missing)}")

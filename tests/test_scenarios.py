@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import re
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,7 +72,7 @@ def test_values_are_toml_and_bare_words_are_strings():
 @pytest.mark.parametrize("sets, fragment", [
     ({"nosuch": 1}, "no parameter matching 'controller.nosuch'"),  # unknown key (Yu: not a graph parameter)
     ({"criteria.nosuch": 1}, "unknown key 'criteria.nosuch'"),
-    ({"terrain.step.heigth": 0.05}, "terrain.step: unknown field 'heigth'"),
+    ({"terrain.step.heigth": 0.05}, "terrain.step.heigth: unknown field 'heigth'"),
     ({"t_end": "x"}, "t_end must be a number, got 'x'"),  # wrong type
     ({"terrain.step.height": "abc"}, "terrain.step.height must be a number"),
     ({"controller.gait": 1.5}, "controller.gait must be an integer"),
@@ -409,3 +410,40 @@ def test_every_failed_criterion_line_names_value_and_limit():
     assert phrases == ["min_distance_m: walked 0.520 m, needs >= 0.7 m",
                        "end_backslide_m: slid back 0.080 m in the last 5.0 s, allowed 0.03 m",
                        "end_tilt_deg: tilted 20.0 deg at the end, needs <= 15.0 deg"]
+
+
+@pytest.mark.parametrize(("sets", "typed", "suggestion"), [
+    ({"terrain.step.heigth": 0.03}, "--set terrain.step.heigth", "did you mean 'height'?"),
+    ({"robot.engin": "mujoco"}, "--set robot.engin", "did you mean 'engine'?"),
+    ({"controller.Fcz": -1.0}, "--set controller.Fcz", ""),
+])
+def test_a_set_error_names_what_the_user_typed_and_no_line_of_a_built_in_file(sets, typed, suggestion):
+    """Issue 60: an error in a --set key or value names that --set and the nearest key; a built-in scenario's
+    own file (not the user's) gets no line number and no package path."""
+    with pytest.raises(ScenarioError) as err:
+        build_scenario("step", sets)
+    message = str(err.value)
+    assert typed in message and suggestion in message and "\n" not in message
+    assert "line " not in message and "cpgsim/experiments" not in message
+
+
+def test_an_error_in_the_users_own_file_names_its_path_and_line(tmp_path):
+    from cpgsim.experiments.scenario import load
+
+    text = (Path(__file__).resolve().parents[1] / "experiments" / "scenarios" / "step.toml").read_text()
+    bad = tmp_path / "mine.toml"
+    bad.write_text(text.replace("height = ", "heigth = ", 1))
+    line = next(n for n, s in enumerate(bad.read_text().splitlines(), 1) if s.startswith("heigth"))
+    with pytest.raises(ScenarioError) as err:
+        load(bad)
+    assert f"({bad}, line {line})" in str(err.value) and "did you mean 'height'?" in str(err.value)
+
+
+@pytest.mark.parametrize(("argv", "suggestion"), [(["simulate", "netwrok"], "did you mean 'network'?"),
+                                                  (["run", "stpe"], "did you mean 'step'?")])
+def test_an_unknown_graph_or_scenario_name_gets_a_suggestion(argv, suggestion, capsys):
+    from cpgsim.cli.main import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith(suggestion)

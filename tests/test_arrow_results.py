@@ -110,7 +110,7 @@ def test_cli_results_converts_to_csv_that_a_csv_reader_gets_exactly(tmp_path, ca
     _results().save(tmp_path / "r.arrow")
     assert main(["results", str(tmp_path / "r.arrow"), "--csv"]) == 0
     out = capsys.readouterr().out
-    assert "7 rows x 3 columns" in out and "complete" in out
+    assert "7 rows x 4 columns (time first)" in out and "complete" in out
     with open(tmp_path / "r.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert [int(r["b.n"]) for r in rows] == [BIG - k for k in range(7)]

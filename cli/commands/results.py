@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     status = "complete" if res.complete else f"INCOMPLETE ({res.message or 'the run did not finish'})"
     span = f"{res.time[0]:.6g} .. {res.time[-1]:.6g} s" if len(res.time) else "no rows"
-    print(f"{source}: {len(res.time)} rows x {len(res.columns)} columns, {span}, {status}")
+    print(f"{source}: {len(res.time)} rows x {len(res.columns) + 1} columns (time first), {span}, {status}")
     for name, unit in list(zip(res.columns, res.units, strict=True))[:8]:
         print(f"  {name} [{unit}]")
     if len(res.columns) > 8:

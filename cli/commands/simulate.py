@@ -228,6 +228,6 @@ def _run_into(args: argparse.Namespace, out: Path) -> int:
         raise CliError(str(exc), code=1) from exc
     if results.meta.get("stopped_by"):
         print(results.message)
-    print(f"wrote {len(results.time)} rows x {len(results.columns)} columns to "
+    print(f"wrote {len(results.time)} rows x {len(results.columns) + 1} columns (time first) to "
           + ", ".join(str(out.parent / f.name) for f in sim.written or [out]))
     return 0

@@ -56,29 +56,50 @@ class Results:
         self._index = {c: i for i, c in enumerate(self.columns)}
         self._copies: dict[str, str] = {}  # those of the last .arrow file written (its sidecar lists them)
 
+    def _columns_of(self, name: str) -> tuple[str, list[int]]:
+        """``(resolved name, column indices)`` for any name ``[]`` accepts but ``time``: a column, an alias
+        (an exposed graph output), or a vector port whose elements are columns ``name[i]``; a one-line error
+        naming ``name`` otherwise."""
+        resolved = self.meta.get("aliases", {}).get(name, name)
+        if resolved in self._index:
+            return resolved, [self._index[resolved]]
+        matches = [self._index[c] for c in self.columns if c.startswith(resolved + "[")]
+        if matches:
+            return resolved, matches
+        from cpgsim.components.core import did_you_mean  # the error path only: casadi stays unimported here
+
+        raise ResultsError(f"no column {name!r} in results (have e.g. {', '.join(self.columns[:6])}...)"
+                           f"{did_you_mean(name, [*self.columns, *self.meta.get('aliases', {})])}")
+
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "time":
             return self.time
-        name = self.meta.get("aliases", {}).get(name, name)
-        exact = self.meta.get("exact_integers", {}).get(name)
+        resolved, idx = self._columns_of(name)
+        exact = self.meta.get("exact_integers", {}).get(resolved)
         if exact is not None:  # a 64-bit integer column: its exact values (the float column rounds them)
             return np.array(exact["values"], dtype=exact["dtype"])
-        if name in self._index:
-            return self.data[:, self._index[name]]
-        matches = [c for c in self.columns if c.startswith(name + "[")]
-        if matches:
-            return self.data[:, [self._index[c] for c in matches]]
-        raise ResultsError(f"no column {name!r} in results (have e.g. {', '.join(self.columns[:6])}...)")
+        return self.data[:, idx[0]] if resolved in self._index else self.data[:, idx]
 
     def __contains__(self, name: str) -> bool:
-        name = self.meta.get("aliases", {}).get(name, name)
-        return name in self._index or any(c.startswith(name + "[") for c in self.columns)
+        if name == "time":
+            return True
+        try:
+            self._columns_of(name)
+        except ResultsError:
+            return False
+        return True
 
     def unit(self, name: str) -> str:
-        return self.units[self._index[name]]
+        """The unit of anything ``[]`` accepts: ``time`` (s), a column, an alias, a vector port (its elements'
+        unit)."""
+        if name == "time":
+            return "s"
+        _, idx = self._columns_of(name)
+        return self.units[idx[0]]
 
     def select(self, names: Sequence[str]) -> Results:
-        idx = [self._index[n] for n in names]
+        """These columns (any name ``[]`` accepts but ``time``, which every result has), in this order."""
+        idx = [i for n in names for i in self._columns_of(n)[1]]
         return Results(self.time, [self.columns[i] for i in idx], [self.units[i] for i in idx],
                        self.data[:, idx], self.complete, self.message, dict(self.meta))
 
@@ -110,7 +131,8 @@ class Results:
                        for j, (c, u) in enumerate(zip(self.columns[:12], self.units[:12], strict=True))
                        if len(self.time))
         more = f"<p>... and {len(self.columns) - 12} more columns</p>" if len(self.columns) > 12 else ""
-        return (f"<div><b>cpgsim results</b>: {len(self.time)} rows x {len(self.columns)} columns, {span}, "
+        return (f"<div><b>cpgsim results</b>: {len(self.time)} rows x {len(self.columns) + 1} columns "
+                f"(time first), {span}, "
                 f"<b>{html.escape(status)}</b><table><tr><th>column</th><th>unit</th><th>last value</th></tr>"
                 f"{rows}</table>{more}</div>")
 

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         build_scenario(scenario, {**sets, study_spec[0]: study_spec[1][0]})
     options = GaitOptions(h=h, central=args.central, tol=1e-3, transient=args.transient, newton=1,
                           perturb_eps=0.05, perturb_strides=4)
-    out = Path(args.output or f"verify_gait_{Path(scenario).stem}")
+    out = Path(args.output or Path("runs") / f"verify_gait_{Path(scenario).stem}")
     bar = _Progress()
     try:
         with run_directory(out, GAIT_FILES) as work:

@@ -19,7 +19,10 @@ MU, OMEGA = 0.5, 2 * math.pi  # radius sqrt(0.5), period 1 s
 
 graph = build(mu=MU, omega=OMEGA)
 res = simulate(graph, t_end=20.0, dt=1e-3)  # one compiled CasADi step, looped in C
-res.save("hopf.csv")  # time, osc.x, osc.y, ... (units in hopf.meta.json)
+out = Path("runs") / "example01_hopf.csv"  # under runs/ (not the tutorial's hopf.csv, which it would replace)
+out.parent.mkdir(exist_ok=True)
+res.save(out)  # time, osc.x, osc.y, ... (units in example01_hopf.meta.json)
+print(f"wrote {out}")
 r2 = res["osc.r2"]
 print(f"simulated {len(res.time)} steps; radius^2 at the end {r2[-1]:.6f} (analytic {MU})")
 assert abs(r2[-1] - MU) < 1e-6

@@ -22,6 +22,7 @@ fmiError or fmiDiscard, a crash, a timeout: the results recorded so far are kept
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from cpgsim.cli import catalog
@@ -46,8 +47,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="macro step in s (default: the FMU's DefaultExperiment stepSize or the step an SSP "
                         "exported by cpgsim records, else 0.001)")
     p.add_argument("--substeps", type=int, default=1, help="RK4 substeps per macro step (default 1)")
-    p.add_argument("-o", "--output", default="results.arrow",
-                   help="results file: .arrow (Arrow IPC, the default), .csv or .npz")
+    p.add_argument("-o", "--output", default=None,
+                   help="results file: .arrow (Arrow IPC), .csv or .npz (default runs/GRAPH.arrow, GRAPH the graph's "
+                        "name or file stem)")
     p.add_argument("--record", action="append", default=None, metavar="PATTERN",
                    help="only record columns matching this glob (repeatable), e.g. 'z1.*'")
     p.add_argument("--list", action="store_true", help="list built-in graphs and exit")
@@ -157,6 +159,15 @@ def schedule_clock(graph: object, spec: str) -> None:
         raise CliError(f"--clock {spec!r}: {exc}") from None
 
 
+def default_output(graph: str) -> Path:
+    """``runs/NAME.arrow`` for a run without ``-o``: NAME the built-in name, the module's stem and function
+    (``hopf_block-build``), or the FMU/SSP file's stem; under ``runs/`` like the robot runs (in .gitignore)."""
+    module, _, function = graph.partition(":")
+    stem = Path(module).stem if ("/" in module or Path(module).suffix) else module
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{stem}-{function}" if function else stem).strip("._") or "results"
+    return Path("runs") / f"{name}.arrow"
+
+
 def run(args: argparse.Namespace) -> int:
     if args.list:
         for name in catalog.names():
@@ -164,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.graph:
         raise CliError("missing GRAPH (a built-in name or path/to/module.py:function)")
-    out = Path(args.output)
+    out = Path(args.output) if args.output else default_output(args.graph)
     if out.suffix not in (".arrow", ".csv", ".npz"):
         raise CliError(f"output {out} must end in .arrow, .csv or .npz")
     from cpgsim.harness.rundir import output_lock

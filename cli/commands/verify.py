@@ -8,7 +8,7 @@ they declare a default. Writes DIR/report.json and DIR/orbit.png.
 `cpgsim verify gait SCENARIO` verifies instead the walking gait of a robot scenario (flat, ...) as a limit
 cycle of the closed loop: Poincare section, stride map from exact saved states, Floquet multipliers by
 finite differences, a perturbation experiment (docs/verification.md, "The walking gait"); it writes
-DIR/gait.json and DIR/gait.png (default DIR verify_gait_<scenario>); --set then takes scenario keys.
+DIR/gait.json and DIR/gait.png (default DIR runs/verify_gait_<scenario>); --set then takes scenario keys.
 
 `--prove` adds a computer-assisted proof in ball arithmetic (python-flint arb): a validated Taylor
 integration of the graph's own CasADi tape, the Krawczyk test on the Poincare map and enclosures of the
@@ -50,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", help="with 'gait': the robot scenario (built-in name or FILE.toml)")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     p.add_argument("-o", "--output", default=None, metavar="DIR",
-                   help="report directory (default verify_<graph>, or verify_sweep with --sweep)")
+                   help="report directory (default runs/verify_<graph>, or runs/verify_sweep with --sweep)")
     add_set_argument(p)
     p.add_argument("--input", dest="inputs", action="append", default=[], metavar="NAME=VALUE",
                    help="hold a free graph input constant (repeatable)")
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sweep:
         if args.graph:
             raise CliError("--sweep takes no GRAPH (it sweeps a single Van der Pol neuron)")
-        out = Path(args.output or "verify_sweep")
+        out = Path(args.output or Path("runs") / "verify_sweep")
         rows = sweep()
         table = sweep_markdown(rows)
         out.mkdir(parents=True, exist_ok=True)
@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     rep = verify(graph, params=parse_sets(args.sets), inputs=parse_assignments(args.inputs, "--input"),
                  x0=parse_assignments(args.x0, "--x0"), options=opts)
     proof = _prove(args, graph, rep) if args.prove else None
-    out = Path(args.output or f"verify_{rep.graph}")
+    out = Path(args.output or Path("runs") / f"verify_{rep.graph}")
     written = [write_json(rep, out / "report.json")]
     if proof is not None:
         (out / "proof.json").write_text(json.dumps(proof.to_json(), indent=2))

@@ -153,31 +153,34 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     state (``x_next`` holds it, ``x`` the last finite one). Returns the :class:`StopInfo` of a
     block that asked to stop, else None.
     """
-    x, z, u, y, x_next, z_next = buffers
     plan = _Plan(m, cs, picks, exact_free)
     n = len(times) - 1
-    dt = m.dt
     t_list = times.tolist()
-    gauss_seidel = order == "gauss-seidel"
     commit = not plan.ft_paths
-    outputs: dict[str, dict[str, np.ndarray]] = {}
-    getters = [(path, blk.get_outputs) for path, blk in cs.items()]
-    steppers = [(path, blk.set_inputs, blk.do_step, blk.get_outputs) for path, blk in cs.items()]
-    data = rec.data
     started: list[CoSimBlock] = []
+    calls = ([(path, blk.get_outputs) for path, blk in cs.items()],  # bound before set-up, as always
+             [(path, blk.set_inputs, blk.do_step, blk.get_outputs) for path, blk in cs.items()])
+    try:
+        k0 = _start(plan, cs, step, buffers, m.dt, times, t_list, n, commit, rec, progress_bar,
+                    started, on_block_error, on_diverged)
+        return _macro_steps(plan, cs, step, buffers, m.dt, t_list, n, k0, commit, order == "gauss-seidel",
+                            calls, u_free, rec, progress_bar, on_block_error, on_diverged)
+    finally:
+        _terminate(started)
+
+
+def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, times: np.ndarray,
+           t_list: list[float], n: int, commit: bool, rec, progress_bar, started: list[CoSimBlock],
+           on_block_error: Callable[[str, str, Exception], Exception],
+           on_diverged: Callable[[], None]) -> int:
+    """Set the blocks up (each appended to ``started``), record how they execute and, when the
+    compiled step may commit itself, let a block run the loop in C (:mod:`cpgsim.harness.fused`).
+
+    Returns the first macro step the Python loop still has to run (0, or where the fused loop stopped).
+    A failure after the last ``setup`` is still reported as that block's set-up, as before the split.
+    """
+    x, z, u, y, _x_next, _z_next = buffers
     stage: tuple[str, str] | None = None
-    stop: StopInfo | None = None
-    last_row = n  # the last row to record (earlier after a stop request)
-
-    halted: set[str] = set()  # blocks that asked to stop: read, never given inputs or stepped again
-
-    def stopped(path: str, exc: StopRequested, row: int) -> None:
-        nonlocal stop, last_row
-        halted.add(path)
-        if stop is None or exc.time < stop.time:
-            stop = StopInfo(path, exc.time, str(exc))
-        last_row = min(last_row, row)
-
     try:
         for path, blk in cs.items():
             stage = (path, "setup")
@@ -195,6 +198,41 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                 stage = (next(iter(cs)), "do_step")
                 k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)
                 stage = None
+        return k0
+    except Exception as exc:
+        error = _block_error(stage, exc, on_block_error)
+        if error is None:
+            raise
+        raise error from exc
+
+
+def _macro_steps(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, t_list: list[float],
+                 n: int, k0: int, commit: bool, gauss_seidel: bool, calls, u_free: np.ndarray, rec, progress_bar,
+                 on_block_error: Callable[[str, str, Exception], Exception],
+                 on_diverged: Callable[[], None]) -> StopInfo | None:
+    """The per-step loop: macro steps ``k0 .. n`` in Python (the module docstring's semantics).
+
+    Everything per step stays in this one function (locals only, no calls beyond the blocks', the
+    compiled step's and the plan's); set-up and tear-down are :func:`_start` and :func:`_terminate`.
+    """
+    x, z, u, y, x_next, z_next = buffers
+    outputs: dict[str, dict[str, np.ndarray]] = {}
+    getters, steppers = calls
+    data = rec.data
+    stage: tuple[str, str] | None = None
+    stop: StopInfo | None = None
+    last_row = n  # the last row to record (earlier after a stop request)
+
+    halted: set[str] = set()  # blocks that asked to stop: read, never given inputs or stepped again
+
+    def stopped(path: str, exc: StopRequested, row: int) -> None:
+        nonlocal stop, last_row
+        halted.add(path)
+        if stop is None or exc.time < stop.time:
+            stop = StopInfo(path, exc.time, str(exc))
+        last_row = min(last_row, row)
+
+    try:
         for k in range(k0, n + 1):
             t = t_list[k]
             for path, get in getters:
@@ -263,15 +301,28 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
                 rec.tick()  # streaming: the recorder writes new rows every simulated second / few seconds
         return stop
     except Exception as exc:
-        if stage is None or _is_simulation_error(exc):
+        error = _block_error(stage, exc, on_block_error)
+        if error is None:
             raise
-        raise on_block_error(*stage, exc) from exc
-    finally:
-        for blk in started:
-            try:
-                blk.terminate()
-            except Exception:  # noqa: BLE001 - best effort cleanup must not mask the real error
-                pass
+        raise error from exc
+
+
+def _block_error(stage: tuple[str, str] | None, exc: Exception,
+                 on_block_error: Callable[[str, str, Exception], Exception]) -> Exception | None:
+    """The exception to raise from ``exc`` for the block call ``stage = (path, what)``; None to re-raise
+    ``exc`` itself (outside any block call, or already a :class:`SimulationError`)."""
+    if stage is None or _is_simulation_error(exc):
+        return None
+    return on_block_error(*stage, exc)
+
+
+def _terminate(started: list[CoSimBlock]) -> None:
+    """Terminate every block that was set up, best effort (a failure here must not mask the run's error)."""
+    for blk in started:
+        try:
+            blk.terminate()
+        except Exception:  # noqa: BLE001 - best effort cleanup must not mask the real error
+            pass
 
 
 def _is_simulation_error(exc: Exception) -> bool:

@@ -141,8 +141,31 @@ def c_step_source(s: Schedule, dt: float, substeps: int, carry_costly: bool = Tr
     can be; else every member calls CasADi's generated function (the same numbers, bit for bit).
     ``member_blocks``: when every member's step is its own (:func:`_member_local`), blocks of members run
     their whole RK4 step in L1-sized buffers instead of each stage passing over the whole state vector."""
-    from cpgsim.harness.native import casadi_c_source
+    fused, inner, reused, sample, first, n_carry = _step_passes(s, carry_costly)
+    local = _member_local(s, fused, n_carry) if inline_kernels and member_blocks else None
+    groups = list({id(g): g for g in first + s.derivative_groups + inner + sample}.values())
+    parts, names = _c_group_parts(s, groups, inline_kernels)
+    reused_rows = np.flatnonzero(reused[:s.n_sig])
+    if reused_rows.size:
+        parts.append(_c_array("cpgsim_reused", reused_rows))
+        keep_reused = (f"if (S != Sw) for (i = 0; i < {reused_rows.size}; ++i) "
+                       "Sw[cpgsim_reused[i]] = S[cpgsim_reused[i]];")
+    else:
+        keep_reused = ""
+    parts.append(_c_pass_functions(s, names, fused, sample, first, inner)
+                 + _c_step_impl(s, dt, substeps, n_carry, bool(local), keep_reused))
+    if local:
+        parts.insert(-1, _c_local_step_impl(s, local, first, names, dt, substeps))
+    return "".join(parts)
 
+
+def _step_passes(s: Schedule, carry_costly: bool):
+    """The groups of each pass of the step: ``(fused, inner, reused, sample, first, n_carry)``.
+
+    ``fused``: first-stage groups doing signals and derivatives in one call (by ``id`` of the signal
+    group); ``inner``: the inner RK4 stages' signal groups and ``reused`` the signal rows they keep from
+    the first stage; ``sample``: the sampled update's pass; ``first``: the first stage's signal passes;
+    ``n_carry``: the carry buffer's size when costly subexpressions are carried between passes."""
     fused = _fused_first_stage(s)
     inner, reused = _pruned_levels(s, s.reads(s.derivative_groups), ~_stage_variant(s), "stage")
     pre = _pruned_levels(s, s.reads(s.discrete_groups), None, "pre")[0] if s.has_discrete else []
@@ -151,9 +174,14 @@ def c_step_source(s: Schedule, dt: float, substeps: int, carry_costly: bool = Tr
     n_carry = 0
     if carry_costly:
         (sample, first), n_carry = carry(s, [sample, first])
-    local = _member_local(s, fused, n_carry) if inline_kernels and member_blocks else None
-    reused_rows = np.flatnonzero(reused[:s.n_sig])
-    groups = list({id(g): g for g in first + s.derivative_groups + inner + sample}.values())
+    return fused, inner, reused, sample, first, n_carry
+
+
+def _c_group_parts(s: Schedule, groups: list[Group], inline_kernels: bool) -> tuple[list[str], dict[int, str]]:
+    """The source's opening parts: CasADi's C for the groups not written inline, the kernel prelude, and
+    each group's tables and loop (``cg<i>_run``); with each group's C name by ``id``."""
+    from cpgsim.harness.native import casadi_c_source
+
     inlined = {id(g) for g in groups if inline_kernels and c_kernel.inlinable(g.fn)}
     source = casadi_c_source([g.fn for g in groups if id(g) not in inlined], "cpgsim_kinds")
     parts = [source, c_kernel.PRELUDE, "\n/* ---- grouped step (harness/compiler/c_form.py) ---- */\n"]
@@ -163,6 +191,13 @@ def c_step_source(s: Schedule, dt: float, substeps: int, carry_costly: bool = Tr
         parts.append(_c_tables(f"cg{gi}", g, s.n_sig, s.pool_size, id(g) in inlined))
         loop = _c_inlined_loop if id(g) in inlined else _c_group_loop
         parts.append(loop(f"cg{gi}", g, s.n_sig, s.pool_size))
+    return parts, names
+
+
+def _c_pass_functions(s: Schedule, names: dict[int, str], fused: dict, sample: list[Group],
+                      first: list[Group], inner: list[Group]) -> str:
+    """The four pass functions calling the groups' loops: the sampled update, the inner stages' signals,
+    the derivatives and the first RK4 stage."""
     def calls(gs) -> str:
         return "\n".join(f"  {names[id(g)]}_run(t, x, z, p, S, E, x_out, z_out, C);" for g in gs)
 
@@ -171,22 +206,8 @@ def c_step_source(s: Schedule, dt: float, substeps: int, carry_costly: bool = Tr
     first_calls = calls(first)
     first_deriv_calls = calls(g for g in s.derivative_groups if id(g.kind) not in fused_kinds)
     inner_calls = calls(inner)
-    if reused_rows.size:
-        parts.append(_c_array("cpgsim_reused", reused_rows))
-        keep_reused = (f"if (S != Sw) for (i = 0; i < {reused_rows.size}; ++i) "
-                       "Sw[cpgsim_reused[i]] = S[cpgsim_reused[i]];")
-    else:
-        keep_reused = ""
     deriv_calls = calls(s.derivative_groups)
-    h = dt / substeps
-    nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
-    if s.has_discrete:
-        start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
-                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb, C);\n"
-                 "  xp = xa; zp = zb;")
-    else:
-        start = "xp = x; zp = z;"
-    parts.append(f"""
+    return f"""
 /* S: the signals (model signal order); E: external inputs, then one zero (see the group tables) */
 
 /* the sampled update: the signals it reads, directly or through other signals (before the update), then
@@ -223,7 +244,21 @@ static void cpgsim_first_stage(double t, const double *x, const double *z, const
 }}
 
 
-#define CPGSIM_NX {max(nx, 1)}
+"""
+
+
+def _c_step_impl(s: Schedule, dt: float, substeps: int, n_carry: int, local: bool, keep_reused: str) -> str:
+    """``cpgsim_step_impl_work`` and ``cpgsim_step_impl``: the sampled update, then ``substeps`` RK4
+    substeps over the pass functions (or, with ``local``, a jump to ``cpgsim_step_local``)."""
+    h = dt / substeps
+    nx, nz, nsig, nu = s.nx, s.nz, s.n_sig, s.n_u
+    if s.has_discrete:
+        start = (f"for (i = 0; i < {nx}; ++i) xa[i] = x[i];\n  for (i = 0; i < {nz}; ++i) zb[i] = z[i];\n"
+                 "  cpgsim_sample(t0, x, z, p, Sw, E, xa, zb, C);\n"
+                 "  xp = xa; zp = zb;")
+    else:
+        start = "xp = x; zp = z;"
+    return f"""#define CPGSIM_NX {max(nx, 1)}
 #define CPGSIM_NZ {max(nz, 1)}
 #define CPGSIM_NSIG {max(nsig, 1)}
 #define CPGSIM_NE {nu + 1}
@@ -273,10 +308,7 @@ int cpgsim_step_impl(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   if (res[1]) for (i = 0; i < {nz}; ++i) res[1][i] = zp[i];
   return 0;
 }}
-""")
-    if local:
-        parts.insert(-1, _c_local_step_impl(s, local, first, names, dt, substeps))
-    return "".join(parts)
+"""
 
 
 def _c_local_step_impl(s: Schedule, pairs: list[tuple[Group, Group]], first: list[Group], names: dict[int, str],

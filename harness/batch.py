@@ -259,13 +259,7 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     is an error). Raises :class:`~cpgsim.components.core.ModelError` for bad input before anything runs, and
     :class:`cpgsim.harness.native.NativeUnavailable` when no C compiler works.
     """
-    from cpgsim.harness.native import step_library
-
-    model = compile_graph(graph, dt, substeps)
-    cs = model.flat.cosim_blocks()
-    if cs:
-        raise ModelError(f"simulate_batch runs equation blocks only; graph {model.name!r} has co-simulation "
-                         f"block(s) {', '.join(cs)} (run them one by one with Simulator)")
+    model = _equation_model(graph, dt, substeps)
     u = _held_inputs(model)
     n = horizon_steps(t0, t_end, dt)
     p_in, n_p = _as_columns(params, "params")
@@ -278,6 +272,41 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     Z0 = _broadcast(z_table, model.z0, N)
     signals, sig_idx = _select_signals(model, record)
     reds = _reductions(reduce)
+    every, k_win, win_s, want_cross, n_samp = _sampling(reds, every, window, n, dt)
+    n_threads = _thread_count(threads, N)
+    _check_memory(N, n_samp, len(signals) if every else 0, n_threads, (n - k_win + 1) * len(signals)
+                  if want_cross else 0)
+    run = _batch_runner(model)
+    bufs = _Buffers(model, N, n_samp, len(signals), bool(reds), every, sig_idx)
+    job = bufs.job(model, N, n, t0, dt, (P, X0, Z0, u), every, n_samp, k_win, want_cross)
+    used, wall = _run_job(run, job, n_threads, bufs.prog, progress, N)
+    status, div_t = _statuses(model, signals, reds, bufs.STATUS, bufs.DIV_STEP, bufs.DIV_STATE, bufs.SFLAG,
+                              t0, dt)
+    reductions = {}
+    for j, sig in enumerate(signals if reds else []):
+        for r in reds:
+            reductions[f"{sig}:{r}"] = bufs.RED[:, j, REDUCTIONS.index(r)].copy()
+    times = t0 + dt * (every * np.arange(n_samp)) if every else None  # = Simulator's times[::every]
+    return BatchResult(params=p_cols, x0=x_cols, reductions=reductions, signals=list(signals), time=times,
+                       data=bufs.REC, status=status, diverged_at=div_t, final_x=bufs.XF, final_z=bufs.ZF,
+                       state_names=model.states.names(), dstate_names=model.dstates.names(), wall_time=wall,
+                       threads=used, steps=n, dt=dt, t0=t0, t_end=t0 + n * dt, window=win_s, graph=model.name,
+                       notes=notes)
+
+
+def _equation_model(graph: Graph | Block, dt: float, substeps: int) -> CompiledModel:
+    """``graph`` compiled; refused when it holds co-simulation blocks (the batch runs equations only)."""
+    model = compile_graph(graph, dt, substeps)
+    cs = model.flat.cosim_blocks()
+    if cs:
+        raise ModelError(f"simulate_batch runs equation blocks only; graph {model.name!r} has co-simulation "
+                         f"block(s) {', '.join(cs)} (run them one by one with Simulator)")
+    return model
+
+
+def _sampling(reds: list[str], every: int | None, window: float | None, n: int, dt: float):
+    """What is recorded when: ``(every, k_win, window_s, want_crossings, n_samples)``, ``every`` checked
+    (0: no trajectories; default 1 without reductions, else 0) and the reductions' window resolved."""
     if every is None:
         every = 0 if reds else 1
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 0:
@@ -288,35 +317,69 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     k_win, win_s = _window(window, n, dt) if reds else (n + 1, None)
     want_cross = any(r in ("period", "crossings") for r in reds)
     n_samp = n // every + 1 if every else 0
+    return every, k_win, win_s, want_cross, n_samp
+
+
+def _thread_count(threads: int | None, N: int) -> int:
+    """The worker threads: ``threads`` (checked) or the CPUs available, at most one per variant."""
     if threads is not None and (isinstance(threads, bool) or int(threads) != threads or threads < 1):
         raise ModelError(f"threads must be a positive integer, got {threads!r}")
-    n_threads = max(1, min(int(threads) if threads is not None else available_threads(), N))
-    _check_memory(N, n_samp, len(signals) if every else 0, n_threads, (n - k_win + 1) * len(signals)
-                  if want_cross else 0)
+    return max(1, min(int(threads) if threads is not None else available_threads(), N))
+
+
+def _batch_runner(model: CompiledModel):
+    """``cpgsim_batch_run`` of the model's compiled step linked with the batch driver (built or cached)."""
+    from cpgsim.harness.native import step_library
+
     lib = ctypes.CDLL(str(step_library(model.step, BATCH_DRIVER, "cpgsim_batch", model.c_step_source())))
-    run = declare(lib, PROTOTYPES).cpgsim_batch_run
+    return declare(lib, PROTOTYPES).cpgsim_batch_run
 
-    nr = len(signals) if reds else 0
-    REC = np.full((N, n_samp, len(signals)), np.nan) if every else None
-    RED = np.full((N, nr, 7), np.nan)
-    SFLAG = np.zeros((N, nr), dtype=np.int64)
-    STATUS = np.full(N, _STATUS_NOT_RUN, dtype=np.int64)
-    DIV_STEP = np.full(N, -1, dtype=np.int64)
-    DIV_STATE = np.full(N, -1, dtype=np.int64)
-    XF, ZF = np.zeros((N, model.states.size)), np.zeros((N, model.dstates.size))
-    prog = np.zeros(2, dtype=np.int64)
-    idx = np.asarray(sig_idx, dtype=np.int64)
 
-    def ptr(a, kind=_dp):
-        return ctypes.cast(a.ctypes.data, kind) if a is not None and a.size else ctypes.cast(_spare.ctypes.data, kind)
+class _Buffers:
+    """The arrays the C driver writes (trajectories, reductions, statuses, final states, progress); they
+    must outlive the run, which holds only pointers to them (see :meth:`job`)."""
 
-    _spare = np.zeros(1, dtype=np.float64)
-    job = _Job(N, n, float(t0), float(dt), model.states.size, model.dstates.size, u.size, model.params.size,
-               model.signals_layout.size, ptr(P), ptr(X0), ptr(Z0), ptr(u),
-               len(signals) if every else 0, max(every, 1), n_samp, ptr(idx, _lp), ptr(REC) if every else None,
-               nr, k_win, int(want_cross), ptr(idx, _lp), ptr(RED), ptr(SFLAG, _lp),
-               ptr(STATUS, _lp), ptr(DIV_STEP, _lp), ptr(DIV_STATE, _lp), ptr(XF), ptr(ZF),
-               ptr(prog, _lp), 0, 0)
+    def __init__(self, model: CompiledModel, N: int, n_samp: int, n_sig: int, reduced: bool, every: int,
+                 sig_idx) -> None:
+        nr = n_sig if reduced else 0
+        self.nr = nr
+        self.REC = np.full((N, n_samp, n_sig), np.nan) if every else None
+        self.RED = np.full((N, nr, 7), np.nan)
+        self.SFLAG = np.zeros((N, nr), dtype=np.int64)
+        self.STATUS = np.full(N, _STATUS_NOT_RUN, dtype=np.int64)
+        self.DIV_STEP = np.full(N, -1, dtype=np.int64)
+        self.DIV_STATE = np.full(N, -1, dtype=np.int64)
+        self.XF, self.ZF = np.zeros((N, model.states.size)), np.zeros((N, model.dstates.size))
+        self.prog = np.zeros(2, dtype=np.int64)
+        self.idx = np.asarray(sig_idx, dtype=np.int64)
+        self.n_sig = n_sig
+        self._spare = np.zeros(1, dtype=np.float64)
+
+    def ptr(self, a, kind=_dp):
+        """A C pointer to ``a``'s data (to a spare element when ``a`` is None or empty)."""
+        data = a.ctypes.data if a is not None and a.size else self._spare.ctypes.data
+        return ctypes.cast(data, kind)
+
+    def job(self, model: CompiledModel, N: int, n: int, t0: float, dt: float, inputs, every: int, n_samp: int,
+            k_win: int, want_cross: bool) -> _Job:
+        """The driver's job description; ``inputs = (P, X0, Z0, u)`` must outlive the run too."""
+        P, X0, Z0, u = inputs
+        ptr = self.ptr
+        idx = self.idx
+        return _Job(N, n, float(t0), float(dt), model.states.size, model.dstates.size, u.size, model.params.size,
+                    model.signals_layout.size, ptr(P), ptr(X0), ptr(Z0), ptr(u),
+                    self.n_sig if every else 0, max(every, 1), n_samp, ptr(idx, _lp),
+                    ptr(self.REC) if every else None,
+                    self.nr, k_win, int(want_cross), ptr(idx, _lp), ptr(self.RED), ptr(self.SFLAG, _lp),
+                    ptr(self.STATUS, _lp), ptr(self.DIV_STEP, _lp), ptr(self.DIV_STATE, _lp), ptr(self.XF),
+                    ptr(self.ZF), ptr(self.prog, _lp), 0, 0)
+
+
+def _run_job(run, job: _Job, n_threads: int, prog: np.ndarray, progress: Callable[[int, int], None] | None,
+             N: int) -> tuple[int, float]:
+    """Run the driver on a worker thread, calling ``progress`` about 5 times a second and once at the end;
+    an interrupt (or any error) here asks the workers to stop and waits for them. Returns the threads
+    the driver used and the wall time; raises :class:`MemoryError` when its buffers could not be had."""
     out: dict[str, int] = {}
 
     def target() -> None:
@@ -340,17 +403,7 @@ def simulate_batch(graph: Graph | Block, params: ParamTable | None, t_end: float
     used = out.get("threads", -1)
     if used < 0:
         raise MemoryError(f"simulate_batch: could not allocate the work buffers of {n_threads} thread(s)")
-    status, div_t = _statuses(model, signals, reds, STATUS, DIV_STEP, DIV_STATE, SFLAG, t0, dt)
-    reductions = {}
-    for j, sig in enumerate(signals if reds else []):
-        for r in reds:
-            reductions[f"{sig}:{r}"] = RED[:, j, REDUCTIONS.index(r)].copy()
-    times = t0 + dt * (every * np.arange(n_samp)) if every else None  # = Simulator's times[::every]
-    return BatchResult(params=p_cols, x0=x_cols, reductions=reductions, signals=list(signals), time=times,
-                       data=REC, status=status, diverged_at=div_t, final_x=XF, final_z=ZF,
-                       state_names=model.states.names(), dstate_names=model.dstates.names(), wall_time=wall,
-                       threads=used, steps=n, dt=dt, t0=t0, t_end=t0 + n * dt, window=win_s, graph=model.name,
-                       notes=notes)
+    return used, wall
 
 
 # -- input checks and tables ---------------------------------------------------------------------------

@@ -504,6 +504,37 @@ def check_binary(desc: FmuDescription, kind: str) -> None:
 
 
 def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
+    """The :class:`FmuDescription` of a parsed modelDescription ``md`` (FMU at ``path`` holding ``members``)."""
+    major, cs, me, se = _interfaces(md)
+    by_vr = {v.valueReference: v for v in md.modelVariables}
+    taken: set[str] = set()  # port and parameter names given so far (ports first)
+    skipped: list[str] = []
+    inputs, outputs, var_port = _ports(md, by_vr, taken, skipped)
+    structural = _structural(md, by_vr)
+    params, value_params = _parameters(md, by_vr, taken, skipped)
+    feed = _feedthrough(md, inputs, outputs, var_port)
+    experiment = default_experiment(md.defaultExperiment, path)
+    step = experiment.get("stepSize")
+    platforms = sorted({m.split("/")[1] for m in members if m.startswith("binaries/") and m.count("/") >= 2
+                        and m.split("/")[1]})
+    desc = FmuDescription(
+        path=path, fmi_version=major, model_name=md.modelName or "", generation_tool=md.generationTool or "",
+        guid=md.guid or "", description=md.description or "", cs_identifier=cs, me_identifier=me,
+        n_states=_count(md.numberOfContinuousStates, "numberOfContinuousStates"),
+        n_event_indicators=_count(md.numberOfEventIndicators, "numberOfEventIndicators"),
+        inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
+        default_experiment=experiment,
+        platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
+        needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
+        skipped=skipped, members=frozenset(members), value_parameters=value_params,
+        structural_parameters=structural, se_identifier=se,
+        variable_step=bool(getattr(md.coSimulation, "canHandleVariableCommunicationStepSize", False)))
+    return desc
+
+
+def _interfaces(md: Any) -> tuple[int, str | None, str | None, str | None]:
+    """FMI major version and the model identifiers of the CoSimulation, ModelExchange and
+    ScheduledExecution interfaces; refuses other versions and an FMU with none of them."""
     major = int(str(md.fmiVersion).split(".")[0])
     if major not in (2, 3):
         raise ModelDescriptionError(f"FMI version {md.fmiVersion} is not supported (need 2.0 or 3.0)")
@@ -513,16 +544,12 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
     se = se_md.modelIdentifier if se_md is not None else None
     if not cs and not me and not se:
         raise ModelDescriptionError("declares neither CoSimulation, ModelExchange nor ScheduledExecution")
-    by_vr = {v.valueReference: v for v in md.modelVariables}
-    taken: set[str] = set()
-    skipped: list[str] = []
-    inputs: dict[str, PortSpec] = {}
-    outputs: dict[str, PortSpec] = {}
-    params: dict[str, ParamSpec] = {}
-    var_port: dict[int, str] = {}  # id(variable) -> port name
-    port_elements = 0
+    return major, cs, me, se
 
-    # --- ports: group FMI 2 indexed scalars, keep FMI 3 arrays ---------------------------------
+
+def _port_groups(md: Any) -> list[list[Any]]:
+    """The input and output variables, one list per port: FMI 2 indexed scalars ``name[1..n]`` (or
+    ``[0..n-1]``) of one type and unit grouped in index order, everything else on its own."""
     port_vars = [v for v in md.modelVariables if v.causality in ("input", "output")]
     groups: list[list[Any]] = []
     by_base: dict[tuple, list[Any]] = {}
@@ -548,6 +575,18 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
             final.extend([v] for v in g)
         else:
             final.append(g)
+    return final
+
+
+def _ports(md: Any, by_vr: dict[int, Any], taken: set[str], skipped: list[str]
+           ) -> tuple[dict[str, PortSpec], dict[str, PortSpec], dict[int, str]]:
+    """Input and output ports (FMI 2 indexed scalars grouped, FMI 3 arrays kept) and each port
+    variable's port name by ``id``; unsupported ones are noted in ``skipped``, names added to ``taken``."""
+    inputs: dict[str, PortSpec] = {}
+    outputs: dict[str, PortSpec] = {}
+    var_port: dict[int, str] = {}  # id(variable) -> port name
+    port_elements = 0
+    final = _port_groups(md)
     for g in final:
         v = g[0]
         kind = kind_of(v.type)
@@ -586,10 +625,15 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         (inputs if spec.direction == "in" else outputs)[name] = spec
         for x in g:
             var_port[id(x)] = name
+    return inputs, outputs, var_port
 
-    # --- parameters ----------------------------------------------------------------------------
+
+def _parameters(md: Any, by_vr: dict[int, Any], taken: set[str], skipped: list[str]
+                ) -> tuple[dict[str, ParamSpec], dict[str, ValueParamSpec]]:
+    """Scalar parameters and value parameters (arrays of fixed shape, strings); the others are noted
+    in ``skipped`` (as are Binary variables that are not ports)."""
+    params: dict[str, ParamSpec] = {}
     value_params: dict[str, ValueParamSpec] = {}
-    structural = _structural(md, by_vr)
     for v in md.modelVariables:
         if v.causality != "parameter":
             if v.type == "Binary" and v.causality not in ("input", "output"):
@@ -611,25 +655,36 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
         if v.variability not in ("fixed", "tunable", None):
             skipped.append(f"parameter {v.name!r} with variability {v.variability}")
             continue
-        start = _parse_start(v, v.type, 1)
-        lo = _attr(v, "min")
-        hi = _attr(v, "max")
-        element = f"variable {v.name!r} <{v.type}>"
-        bounds = (number_attribute(lo, element, "min", v.type) if lo is not None else -math.inf,
-                  number_attribute(hi, element, "max", v.type) if hi is not None else math.inf)
-        s0 = start[0] if start else None
-        if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
-            skipped.append(f"bounds of parameter {v.name!r} ignored: start {format_value(s0, v.type)} is outside "
-                           f"[{format_value(bounds[0], v.type)}, {format_value(bounds[1], v.type)}]")
-            bounds = (-math.inf, math.inf)
-        if kind == "boolean":
-            bounds = (0.0, 1.0)
-        name = identifier(v.name, taken)
-        params[name] = ParamSpec(name=name, fmi_name=v.name, vr=v.valueReference, type=v.type, kind=kind,
-                                 unit=normalize_unit(_attr(v, "unit") or ""), start=s0, bounds=bounds,
-                                 description=one_line(v.description or "", 200), variability=v.variability or "fixed")
+        spec = _scalar_param(v, kind, taken, skipped)
+        params[spec.name] = spec
+    return params, value_params
 
-    # --- feedthrough from ModelStructure ---------------------------------------------------------
+
+def _scalar_param(v: Any, kind: str, taken: set[str], skipped: list[str]) -> ParamSpec:
+    """A scalar parameter: start, bounds (ignored, with a note, when the start lies outside them; 0..1
+    for a boolean) and a unique name."""
+    start = _parse_start(v, v.type, 1)
+    lo = _attr(v, "min")
+    hi = _attr(v, "max")
+    element = f"variable {v.name!r} <{v.type}>"
+    bounds = (number_attribute(lo, element, "min", v.type) if lo is not None else -math.inf,
+              number_attribute(hi, element, "max", v.type) if hi is not None else math.inf)
+    s0 = start[0] if start else None
+    if s0 is not None and not (bounds[0] <= s0 <= bounds[1]):
+        skipped.append(f"bounds of parameter {v.name!r} ignored: start {format_value(s0, v.type)} is outside "
+                       f"[{format_value(bounds[0], v.type)}, {format_value(bounds[1], v.type)}]")
+        bounds = (-math.inf, math.inf)
+    if kind == "boolean":
+        bounds = (0.0, 1.0)
+    name = identifier(v.name, taken)
+    return ParamSpec(name=name, fmi_name=v.name, vr=v.valueReference, type=v.type, kind=kind,
+                     unit=normalize_unit(_attr(v, "unit") or ""), start=s0, bounds=bounds,
+                     description=one_line(v.description or "", 200), variability=v.variability or "fixed")
+
+
+def _feedthrough(md: Any, inputs: dict[str, PortSpec], outputs: dict[str, PortSpec],
+                 var_port: dict[int, str]) -> dict[str, set[str]]:
+    """Each output's direct-feedthrough inputs from ModelStructure (all inputs when not listed)."""
     feed: dict[str, set[str]] = {name: set() for name in outputs}
     listed: set[str] = set()
     for unknown in md.outputs:
@@ -644,24 +699,7 @@ def _build(md: Any, path: Path, members: list[str]) -> FmuDescription:
     for out in outputs:  # an output missing from ModelStructure: assume the worst
         if out not in listed:
             feed[out] = set(inputs)
-
-    experiment = default_experiment(md.defaultExperiment, path)
-    step = experiment.get("stepSize")
-    platforms = sorted({m.split("/")[1] for m in members if m.startswith("binaries/") and m.count("/") >= 2
-                        and m.split("/")[1]})
-    desc = FmuDescription(
-        path=path, fmi_version=major, model_name=md.modelName or "", generation_tool=md.generationTool or "",
-        guid=md.guid or "", description=md.description or "", cs_identifier=cs, me_identifier=me,
-        n_states=_count(md.numberOfContinuousStates, "numberOfContinuousStates"),
-        n_event_indicators=_count(md.numberOfEventIndicators, "numberOfEventIndicators"),
-        inputs=inputs, outputs=outputs, parameters=params, feedthrough=feed, default_step=step,
-        default_experiment=experiment,
-        platforms=platforms, has_sources=any(m.startswith("sources/") and m.endswith(".c") for m in members),
-        needs_execution_tool=bool(getattr(md.coSimulation or md.modelExchange, "needsExecutionTool", False)),
-        skipped=skipped, members=frozenset(members), value_parameters=value_params,
-        structural_parameters=structural, se_identifier=se,
-        variable_step=bool(getattr(md.coSimulation, "canHandleVariableCommunicationStepSize", False)))
-    return desc
+    return feed
 
 
 def _value_param(v: Any, by_vr: dict[int, Any], taken: set[str]) -> ValueParamSpec | None:

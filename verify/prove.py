@@ -655,93 +655,11 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
             if m == 0:
                 raise ProofFailed("a one-state autonomous ODE has no periodic orbit")
             J = _chord_jacobian(pr, sec, np.asarray(x_star, dtype=float), fx, monodromy, s, period)
-            # numeric DP is good to about 1e-9: a smallest singular value of DG below 1e-7 is a multiplier at 1
-            if not np.all(np.isfinite(J)) or np.linalg.svd(J, compute_uv=False)[-1] < 1e-7 * max(
-                    1.0, float(np.max(np.abs(J + np.eye(m))))):
-                raise ProofFailed("Krawczyk test failed: DG = DP - I is singular at the numerical fixed point "
-                                  "(a multiplier within 1e-7 of 1: the orbit is not isolated, e.g. a centre of a "
-                                  "conservative system or uncoupled oscillators)")
-            Ja = arb_mat([[arb(float(v)) for v in row] for row in J])
-            G, ret = None, None
-            g_prev = math.inf
-            for it in range(opts.newton_steps):
-                G, _, ret = pr.residual_and_jacobian(s, sec, period, augmented=False)
-                g = max(_mag(v) for v in G)
-                say(f"prove: Newton {it}: |P(s) - s| <= {g:.3g}, return time {float(ret.time.mid()):.12f} s, "
-                    f"{len(ret.steps)} steps")
-                if g > 1e-3 * g_prev:  # at the floor set by the enclosure widths: keep this s_hat
-                    break
-                g_prev = g
-                # a chord-Newton step on the midpoints (the proof does not rely on it: s_hat is only a guess)
-                da = Ja.solve(arb_mat([[v.mid()] for v in G]))
-                s_new = [(s[j] - da[j, 0]).mid() for j in range(m)]
-                if it == opts.newton_steps - 1:
-                    break
-                s = s_new
-            assert G is not None and ret is not None
-            CG = float(np.max(np.abs(np.linalg.solve(J, [float(v.mid()) for v in G])))) + max(_mag(v) for v in G)
-            r_f = _radius(opts, CG)
-            steps_point, tau_point = ret.steps, ret.tau
-            ok, info, box = False, {}, None
-            G_center = G
-            for attempt in range(4):
-                r = arb(r_f)
-                center = [s[j] + arb(center_shift * r_f) for j in range(m)]
-                X = [arb(center[j], r) for j in range(m)]
-                if center_shift:
-                    G_center, _, _ = pr.residual_and_jacobian(center, sec, period, steps_point, tau_point, False)
-                say(f"prove: box radius {r_f:.3g}: validated integration of the variational equation over the box")
-                try:
-                    _, DGX, box = pr.residual_and_jacobian(X, sec, period, steps_point, tau_point, split=True)
-                except ProofFailed:
-                    if attempt == 3:
-                        raise
-                    r_f *= 1e-3
-                    continue
-                assert DGX is not None
-                Jx = _mid_matrix(DGX)
-                if not np.all(np.isfinite(Jx)) or abs(np.linalg.det(Jx)) == 0:
-                    raise ProofFailed("Krawczyk test failed: DG(X) is singular", "bits-order")
-                C = arb_mat([[arb(float(v)) for v in row] for row in np.linalg.inv(Jx)])
-                ok, info = krawczyk(center, G_center, DGX, C, r)
-                info["box_radius"] = r_f
-                if ok or opts.radius is not None or center_shift:
-                    break
-                q = info["contraction_norm"]
-                if q >= 0.5:
-                    r_f *= 1e-4  # DG(X) too wide (wrapping): a smaller box
-                else:
-                    r_f = max(4 * info["residual"] / (1 - q), 10 * r_f)  # the residual does not fit: a larger box
-            res.krawczyk = info
-            res.steps = len(box.steps) if box is not None else len(steps_point)
-            res.box_center = [s[j] + arb(center_shift * r_f) for j in range(m)]
-            res.radius = arb(r_f)
-            if not ok or box is None:
-                raise ProofFailed(f"Krawczyk test failed at box width {2 * r_f:.3g} (|I - C DG(X)| <= "
-                                  f"{round_up(info.get('contraction_norm', math.nan), 3)}, |C G(s_hat)| <= "
-                                  f"{round_up(info.get('residual', math.nan), 3)})",
-                                  "bits-order" if info.get("contraction_norm", math.inf) >= 1 else "box")
-            # the fixed point lies in K(X) n X, far narrower than X: the period and the multipliers
-            # are enclosed over that box (one more validated run)
-            K_box = [arb(c.mid(), arb(info["K_radius"]) * 2) for c in center]
-            if not all(X[j].contains(K_box[j]) for j in range(m)):
-                K_box = X
-            steps_point, tau_point = box.steps, box.tau  # the variational run's steps (halved where needed)
-            say("prove: enclosing the period and the multipliers over K(X)")
-            _, _, box = pr.residual_and_jacobian(K_box, sec, period, steps_point, tau_point)
-            res.period = box.time
-            _, DPX = pr.section_map(box, sec, True)
-            assert DPX is not None
-            res.multipliers = multiplier_enclosures(DPX) if m else []
-            res.proved = True
-            res.stable = all(mu["inside_unit_circle"] for mu in res.multipliers)
-            if res.stable:
-                res.reason = (f"proved: a unique periodic orbit through the box, period in "
-                              f"{ball_text(res.period, 15)} s; every non-trivial "
-                              "multiplier enclosure lies inside the unit circle: asymptotically stable")
-            else:
-                res.reason = ("proved a periodic orbit, but a multiplier enclosure touches or leaves the unit circle "
-                              "(stability not proved)")
+            _require_isolated(J, m)
+            s, G, ret = _newton_refine(pr, s, sec, period, J, opts.newton_steps, say)
+            info, box, r_f, center, X, C = _krawczyk_box(res, pr, s, sec, period, J, G, ret, opts, center_shift,
+                                                         say)
+            steps_point, tau_point = _enclose_over_k(res, pr, sec, period, info, center, X, box, say)
             res.certificate = {
                 "format": CERT_FORMAT, "states": list(names), "tape_sha256": pr.tape.digest(),
                 "proved_for": PROVED_FOR, "tape_constants": res.tape_constants,
@@ -757,6 +675,123 @@ def prove_system(f: Any, names: Sequence[str], x_star: np.ndarray, period: float
             res.proved, res.stable, res.reason = False, False, str(exc) + knob_hint(exc.knob, opts)
     res.wall_time_s = time.perf_counter() - t0
     return res
+
+
+def _require_isolated(J: np.ndarray, m: int) -> None:
+    """Refuse a chord matrix ``DG = DP - I`` that is singular at the numerical fixed point (a multiplier
+    within 1e-7 of 1: the orbit is not isolated)."""
+    # numeric DP is good to about 1e-9: a smallest singular value of DG below 1e-7 is a multiplier at 1
+    if not np.all(np.isfinite(J)) or np.linalg.svd(J, compute_uv=False)[-1] < 1e-7 * max(
+            1.0, float(np.max(np.abs(J + np.eye(m))))):
+        raise ProofFailed("Krawczyk test failed: DG = DP - I is singular at the numerical fixed point "
+                          "(a multiplier within 1e-7 of 1: the orbit is not isolated, e.g. a centre of a "
+                          "conservative system or uncoupled oscillators)")
+
+
+def _newton_refine(pr: Prover, s: list, sec: Any, period: float, J: np.ndarray, newton_steps: int,
+                   say: Progress) -> tuple[list, Any, Any]:
+    """Chord-Newton steps on the section map's midpoints until the residual stops shrinking: ``(s_hat,
+    G(s_hat), its return)`` (the proof does not rely on ``s_hat``, a guess)."""
+    m = len(s)
+    Ja = arb_mat([[arb(float(v)) for v in row] for row in J])
+    G, ret = None, None
+    g_prev = math.inf
+    for it in range(newton_steps):
+        G, _, ret = pr.residual_and_jacobian(s, sec, period, augmented=False)
+        g = max(_mag(v) for v in G)
+        say(f"prove: Newton {it}: |P(s) - s| <= {g:.3g}, return time {float(ret.time.mid()):.12f} s, "
+            f"{len(ret.steps)} steps")
+        if g > 1e-3 * g_prev:  # at the floor set by the enclosure widths: keep this s_hat
+            break
+        g_prev = g
+        # a chord-Newton step on the midpoints (the proof does not rely on it: s_hat is only a guess)
+        da = Ja.solve(arb_mat([[v.mid()] for v in G]))
+        s_new = [(s[j] - da[j, 0]).mid() for j in range(m)]
+        if it == newton_steps - 1:
+            break
+        s = s_new
+    assert G is not None and ret is not None
+    return s, G, ret
+
+
+def _krawczyk_box(res: ProofResult, pr: Prover, s: list, sec: Any, period: float, J: np.ndarray, G: Any, ret: Any,
+                  opts: ProofOptions, center_shift: float, say: Progress):
+    """Find a box around ``s_hat`` that passes the Krawczyk test (up to 4 tries, shrinking or growing it);
+    records the test in ``res`` and raises :class:`ProofFailed` when none passes. Returns ``(info, box
+    run, radius, centre, X, C)``."""
+    m = len(s)
+    CG = float(np.max(np.abs(np.linalg.solve(J, [float(v.mid()) for v in G])))) + max(_mag(v) for v in G)
+    r_f = _radius(opts, CG)
+    steps_point, tau_point = ret.steps, ret.tau
+    ok, info, box = False, {}, None
+    G_center = G
+    for attempt in range(4):
+        r = arb(r_f)
+        center = [s[j] + arb(center_shift * r_f) for j in range(m)]
+        X = [arb(center[j], r) for j in range(m)]
+        if center_shift:
+            G_center, _, _ = pr.residual_and_jacobian(center, sec, period, steps_point, tau_point, False)
+        say(f"prove: box radius {r_f:.3g}: validated integration of the variational equation over the box")
+        try:
+            _, DGX, box = pr.residual_and_jacobian(X, sec, period, steps_point, tau_point, split=True)
+        except ProofFailed:
+            if attempt == 3:
+                raise
+            r_f *= 1e-3
+            continue
+        assert DGX is not None
+        Jx = _mid_matrix(DGX)
+        if not np.all(np.isfinite(Jx)) or abs(np.linalg.det(Jx)) == 0:
+            raise ProofFailed("Krawczyk test failed: DG(X) is singular", "bits-order")
+        C = arb_mat([[arb(float(v)) for v in row] for row in np.linalg.inv(Jx)])
+        ok, info = krawczyk(center, G_center, DGX, C, r)
+        info["box_radius"] = r_f
+        if ok or opts.radius is not None or center_shift:
+            break
+        q = info["contraction_norm"]
+        if q >= 0.5:
+            r_f *= 1e-4  # DG(X) too wide (wrapping): a smaller box
+        else:
+            r_f = max(4 * info["residual"] / (1 - q), 10 * r_f)  # the residual does not fit: a larger box
+    res.krawczyk = info
+    res.steps = len(box.steps) if box is not None else len(steps_point)
+    res.box_center = [s[j] + arb(center_shift * r_f) for j in range(m)]
+    res.radius = arb(r_f)
+    if not ok or box is None:
+        raise ProofFailed(f"Krawczyk test failed at box width {2 * r_f:.3g} (|I - C DG(X)| <= "
+                          f"{round_up(info.get('contraction_norm', math.nan), 3)}, |C G(s_hat)| <= "
+                          f"{round_up(info.get('residual', math.nan), 3)})",
+                          "bits-order" if info.get("contraction_norm", math.inf) >= 1 else "box")
+    return info, box, r_f, center, X, C
+
+
+def _enclose_over_k(res: ProofResult, pr: Prover, sec: Any, period: float, info: dict, center: list, X: list,
+                    box: Any, say: Progress) -> tuple[list, Any]:
+    """Enclose the period and the multipliers over ``K(X) n X`` (one more validated run) and state the
+    verdict in ``res``; returns the steps and ``tau`` of the run over X that the certificate replays."""
+    m = len(center)
+    # the fixed point lies in K(X) n X, far narrower than X: the period and the multipliers
+    # are enclosed over that box (one more validated run)
+    K_box = [arb(c.mid(), arb(info["K_radius"]) * 2) for c in center]
+    if not all(X[j].contains(K_box[j]) for j in range(m)):
+        K_box = X
+    steps_point, tau_point = box.steps, box.tau  # the variational run's steps (halved where needed)
+    say("prove: enclosing the period and the multipliers over K(X)")
+    _, _, box = pr.residual_and_jacobian(K_box, sec, period, steps_point, tau_point)
+    res.period = box.time
+    _, DPX = pr.section_map(box, sec, True)
+    assert DPX is not None
+    res.multipliers = multiplier_enclosures(DPX) if m else []
+    res.proved = True
+    res.stable = all(mu["inside_unit_circle"] for mu in res.multipliers)
+    if res.stable:
+        res.reason = (f"proved: a unique periodic orbit through the box, period in "
+                      f"{ball_text(res.period, 15)} s; every non-trivial "
+                      "multiplier enclosure lies inside the unit circle: asymptotically stable")
+    else:
+        res.reason = ("proved a periodic orbit, but a multiplier enclosure touches or leaves the unit circle "
+                      "(stability not proved)")
+    return steps_point, tau_point
 
 
 def check_system(f: Any, names: Sequence[str], cert: Mapping[str, Any],

@@ -169,6 +169,19 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
     gs = fig.add_gridspec(nrow_pp + 1, max(ncol, 2))
     t_tr, X_tr = rep.transient if rep.transient is not None else (np.zeros(0), np.zeros((len(rep.states), 0)))
     idx = {n: i for i, n in enumerate(rep.states)}
+    _plot_phase_portraits(fig, gs, pairs, ncol, cycles, X_tr, idx)
+    _plot_orbit_series(fig.add_subplot(gs[nrow_pp, 0]), rep, cycles, t_tr, X_tr, idx)
+    _plot_summary_and_convergence(fig, gs, rep, pairs, ncol, nrow_pp, _summary_lines(rep, cycles))
+    fig.suptitle(f"{rep.graph}: {STATUS_TEXT[rep.status]}", fontsize=10)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_phase_portraits(fig: Any, gs: Any, pairs: list[tuple[str, str]], ncol: int, cycles: list,
+                          X_tr: np.ndarray, idx: dict[str, int]) -> None:
+    """One panel per pair of states (in the grid's top rows): the transient in grey, the orbit in colour."""
     for k, (a, b) in enumerate(pairs):
         ax = fig.add_subplot(gs[k // ncol, k % ncol])
         if X_tr.size:
@@ -185,7 +198,12 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
         ax.grid(alpha=0.3)
         if k == 0:  # below the axes: a legend inside covered the orbit's start marker
             ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
-    ax = fig.add_subplot(gs[nrow_pp, 0])
+
+
+def _plot_orbit_series(ax: Any, rep: VerifyReport, cycles: list, t_tr: np.ndarray, X_tr: np.ndarray,
+                       idx: dict[str, int]) -> None:
+    """The orbit's states over one period (sub-cycles over the longest one; up-crossing marks), else the
+    transient's first states, else nothing."""
     if cycles:
         T_show = max(c.period for c in cycles)
         for ci, c in enumerate(cycles):
@@ -221,10 +239,21 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
         ax.grid(alpha=0.3)
     else:
         ax.set_axis_off()
+
+
+def _summary_lines(rep: VerifyReport, cycles: list) -> list[str]:
+    """The verdict, the reason and each cycle's period and multipliers, wrapped for the text panel."""
     summary = [STATUS_TEXT[rep.status], "", *textwrap.wrap(rep.reason, 52)]
     for c in cycles:
         mus = ", ".join(_mu(m) for m in c.multipliers[:8])
         summary += ["", f"[{c.name}] T = {c.period:.8g} s", *textwrap.wrap(f"multipliers: {mus}", 52)]
+    return summary
+
+
+def _plot_summary_and_convergence(fig: Any, gs: Any, rep: VerifyReport, pairs: list[tuple[str, str]], ncol: int,
+                                  nrow_pp: int, summary: list[str]) -> None:
+    """The summary text in the first free panel and, with a synchronisation trace, the convergence panel
+    (follower disagreement and distance to the orbit against the tolerance) in the bottom row."""
     free = [(r, cidx) for r in range(nrow_pp) for cidx in range(max(ncol, 2)) if r * ncol + cidx >= len(pairs)
             and cidx < max(ncol, 2)]
     ax = fig.add_subplot(gs[nrow_pp, 1:] if max(ncol, 2) > 2 else gs[nrow_pp, 1])
@@ -239,28 +268,29 @@ def plot_report(rep: VerifyReport, path: Path) -> Path:
         tax.text(0.02, 0.98, "\n".join(summary[:28]), ha="left", va="top", fontsize=8, family="monospace",
                  transform=tax.transAxes)
     if s and "trace" in s:
-        t, d_sync, d_cyc = s["trace"]
-        if s["pairs"]:
-            label = "follower disagreement " + ", ".join("~".join(p) for p in s["pairs"])
-            ax.semilogy(t, np.maximum(d_sync, 1e-16), label=label)
-        if rep.cycle is not None or rep.subcycles:
-            ax.semilogy(t, np.maximum(d_cyc, 1e-16),
-                        label="distance to the orbit" if rep.cycle else "distance to the sub-cycles")
-        ax.axhline(s["tolerance"], color="k", lw=0.8, ls="--", label=f"tolerance {s['tolerance']:g}")
-        if s.get("sync_time") is not None:
-            ax.axvline(s["sync_time"], color="C0", lw=0.8, ls=":", label=f"sync time {s['sync_time']:.2f} s")
-        if s["pairs"]:
-            ax.axvline(2.0, color="C3", lw=0.8, ls="-.", label="Yu's claim: followers sync in ~2 s")
-        ax.set_xlabel("time from x0 [s]")
-        ax.set_ylabel("relative distance")
-        ax.set_title("convergence from the graph's initial state", fontsize=9)
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3, which="both")
-    fig.suptitle(f"{rep.graph}: {STATUS_TEXT[rep.status]}", fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+        _plot_convergence(ax, rep, s)
+
+
+def _plot_convergence(ax: Any, rep: VerifyReport, s: dict) -> None:
+    """Follower disagreement and distance to the orbit (or sub-cycles) over time, log scale, with the
+    tolerance, the sync time and Yu's 2 s claim."""
+    t, d_sync, d_cyc = s["trace"]
+    if s["pairs"]:
+        label = "follower disagreement " + ", ".join("~".join(p) for p in s["pairs"])
+        ax.semilogy(t, np.maximum(d_sync, 1e-16), label=label)
+    if rep.cycle is not None or rep.subcycles:
+        ax.semilogy(t, np.maximum(d_cyc, 1e-16),
+                    label="distance to the orbit" if rep.cycle else "distance to the sub-cycles")
+    ax.axhline(s["tolerance"], color="k", lw=0.8, ls="--", label=f"tolerance {s['tolerance']:g}")
+    if s.get("sync_time") is not None:
+        ax.axvline(s["sync_time"], color="C0", lw=0.8, ls=":", label=f"sync time {s['sync_time']:.2f} s")
+    if s["pairs"]:
+        ax.axvline(2.0, color="C3", lw=0.8, ls="-.", label="Yu's claim: followers sync in ~2 s")
+    ax.set_xlabel("time from x0 [s]")
+    ax.set_ylabel("relative distance")
+    ax.set_title("convergence from the graph's initial state", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3, which="both")
 
 
 # -- sweep -----------------------------------------------------------------------------------------

@@ -241,3 +241,39 @@ def test_output_clock_every_third_tick_of_a_periodic_input_clock(trig_fmu, tmp_p
     every = [k / 40 for k in range(2, 20, 3)]
     assert res.meta["clock_ticks"] == {"p.every": every}
     np.testing.assert_array_equal(res["p.every"], flag_rows(every, res.time))
+
+
+@pytest.mark.parametrize(("ticks", "fragment"), [([0.1, 0.1], "0.1 is given twice in 0.1, 0.1"),
+                                                 ([0.3, 0.1, 0.4], "0.1 is given out of order in 0.3, 0.1, 0.4")])
+def test_a_schedule_with_a_repeated_or_unsorted_tick_is_refused(trig_fmu, ticks, fragment):
+    """Issue 61: '--clock inClock2=1,1' activated the clock twice at t = 1 and '8,1,9' was sorted without
+    notice; both are one-line errors naming the block, the clock and the tick."""
+    from cpgsim.components.core import ModelError
+    from cpgsim.fmus.importer.block import FmuBlock
+
+    with pytest.raises(ModelError, match=rf"FMU block 'a': clock 'trig': tick times must increase, {fragment}$"):
+        FmuBlock("a", trig_fmu, kind="cs", clocks={"trig": ticks})
+
+
+def test_a_tick_before_the_start_is_refused_at_setup(trig_fmu):
+    from cpgsim.components.core import ModelError
+    from cpgsim.fmus.importer.block import FmuBlock
+
+    blk = FmuBlock("a", trig_fmu, kind="cs", clocks={"trig": [-1.0, 0.1]})
+    with pytest.raises(ModelError, match=r"clock 'trig' is scheduled to tick at -1 s, before the run starts at 0 s"):
+        blk.setup(0.0)
+
+
+@pytest.mark.slow
+def test_cli_refuses_ticks_outside_the_run_and_names_a_wrong_block(trig_fmu, tmp_path, capsys):
+    from cpgsim.cli.main import main
+
+    args = ["simulate", str(trig_fmu), "--t-end", "0.5", "--dt", "0.01", "-o", str(tmp_path / "r.arrow"),
+            "--no-isolate"]
+    assert main(args + ["--clock", "trig=0.1,0.9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("tick at 0.9 s is outside the run [0, 0.5] s") and "\n" not in err
+    assert main(args + ["--clock", "other.trig=0.1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no FMU block named 'other' (FMU blocks: Trig" in err and "\n" not in err
+    assert not (tmp_path / "r.arrow").exists()

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from cpgsim.cli import catalog
 from cpgsim.cli.common import CliError, add_set_argument, parse_sets, positive_float
+from cpgsim.components.core import did_you_mean
 from cpgsim.components.graph import Graph
 from cpgsim.harness.simulate import SimulationError, Simulator
 
@@ -148,6 +149,10 @@ def schedule_clock(graph: object, spec: str) -> None:
     if not values:
         raise CliError(f"--clock {spec!r}: expected NAME=T1,T2,... (tick times in seconds)")
     block, _, clock = name.strip().rpartition(".")
+    known = [b.name for b in fmu_blocks(graph)]
+    if block and block not in known:
+        raise CliError(f"--clock {spec!r}: no FMU block named {block!r} (FMU blocks: {', '.join(known) or 'none'})"
+                       f"{did_you_mean(block, known)}")
     blocks = [b for b in fmu_blocks(graph) if (not block or b.name == block)
               and any(clock in (p, c.name) for p, c in getattr(b, "clock_inputs", {}).items())]
     if len(blocks) != 1:
@@ -157,6 +162,19 @@ def schedule_clock(graph: object, spec: str) -> None:
         blocks[0].schedule_clock(clock, values)
     except Exception as exc:  # noqa: BLE001 - a ModelError naming the clock
         raise CliError(f"--clock {spec!r}: {exc}") from None
+
+
+def check_clock_schedules(graph: object, t0: float, t_end: float) -> None:
+    """Every ``--clock`` tick inside the run ``[t0, t_end]``: a tick outside it would be silently dropped (after
+    the end) or handed to the FMU before its start time."""
+    from cpgsim.fmus.importer.block import fmu_blocks
+
+    for blk in fmu_blocks(graph):
+        for clock, ticks in getattr(blk, "schedules", {}).items():
+            outside = [t for t in ticks if not t0 <= t <= t_end]
+            if outside:
+                raise CliError(f"--clock {blk.name}.{clock}: tick at {outside[0]:g} s is outside the run "
+                               f"[{t0:g}, {t_end:g}] s")
 
 
 def default_output(graph: str) -> Path:
@@ -210,6 +228,7 @@ def _run_into(args: argparse.Namespace, out: Path) -> int:
         params = {}
     experiment = choose_experiment(args, declared_experiment(graph, args.graph))
     t0, t_end, dt = (float(experiment[k]["value"]) for k in ("t0", "t_end", "dt"))  # type: ignore[arg-type]
+    check_clock_schedules(graph, t0, t_end)
     tol = experiment.get("tolerance")
     if tol is not None and str(tol["used"]).startswith("as the"):
         from cpgsim.fmus.importer.block import set_solver

@@ -132,11 +132,16 @@ class FmuBlock(CoSimBlock):
             raise ModelError(f"FMU block {name!r}: clocks= names {key!r}, not a triggered input clock of "
                              f"{self.path.name} (triggered input clocks: {have})")
         try:
-            vals = sorted(float(t) for t in np.atleast_1d(np.asarray(times, dtype=float)))
+            vals = [float(t) for t in np.atleast_1d(np.asarray(times, dtype=float))]
         except (TypeError, ValueError):
             vals = [math.nan]
         if not all(math.isfinite(t) for t in vals):
             raise ModelError(f"FMU block {name!r}: clock {key!r}: tick times must be finite numbers, got {times!r}")
+        bad = next((k for k in range(1, len(vals)) if not vals[k] > vals[k - 1]), None)
+        if bad is not None:
+            what = "twice" if vals[bad] in vals[:bad] else "out of order"
+            raise ModelError(f"FMU block {name!r}: clock {key!r}: tick times must increase, {vals[bad]:g} is given "
+                             f"{what} in {', '.join(f'{t:g}' for t in vals)}")
         self.schedules[spec.name] = vals
 
     def reset_clock_wiring(self) -> None:
@@ -245,6 +250,10 @@ class FmuBlock(CoSimBlock):
 
     # -- co-simulation interface --------------------------------------------------------------------
     def setup(self, t0: float) -> None:
+        for clock, ticks in self.schedules.items():
+            if ticks and ticks[0] < t0:
+                raise ModelError(f"FMU block {self.name!r}: clock {clock!r} is scheduled to tick at {ticks[0]:g} s, "
+                                 f"before the run starts at {t0:g} s")
         self.terminate()
         args = dict(path=str(self.path), kind=self.kind, instance_name=self.name,
                     workdir=None if self.workdir is None else str(self.workdir), substeps=self.substeps,

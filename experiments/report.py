@@ -107,6 +107,25 @@ def robot_frame(geometry, q: np.ndarray, pos: np.ndarray, rpy: np.ndarray, force
             for (xs, ys, zs), color, width, name in styled]
 
 
+SCENE_SCALE = 1.1
+"""The 3D box's longest side in plotly's scene units (its default cube: 1): the box, its tick labels and the axis
+titles stay inside the viewer's frame, which keeps its shape (5:4) at any page width (at 2 with a fixed height,
+the tick labels were cut off at the left edge: "-0.2" read ".4")."""
+
+
+def scene_layout(y_lo: float, y_hi: float, z_lo: float, z_hi: float) -> dict[str, Any]:
+    """The 3D viewer's scene: x (lateral) from -0.45 to 0.45 m, y (forward) and z ranges as given, equal scale
+    on the three axes as in the world, each axis titled with its unit."""
+    ranges = {"x": 0.9, "y": y_hi - y_lo, "z": z_hi - z_lo}
+    scale = SCENE_SCALE / max(ranges.values())
+    return {"xaxis": {"range": [-0.45, 0.45], "title": {"text": "x lateral [m]"}},
+            "yaxis": {"range": [y_lo, y_hi], "title": {"text": "y forward [m]"}},
+            "zaxis": {"range": [z_lo, z_hi], "title": {"text": "z [m]"}},
+            "aspectmode": "manual", "aspectratio": {k: v * scale for k, v in ranges.items()},
+            # looking at a point below the box's centre: the box sits higher, its labels clear the bottom edge
+            "camera": {"eye": {"x": 1.5, "y": -1.3, "z": 0.9}, "center": {"x": 0, "y": 0, "z": -0.25}}}
+
+
 def _round(values: list) -> list:
     """Coordinates to 0.1 mm (what a screen can show; a third of the page's size)."""
     return [None if v is None else round(v, 4) for v in values]
@@ -153,16 +172,10 @@ def build_report(run_dir: str | Path, fps: int = FPS) -> Path:
                         for d in robot_frame(geometry, q[k], pos[k], rpy[k], force[k], pushing(int(k)))]}
               for k in idx]
     z_lo, z_hi = -0.15, max(0.45, float(pos[:, 2].max()) + 2 * geometry.height)
-    ranges = {"x": 0.9, "y": y_hi - y_lo, "z": z_hi - z_lo}
-    scale = 2.0 / max(ranges.values())  # equal scale on the three axes, as in the world
-    scene = {"xaxis": {"range": [-0.45, 0.45], "title": "x lateral [m]"},
-             "yaxis": {"range": [y_lo, y_hi], "title": "y forward [m]"},
-             "zaxis": {"range": [z_lo, z_hi], "title": "z [m]"},
-             "aspectmode": "manual", "aspectratio": {k: v * scale for k, v in ranges.items()},
-             "camera": {"eye": {"x": 1.5, "y": -1.3, "z": 0.9}}}
+    scene = scene_layout(y_lo, y_hi, z_lo, z_hi)
     viewer = {"data": [terrain_trace, *first, event_trace], "frames": frames,
               # the title on the left, under plotly's toolbar (top right; centred, the title ran under it)
-              "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 56, "b": 0}, "height": 586,
+              "layout": {"scene": scene, "margin": {"l": 0, "r": 0, "t": 56, "b": 0},
                          "title": {"text": "3D replay (drag to rotate; arrows: toe forces"
                                    + ("; gold: pushes on the body" if pushes else "") + ")", "font": {"size": 13},
                                    "x": 0.01, "xanchor": "left", "y": 0.955, "yanchor": "top"},
@@ -245,8 +258,9 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
               f"vertical toe force Fz [N]{f' (dashed: Fcz = {fz:g} N)' if fz is not None else ''}",
               "body height [cm], roll and pitch [deg]"]
     # top margin 48 px: the first panel title sits below plotly's toolbar (about 30 px at the top right)
-    layout: dict[str, Any] = {"height": 760, "margin": {"l": 70, "r": 10, "t": 48, "b": 40}, "shapes": shapes,
-                              "legend": {"orientation": "h", "y": -0.06, "font": {"size": 10}},
+    # bottom: the time axis's tick labels and title, then the legend below them (it ran over the title)
+    layout: dict[str, Any] = {"height": 790, "margin": {"l": 70, "r": 10, "t": 48, "b": 70}, "shapes": shapes,
+                              "legend": {"orientation": "h", "y": -0.085, "yanchor": "top", "font": {"size": 10}},
                               "hovermode": "closest", "annotations": []}
     for r, ((lo, hi), text) in enumerate(zip(dom, titles, strict=True), start=1):
         sx = "" if r == 1 else str(r)
@@ -259,7 +273,7 @@ def _plots(res: Results, summary: dict, idx: np.ndarray, robot: str) -> dict[str
         layout["annotations"].append({"text": text, "xref": "paper", "yref": "paper", "x": 0, "y": hi + 0.005,
                                       "xanchor": "left", "yanchor": "bottom", "showarrow": False,
                                       "font": {"size": 11}})
-    layout["xaxis4"]["title"] = "time [s]"
+    layout["xaxis4"]["title"] = {"text": "time [s]"}
     return {"data": traces, "layout": layout}
 
 
@@ -354,7 +368,9 @@ def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float
 <html lang="en"><head><meta charset="utf-8"><title>cpgsim run: {html.escape(name)}</title>
 <style>
 body {{ font-family: sans-serif; margin: 12px; color: #222; }}
-#top {{ display: flex; gap: 12px; }} #left {{ flex: 1.1; min-width: 480px; }} #right {{ flex: 1; min-width: 420px; }}
+#top {{ display: flex; flex-wrap: wrap; gap: 12px; }}
+#left {{ flex: 1.1; min-width: 480px; }} #right {{ flex: 1; min-width: 420px; }}
+#viewer {{ aspect-ratio: 5 / 4; }} /* one shape at any width: what fits the frame at one width fits at all */
 #plotbox {{ position: relative; }} #cursor {{ position: absolute; width: 2px; background: #ff7f0e;
 pointer-events: none; top: 0; left: 0; height: 0; }}
 #controls {{ display: flex; gap: 6px; align-items: center; margin: 6px 0; }}
@@ -416,6 +432,25 @@ document.getElementById('play').onclick = play;
 document.getElementById('pause').onclick = pause;
 document.getElementById('speed').onchange = () => {{ if (playing) play(); }};
 slider.oninput = () => {{ pause(); show(parseInt(slider.value)); }};
+// the 3D axes as drawn (what the browser test reads): each axis's title, the viewer's size and the eight corners
+// of the axes' box in the viewer's pixels (plotly's projection of a 3D annotation), the tick labels next to them
+function sceneAxes() {{
+  const S = viewer._fullLayout.scene, sc = S._scene, cam = sc.glplot.cameraParams, size = viewer._fullLayout._size;
+  const mul = (m, v) => [0, 1, 2, 3].map(a => [0, 1, 2, 3].reduce((acc, n) => acc + m[4 * n + a] * v[n], 0));
+  const axes = ['xaxis', 'yaxis', 'zaxis'].map(a => S[a]), corners = [];
+  for (const i of [0, 1]) for (const j of [0, 1]) for (const k of [0, 1]) {{
+    const p = [axes[0].range[i], axes[1].range[j], axes[2].range[k]].map((v, n) => v * sc.dataScale[n]);
+    const q = mul(cam.projection, mul(cam.view, mul(cam.model, [...p, 1])));
+    const dx = S.domain.x, dy = S.domain.y;
+    corners.push([size.l + dx[0] * size.w + 0.5 * (1 + q[0] / q[3]) * size.w * (dx[1] - dx[0]),
+                  size.t + (1 - dy[1]) * size.h + 0.5 * (1 - q[1] / q[3]) * size.h * (dy[1] - dy[0])]
+                 .map(v => Math.round(v)));
+  }}
+  const box = viewer.getBoundingClientRect();
+  return {{titles: axes.map(a => a.title.text), showticklabels: axes.map(a => a.showticklabels), corners,
+           width: viewer._fullLayout.width, height: viewer._fullLayout.height,
+           left: box.left + window.scrollX, top: box.top + window.scrollY}};
+}}
 function toggleLeg(group) {{
   const idx = plots.data.map((d, i) => d.legendgroup === group ? i : -1).filter(i => i >= 0);
   const hide = plots.data[idx[0]].visible !== 'legendonly';
@@ -452,6 +487,7 @@ Promise.all([Plotly.newPlot(viewer, D.viewer.data, D.viewer.layout, {{responsive
   document.body.dataset.legVisible = JSON.stringify(D.legs.map((g, i) => [
     viewer.data[D.viewerTraces[1 + i]].visible !== false,
     plots.data.filter(d => d.legendgroup === g).every(d => d.visible !== 'legendonly')]));
+  document.body.dataset.sceneAxes = JSON.stringify(sceneAxes());
   document.body.dataset.readyMs = String(Math.round(performance.now()));
   document.body.dataset.ready = '1';
 }});

@@ -58,8 +58,9 @@ def test_cpgsim_report_rebuilds_it_and_refuses_a_wrong_directory(run_dir, tmp_pa
     assert len(err) == 1 and "results.arrow does not exist" in err[0]
 
 
-def _browser(url: str, *args: str, user_dir: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={user_dir}", *args, url], capture_output=True,
+def _browser(url: str, *args: str, user_dir: Path, width: int = 1600) -> subprocess.CompletedProcess:
+    flags = [f"--window-size={width},1100" if f.startswith("--window-size=") else f for f in FLAGS]
+    return subprocess.run([CHROMIUM, *flags, f"--user-data-dir={user_dir}", *args, url], capture_output=True,
                           text=True, timeout=180)
 
 
@@ -86,8 +87,8 @@ def test_report_draws_the_robot_and_scrubbing_moves_it(run_dir, tmp_path):
     assert changed > 0.001, f"scrubbing from frame 0 to 70 changed only {changed:.4%} of the viewer"
 
 
-def _body_data(url: str, user_dir: Path) -> dict[str, str]:
-    dom = _browser(url, "--dump-dom", user_dir=user_dir)
+def _body_data(url: str, user_dir: Path, width: int = 1600) -> dict[str, str]:
+    dom = _browser(url, "--dump-dom", user_dir=user_dir, width=width)
     body = re.search(r"<body([^>]*)>", dom.stdout)
     assert body and 'data-ready="1"' in body.group(1), dom.stderr[-2000:]
     return {k: html.unescape(v) for k, v in re.findall(r'data-([\w-]+)="([^"]*)"', body.group(1))}
@@ -120,6 +121,39 @@ def test_replay_follows_the_wall_clock(run_dir, tmp_path):
     # what is drawn is bounded whatever the run's length: at most 1,500 samples per plot trace
     plots = json.loads(re.search(r"const D = (\{.*?\});\n", page).group(1))["plots"]
     assert max(len(tr["x"]) for tr in plots["data"] if tr["type"] == "scatter") <= 1500
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium on this machine (.ci/run installs Debian's chromium)")
+@pytest.mark.parametrize("width", [1400, 960, 900])  # side by side; the narrowest viewer; the plots below it
+def test_the_3d_axes_are_titled_and_their_labels_lie_inside_the_frame(run_dir, tmp_path, width):
+    """Found from outside (issue 60): the 3D replay's tick labels were cut off at the viewer's left edge ("-0.2"
+    read ".4") and no axis had a title (plotly.js 3 and later ignore a title given as a bare string). As drawn:
+    each axis's title, the box's eight corners (plotly's projection) at least 40 px inside the viewer (the
+    tick labels and titles lie beyond the box's edges), and in a screenshot nothing drawn touches the viewer's
+    left, right or bottom edge."""
+    from PIL import Image
+
+    url = (run_dir / "report.html").as_uri() + "#frame=0"
+    axes = json.loads(_body_data(url, tmp_path / "u0", width)["scene-axes"])
+    assert axes["titles"] == ["x lateral [m]", "y forward [m]", "z [m]"] and all(axes["showticklabels"])
+    w, h = axes["width"], axes["height"]
+    assert w <= width - 24 and abs(w / h - 5 / 4) < 0.02, axes  # the viewer keeps its shape at every width
+    for x, y in axes["corners"]:
+        assert 45 <= x <= w - 45 and 40 <= y <= h - 40, (width, axes)
+    png = tmp_path / "page.png"
+    _browser(url, f"--screenshot={png}", user_dir=tmp_path / "u1", width=width)
+    keep = os.environ.get("CPGSIM_SCREENSHOT_DIR")
+    if keep:
+        shutil.copy(png, Path(keep) / f"report_axes_{width}.png")
+    shot = np.asarray(Image.open(png).convert("L"), dtype=int)
+    x0, y0 = round(axes["left"]), round(axes["top"])
+    x1, y1 = x0 + int(w) - 1, y0 + int(h) - 1
+    assert y1 < shot.shape[0], (shot.shape, axes)
+    for edge, strip in (("left", shot[y0 + 60:y1, x0:x0 + 3]), ("right", shot[y0 + 60:y1, x1 - 2:x1 + 1]),
+                        ("bottom", shot[y1 - 2:y1 + 1, x0:x1])):
+        assert strip.min() > 230, f"something drawn touches the viewer's {edge} edge at {width} px"
+    viewer = shot[y0 + 60:y1, x0:x1]
+    assert (viewer < 120).mean() > 0.002  # and it does draw: the box's labels, the robot
 
 
 def test_nan_in_what_is_drawn_becomes_a_gap_not_an_error():

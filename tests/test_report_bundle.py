@@ -1,10 +1,12 @@
-"""report.html's plotting library: a gzipped partial bundle of plotly.js (quick; the browser tests are in
-test_report.py)."""
+"""report.html's plotting library: a gzipped partial bundle of plotly.js, and the 3D scene as written for it
+(quick; the browser tests are in test_report.py)."""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
+
+import pytest
 
 
 def test_the_page_carries_a_partial_plotting_library_that_draws_what_it_uses(monkeypatch, tmp_path):
@@ -30,3 +32,18 @@ def test_the_page_carries_a_partial_plotting_library_that_draws_what_it_uses(mon
     monkeypatch.setattr(report, "PLOTLY_BUNDLE", tmp_path / "missing.js.gz")
     whole = report._page("short", {"success": True}, viewer, plots, [0.0], 20)
     assert 'id="plotly-gz"' not in whole and len(whole.encode()) > 4_000_000
+
+
+def test_the_3d_axes_have_titles_with_units_and_the_box_leaves_room_for_its_labels():
+    """Quick: the scene as written into the page (test_report.py checks it as drawn in a browser). Every title is a
+    ``{"text": ...}``: plotly.js 3 and later (the page carries 4.x) show nothing for a bare string."""
+    from cpgsim.experiments import report
+
+    scene = report.scene_layout(-0.4, 1.8, -0.15, 0.45)
+    assert [scene[f"{a}axis"]["title"]["text"] for a in "xyz"] == ["x lateral [m]", "y forward [m]", "z [m]"]
+    ratio = scene["aspectratio"]
+    assert max(ratio.values()) == pytest.approx(report.SCENE_SCALE) and report.SCENE_SCALE <= 1.2
+    assert ratio["y"] / ratio["x"] == pytest.approx(2.2 / 0.9)  # equal scale on the three axes
+    source = Path(report.__file__).read_text()
+    assert not re.search(r'"title"\]?\s*[:=]\s*f?"', source)  # no axis or plot title as a bare string
+    assert "aspect-ratio: 5 / 4" in source  # the viewer keeps its shape (a fixed height cut it off when narrow)

@@ -9,7 +9,7 @@ microseconds per step and their ratio to the default.
 - ``grouped`` (the default for this graph): the six legs one kind, looped; inner RK4 stages compute only
   the signal rows derivatives read that move within the step, the sampled update merged into its signal
   pass, common subexpressions shared (``harness/compiler/c_form.py``), gcc flags of
-  ``harness/toolchain.optimization_flags`` (-O3 for this 116 kB file; -O1 before 2026-12-03, when it was 197 kB);
+  ``harness/c/toolchain.optimization_flags`` (-O3 for this 116 kB file; -O1 before 2026-12-03, when it was 197 kB);
 - ``grouped -O1``: the same C at -O1 (the default for this step until 2026-12-03; 0.9 s less of gcc);
 - ``grouped, nothing carried``: the default without carrying costly subexpressions between passes
   (``harness/compiler/carry.py``: each signal pass computes its own ``sin``/``atan2``, as before
@@ -31,7 +31,8 @@ import time
 import numpy as np
 
 from cpgsim.components.yu.leg import hexapod_controller  # noqa: E402
-from cpgsim.harness import native, toolchain  # noqa: E402
+from cpgsim.harness import native
+from cpgsim.harness.c import toolchain  # noqa: E402
 from cpgsim.harness.compile import compile_graph  # noqa: E402
 from cpgsim.harness.compiler.c_form import c_step_source  # noqa: E402
 

@@ -196,8 +196,8 @@ def measure_grouping(seconds: float, repeat: int) -> dict[str, list[dict[str, fl
 @contextlib.contextmanager
 def master_fused(fused: bool = True) -> Iterator[None]:
     """``fused=False``: the runs inside the block keep the master's Python loop (the master's fast path,
-    :mod:`cpgsim.harness.fused`, refused)."""
-    import cpgsim.harness.fused as fused_path
+    :mod:`cpgsim.harness.cosim.fused`, refused)."""
+    import cpgsim.harness.cosim.fused as fused_path
 
     runner = fused_path.fused_runner
     if not fused:

@@ -56,9 +56,9 @@ import numpy as np
 
 from cpgsim.components.core import Block, ModelError, ParameterError
 from cpgsim.components.graph import Graph
+from cpgsim.harness.c.toolchain import Prototypes, c_source, declare
 from cpgsim.harness.compile import CompiledModel, compile_graph
 from cpgsim.harness.simulate import horizon_steps, matching_columns, physical_memory
-from cpgsim.harness.toolchain import Prototypes, c_source, declare
 
 REDUCTIONS = ("final", "min", "max", "mean", "amplitude", "period", "crossings")
 """Reductions :func:`simulate_batch` computes, in the order of ``BATCH_DRIVER``'s result slots."""

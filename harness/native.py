@@ -3,7 +3,7 @@
 CasADi's ``mapaccum`` keeps a Python-free horizon but its generic map machinery costs about
 1-2 us per step. For long equation-only horizons we generate the step function's C code with
 ``casadi.CodeGenerator``, add a small loop driver (``harness/c/horizon_driver.c``), compile it with the
-system C compiler (:mod:`cpgsim.harness.toolchain`) and call it once through :mod:`ctypes`. Compiled libraries
+system C compiler (:mod:`cpgsim.harness.c.toolchain`) and call it once through :mod:`ctypes`. Compiled libraries
 are cached by content hash, each checked against its recorded SHA-256 before it is loaded (:func:`cached_library`).
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from cpgsim.harness.toolchain import (  # noqa: F401  (re-exported: the names callers know)
+from cpgsim.harness.c.toolchain import (  # noqa: F401  (re-exported: the names callers know)
     NativeUnavailable,
     Prototypes,
     c_source,

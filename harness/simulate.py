@@ -29,9 +29,9 @@ from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.harness import prefault
 from cpgsim.harness.compile import CompiledModel, compile_graph
-from cpgsim.harness.contracts import ResumableBlock
+from cpgsim.harness.cosim.contracts import ResumableBlock
+from cpgsim.harness.cosim.master import run_master
 from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
-from cpgsim.harness.master import run_master
 from cpgsim.harness.results import Results
 from cpgsim.harness.steps import MAX_STEPS, chunk_length, horizon_steps, rows_per_second  # noqa: F401 (MAX_STEPS, horizon_steps: public names here too)
 
@@ -479,8 +479,8 @@ class Simulator:
     # -- co-simulation master ---------------------------------------------------------------------
     def _run_cosim(self, cs: dict[str, CoSimBlock], times, x, z, p, u_free, picks, rec: _Recorder,
                    progress: bool):
-        """The co-simulation master (:mod:`cpgsim.harness.master`) with this simulator's step and errors;
-        returns the master's :class:`~cpgsim.harness.master.StopInfo` (a block asked to stop) or None."""
+        """The co-simulation master (:mod:`cpgsim.harness.cosim.master`) with this simulator's step and errors;
+        returns the master's :class:`~cpgsim.harness.cosim.master.StopInfo` (a block asked to stop) or None."""
         m = self.model
         u = np.zeros(m.inputs.size)
         y = np.zeros(m.signals_layout.size)

@@ -8,7 +8,7 @@ is imported to compute it, so a module that fails to import still gets a key; a 
 (``from cpgsim.harness.compiler import Layout``) resolves to the module that defines it.
 
 A module that reads hand-written C from package data names the file by a string constant (``c_source(
-__package__, "c/exit_guard.c")``, :mod:`cpgsim.harness.toolchain`): every string literal of a module that
+__package__, "c/exit_guard.c")``, :mod:`cpgsim.harness.c.toolchain`): every string literal of a module that
 names an existing ``.c`` or ``.h`` file relative to the module's folder is in the closure too, with the
 files those ``#include "..."`` in turn, so a C driver is part of every key its Python module is part of.
 

@@ -15,8 +15,7 @@ Engines (each a subpackage, imported only when it runs): :mod:`cpgsim.robots.dar
 :mod:`cpgsim.robots.mujoco` (the ``mujoco`` package). docs/architecture.md explains the contract.
 """
 
-import sys
-from importlib.abc import MetaPathFinder
+from cpgsim.components import moved
 
 MOVED = {
     "cpgsim.robots.plant": "cpgsim.robots.dart.plant (DartHexapod; shared by every engine: cpgsim.robots.plant_base)",
@@ -30,26 +29,5 @@ MOVED = {
     "cpgsim.robots.mjcf": "cpgsim.robots.mujoco.mjcf",
 }
 """Modules of the robot package before each engine became a subpackage (2026-12), and where they went."""
-
-
-class _MovedModule(MetaPathFinder):
-    """Importing a module of :data:`MOVED` fails with one line naming its new place (asked last, so only a
-    name no other finder resolves reaches it)."""
-
-    def find_spec(self, fullname, path=None, target=None):
-        new = MOVED.get(fullname)
-        if new is not None:
-            raise ModuleNotFoundError(f"{fullname} moved to {new}", name=fullname)
-        return None
-
-
-if not any(isinstance(finder, _MovedModule) for finder in sys.meta_path):
-    sys.meta_path.append(_MovedModule())
-
-
-def __getattr__(name: str):
-    """``from cpgsim.robots import plant`` (a moved module) fails with the same line as ``import``."""
-    new = MOVED.get(f"{__name__}.{name}")
-    if new is not None:
-        raise ModuleNotFoundError(f"{__name__}.{name} moved to {new}", name=f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+moved.register(MOVED)
+__getattr__ = moved.package_getattr(__name__)

@@ -19,8 +19,8 @@ indices. An engine's plant supplies the rest (the engine contract, docs/architec
 - ``_read_state()``: the engine's generalized positions and velocities into the buffers;
 - ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
 - for the capabilities ``snapshot_restore`` and ``fused_loop``: also derive
-  :class:`~cpgsim.harness.contracts.ResumableBlock` (``snapshot``/``restore``; ``resume_from`` is here) and
-  :class:`~cpgsim.harness.contracts.FusedLoopBlock` (``fused_loop``); an engine that does not declare them
+  :class:`~cpgsim.harness.cosim.contracts.ResumableBlock` (``snapshot``/``restore``; ``resume_from`` is here) and
+  :class:`~cpgsim.harness.cosim.contracts.FusedLoopBlock` (``fused_loop``); an engine that does not declare them
   does not derive them, so the master never asks it (and :func:`cpgsim.robots.registry.require` refuses a
   run that needs them, naming the engine).
 

@@ -13,10 +13,10 @@ refused with an error that names the engine and the capability.
 capability            meaning
 ===================== ========================================================================
 ``fused_loop``        the closed loop with a compiled controller runs in one C loop
-                      (:class:`~cpgsim.harness.contracts.FusedLoopBlock`)
+                      (:class:`~cpgsim.harness.cosim.contracts.FusedLoopBlock`)
 ``batched_rollouts``  many trials' fused loops advanced together on threads
                       (:func:`cpgsim.robots.mujoco.batch.run_batch`)
-``snapshot_restore``  exact state saved and restored (:class:`~cpgsim.harness.contracts.ResumableBlock`)
+``snapshot_restore``  exact state saved and restored (:class:`~cpgsim.harness.cosim.contracts.ResumableBlock`)
 ``pushes``            external pushes on the body (:mod:`cpgsim.robots.disturbance`)
 ``amputation``        legs that touch nothing (Fukuhara 2022, Sec. 3.2)
 ``detectors``         a choice of collision detector (``detector=``)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cpgsim.components.core import CoSimBlock
-from cpgsim.harness.contracts import ResumableBlock
+from cpgsim.harness.cosim.contracts import ResumableBlock
 from cpgsim.harness.simulate import Snapshot
 
 

@@ -213,11 +213,9 @@ def test_folder_rule_refuses_an_upward_import():
 
 def test_engine_root_stays_small():
     root_modules = [p.stem for p in (ROOT / "harness").glob("*.py") if p.stem != "__init__"]
-    # 15: the twelve of the engine plus rundir (which files a run may replace, one writer per output),
-    # fused (a co-simulation block's own C loop with the compiled step, e.g. MuJoCo's) and contracts (what
-    # the master asks of a block beyond setup/do_step: ResumableBlock, FusedLoopBlock; issue 55); 16: toolchain
-    # (the one place hand-written C is read from package data and compiled into the cache; issue 56)
-    assert len(root_modules) <= 16, sorted(root_modules)
+    # issue 59: at most 12; the rest are subpackages by role (compiler/, cosim/: master, contracts, fused;
+    # c/: toolchain, exit guard and the C sources; results/)
+    assert len(root_modules) <= 12, sorted(root_modules)
 
 
 @pytest.mark.parametrize("package", sorted(m for m, p in project_modules().items() if p.name == "__init__.py"))
@@ -273,3 +271,20 @@ def test_the_compiler_imports_point_one_way():
         wrong += [f"{stage} -> {d}" for d in deps & later]
     assert not wrong, wrong
     assert set(order) == {p.stem for p in (ROOT / "harness" / "compiler").glob("*.py")} - {"__init__"}
+
+
+@pytest.mark.parametrize("old", ["master", "fused", "contracts", "toolchain", "exit_guard"])
+def test_a_module_moved_out_of_the_engine_root_is_one_line_naming_its_place(old):
+    """Issue 59: the engine's root grouped into subpackages by role (cosim/, c/); the old paths fail with one
+    line naming the new module, which exists (both ways of importing)."""
+    import importlib
+    import importlib.util
+
+    for attempt in (lambda: importlib.import_module(f"cpgsim.harness.{old}"),
+                    lambda: exec(f"from cpgsim.harness import {old}", {})):
+        with pytest.raises(ModuleNotFoundError) as err:
+            attempt()
+        message = str(err.value)
+        assert message.startswith(f"cpgsim.harness.{old} moved to cpgsim.harness.") and "\n" not in message
+        assert importlib.util.find_spec(message.split(" moved to ")[1].split(" ")[0]) is not None
+    assert not (ROOT / "harness" / f"{old}.py").exists()

@@ -1,6 +1,6 @@
 """docs/architecture.md names only paths that exist, and names every package of the engine, robots and FMUs.
 
-A path on the page is a backquoted token made of path characters with at least one ``/`` (``harness/fused.py``,
+A path on the page is a backquoted token made of path characters with at least one ``/`` (``harness/cosim/fused.py``,
 ``robots/dart/``, ``harness/c/horizon_driver.c``); a ``:name`` after it (``experiments/runner.py:run_scenario``)
 is the object in that file and is dropped. Placeholders (``robots/<engine>/``) and globs (``cli/commands/*.py``)
 are not paths. A bare file name (``archive.py`` in a list under ``fmus/importer/``) is not checked: its folder
@@ -51,10 +51,10 @@ def test_the_page_names_every_package_of_the_engine_robots_and_fmus():
 
 
 def test_the_check_sees_paths_and_refuses_a_planted_bad_one():
-    text = ("the loop is in `harness/fused.py`, the driver in `harness/c/horizon_driver.c`, the engines in "
+    text = ("the loop is in `harness/cosim/fused.py`, the driver in `harness/c/horizon_driver.c`, the engines in "
             "`robots/dart/`; `experiments/runner.py:run_scenario`; not paths: `robots/<engine>/`, "
             "`cli/commands/*.py`, `archive.py`, `cpgsim run FILE.toml`")
-    assert named_paths(text) == {"harness/fused.py", "harness/c/horizon_driver.c", "robots/dart/",
+    assert named_paths(text) == {"harness/cosim/fused.py", "harness/c/horizon_driver.c", "robots/dart/",
                                  "experiments/runner.py"}
     assert missing_paths(text) == []
     planted = text + " and the old `harness/grouped.py`, `harness/results.py/` and `robots/plant.py`"

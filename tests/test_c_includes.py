@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 import cpgsim
+from cpgsim.harness.c.toolchain import c_source, library_name
 from cpgsim.harness.sources import module_closure
-from cpgsim.harness.toolchain import c_source, library_name
 
 HEADER = Path(cpgsim.__file__).parent / "robots" / "c" / "plant_contacts.h"
 
@@ -85,7 +85,7 @@ FUSED_HEADER = Path(cpgsim.__file__).parent / "harness" / "c" / "fused_status.h"
 def test_the_fused_status_enum_is_the_headers():
     """One status-code enum for every fused loop: Python's FusedStatus is read from harness/c/fused_status.h,
     the master's outcomes are 0-3 and the engine-internal ones follow."""
-    from cpgsim.harness.contracts import FusedStatus
+    from cpgsim.harness.cosim.contracts import FusedStatus
 
     codes = {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_FUSED_(\w+)\s*=\s*(\d+)", FUSED_HEADER.read_text())}
     assert {s.name: s.value for s in FusedStatus} == codes

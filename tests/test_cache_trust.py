@@ -21,7 +21,8 @@ import pytest
 
 from cpgsim.components import private_store
 from cpgsim.components.library import hexapod_network
-from cpgsim.harness import exit_guard, native
+from cpgsim.harness import native
+from cpgsim.harness.c import exit_guard
 from cpgsim.harness.compile import compile_graph
 
 OTHER = 65534
@@ -81,7 +82,8 @@ def plant_folder(shared: Path, name: str) -> Path:
 
 def victim(env: dict[str, str], marker: Path) -> subprocess.CompletedProcess:
     """A fresh process of this user that loads the exit guard from the cache."""
-    code = ("import os; from cpgsim.harness import exit_guard, native; from cpgsim.components import private_store; "
+    code = ("import os; from cpgsim.harness import native; from cpgsim.harness.c import exit_guard; "
+            "from cpgsim.components import private_store; "
             "d = native.cache_dir(); print(exit_guard.available(), d, oct(os.stat(d).st_mode & 0o777), "
             "private_store.untrusted_reason(d))")
     full = {k: v for k, v in os.environ.items() if k not in ("CPGSIM_CACHE", "XDG_CACHE_HOME")}

@@ -92,7 +92,7 @@ def test_fused_loop_hands_a_target_that_is_not_finite_to_the_plant():
     import ctypes
 
     from cpgsim.components.core import ModelError
-    from cpgsim.harness.contracts import FusedRequest
+    from cpgsim.harness.cosim.contracts import FusedRequest
 
     robot = DartHexapod()
     robot.setup(0.0)

@@ -1,10 +1,10 @@
-"""The fused loop's recorder copy: index arrays as runs of slices (:func:`cpgsim.harness.fused.column_runs`)."""
+"""The fused loop's recorder copy: index arrays as runs of slices (:func:`cpgsim.harness.cosim.fused.column_runs`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from cpgsim.harness.fused import column_runs
+from cpgsim.harness.cosim.fused import column_runs
 
 
 def test_runs_of_consecutive_columns():

@@ -16,7 +16,7 @@ import pytest
 
 from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import YU_SIM
-from cpgsim.harness.contracts import FusedLoopBlock, ResumableBlock
+from cpgsim.harness.cosim.contracts import FusedLoopBlock, ResumableBlock
 from cpgsim.robots.description import describe_hexapod, standing_posture
 from cpgsim.robots.registry import CAPABILITIES, ENGINES, make_plant, require
 
@@ -190,7 +190,7 @@ def test_the_fused_native_and_python_paths_record_the_same_walk(engine, monkeypa
     """The ``step`` scenario's closed loop three ways: controller and plant in one C loop (the master's fast
     path), the Python master with the plant's C step, and the Python master with the plant's Python step.
     They record the same numbers bit for bit over 2.05 s (chunk boundaries inside, a partial last chunk)."""
-    import cpgsim.harness.fused as fused
+    import cpgsim.harness.cosim.fused as fused
     from cpgsim.experiments.runner import build_scenario
     from cpgsim.harness.simulate import Simulator
 

@@ -1,6 +1,6 @@
 """Issue 56: each library's ctypes prototype table checked against its C by the C compiler itself.
 
-:func:`cpgsim.harness.toolchain.check_prototypes` compiles (``-fsyntax-only``) the library's C followed by one
+:func:`cpgsim.harness.c.toolchain.check_prototypes` compiles (``-fsyntax-only``) the library's C followed by one
 call per function of the table with arguments of the table's ctypes types, conversions refused: a table
 whose argument count, kind, width, pointee or order, or return type differs from the C does not compile.
 A planted mismatch of each kind is refused, so the check is not vacuous.
@@ -13,7 +13,8 @@ import ctypes
 import casadi as ca
 import pytest
 
-from cpgsim.harness import native, toolchain
+from cpgsim.harness import native
+from cpgsim.harness.c import toolchain
 
 pytestmark = pytest.mark.skipif(toolchain.compiler() is None, reason="needs a C compiler")
 

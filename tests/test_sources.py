@@ -124,7 +124,7 @@ def test_the_real_c_drivers_are_in_the_closure_of_their_modules():
     """The package's own hand-written C is found from the modules that read it (no hand-kept list)."""
     sources.module_closure.cache_clear()
     root = sources._package_root()
-    guard = _rel(sources.module_closure(str(root / "harness" / "exit_guard.py")), root)
+    guard = _rel(sources.module_closure(str(root / "harness" / "c" / "exit_guard.py")), root)
     assert "harness/c/exit_guard.c" in guard
 
 

@@ -243,7 +243,7 @@ def _run_into(args: argparse.Namespace, out: Path) -> int:
         raise CliError(f"--t-end {t_end:g} must be after the start time {t0:g}")
     sim = Simulator(graph, dt=dt, substeps=args.substeps, params=params, record=args.record,
                     step_thread=args.step_thread, prefault=not args.no_prefault)
-    from cpgsim.harness.exit_guard import guard_run
+    from cpgsim.harness.c.exit_guard import guard_run
 
     try:
         with guard_run("cpgsim simulate", args.graph, out):

@@ -1,6 +1,6 @@
 /* The status a fused loop (a compiled controller step and a plant in one C loop) reports after a call: one
-   definition for every engine's C loop and for Python, where cpgsim.harness.contracts.FusedStatus is read
-   from this enum. 0-3 reach the master (cpgsim.harness.fused.run_fused); 4 and 5 are handled by the
+   definition for every engine's C loop and for Python, where cpgsim.harness.cosim.contracts.FusedStatus is read
+   from this enum. 0-3 reach the master (cpgsim.harness.cosim.fused.run_fused); 4 and 5 are handled by the
    engine's own loop object before it returns. */
 #ifndef CPGSIM_FUSED_STATUS_H
 #define CPGSIM_FUSED_STATUS_H

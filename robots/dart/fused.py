@@ -1,8 +1,8 @@
 """The controller's compiled step and the DART plant in one C loop (``cpgsim_dart_loop``, :mod:`.native`).
 
-A :class:`~cpgsim.harness.contracts.FusedLoop`, built by
+A :class:`~cpgsim.harness.cosim.contracts.FusedLoop`, built by
 :meth:`cpgsim.robots.dart.plant.DartHexapod.fused_loop` for the master's fast path
-(:mod:`cpgsim.harness.fused`). ``run(k0, k1, times)`` does macro steps ``k0 .. k1-1`` and returns
+(:mod:`cpgsim.harness.cosim.fused`). ``run(k0, k1, times)`` does macro steps ``k0 .. k1-1`` and returns
 ``(rows, status, Y, O)`` like the MuJoCo plant's loop: the rows recorded, the status (0 done, 1 the
 controller's state went non-finite at the last row, 2 an evaluation error), the recorded signals ``y[yi]``
 and the plant's output vectors per row. What the C loop leaves to Python, Python does within the same call,
@@ -21,8 +21,8 @@ import ctypes
 
 import numpy as np
 
-from cpgsim.harness.contracts import FusedRequest, FusedStatus
-from cpgsim.harness.fused import FusedLoopBase
+from cpgsim.harness.cosim.contracts import FusedRequest, FusedStatus
+from cpgsim.harness.cosim.fused import FusedLoopBase
 from cpgsim.robots.dart.native import NativeDartStep
 
 

@@ -41,7 +41,7 @@ import ctypes
 import dartpy as dart
 import numpy as np
 
-from cpgsim.harness.toolchain import NativeUnavailable, Prototypes, c_source, compile_source, declare
+from cpgsim.harness.c.toolchain import NativeUnavailable, Prototypes, c_source, compile_source, declare
 
 _SYMBOLS = {  # the C name of each function pointer (the dart_api struct's order) -> dartpy's DART 6 C++ symbol
     "world_step": "_ZN4dart10simulation5World4stepEb",

@@ -49,7 +49,7 @@ import numpy as np
 
 from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
-from cpgsim.harness.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
+from cpgsim.harness.cosim.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
 from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.dart import native as dart_native
 from cpgsim.robots.dart.ground import add_terrain
@@ -394,7 +394,7 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     # -- the closed loop in C --------------------------------------------------------------------
     def fused_loop(self, request: FusedRequest):
         """A :class:`~cpgsim.robots.dart.fused.FusedLoop` running this plant with the controller's bound
-        compiled step in one C loop (the master's fast path, :mod:`cpgsim.harness.fused`), or None when this
+        compiled step in one C loop (the master's fast path, :mod:`cpgsim.harness.cosim.fused`), or None when this
         set-up cannot: no C step or compiled readout, ``velocity_ff`` on, pushes, more than one world step per
         macro step, an input that is not ``q_target``."""
         if self.native_step is None or self._fused_refusal(request) or self.steps_for(request.dt) != 1:

@@ -3,7 +3,7 @@
 :func:`run_batch` runs whole trials (any callables: a benchmark's or a sweep's :func:`run_trial`) on Python
 threads, at most ``concurrency`` at a time, and serves them from the calling thread. Each trial builds its
 scenario, compiles (from the cache), sets up its plant and runs the co-simulation master as it would alone;
-when the master reaches the fused loop (:mod:`cpgsim.harness.fused`,
+when the master reaches the fused loop (:mod:`cpgsim.harness.cosim.fused`,
 :class:`cpgsim.robots.mujoco.native.FusedLoop`), each chunk of macro steps is handed to the :class:`Batch`
 instead of being run by the trial's own thread. The serving thread collects the chunks and advances them all
 in one ``cpgsim_mj_batch`` call: ``threads`` POSIX threads (default: the CPUs this process may use), each

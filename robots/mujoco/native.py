@@ -3,7 +3,7 @@ per sub-step.
 
 :class:`NativeMujocoStep` compiles ``robots/mujoco/c/mujoco_loop.c`` against the headers the ``mujoco`` package ships
 (``mujoco/include``) and links the package's ``libmujoco``, through
-:func:`cpgsim.harness.toolchain.compile_source` (the per-user cache, named by the content digest of source
+:func:`cpgsim.harness.c.toolchain.compile_source` (the per-user cache, named by the content digest of source
 and flags). It works on the very ``mjModel``/``mjData`` the Python bindings own (their ``_address``),
 so the Python plant keeps reading and writing them between calls. ``run(n)`` does what
 :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.do_step` does per sub-step -- ``mj_step``, then each
@@ -23,9 +23,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cpgsim.harness.contracts import FusedRequest, FusedStatus
-from cpgsim.harness.fused import FusedLoopBase
-from cpgsim.harness.toolchain import (
+from cpgsim.harness.c.toolchain import (
     NativeUnavailable,
     Prototypes,
     c_source,
@@ -33,6 +31,8 @@ from cpgsim.harness.toolchain import (
     declare,
     optimization_flags,
 )
+from cpgsim.harness.cosim.contracts import FusedRequest, FusedStatus
+from cpgsim.harness.cosim.fused import FusedLoopBase
 
 BATCH = threading.local()
 """``BATCH.current``: the :class:`cpgsim.robots.mujoco.batch.Batch` whose trial runs on this thread (None:
@@ -128,7 +128,7 @@ class FusedLoop(FusedLoopBase):
     """The controller's bound compiled step and the plant in one C loop (:func:`cpgsim_mj_loop`).
 
     Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`; a
-    :class:`~cpgsim.harness.fused.FusedLoopBase` (``run(k0, k1, times)`` returns ``(rows, status, Y, O)``; the
+    :class:`~cpgsim.harness.cosim.fused.FusedLoopBase` (``run(k0, k1, times)`` returns ``(rows, status, Y, O)``; the
     status may be ``PLANT_DIVERGED``: MuJoCo's state went non-finite or out of range after the last row).
     Made on a trial thread of a :class:`~cpgsim.robots.mujoco.batch.Batch`, it hands each chunk to the batch,
     which advances it with the other trials' chunks in one ``cpgsim_mj_batch`` call: the same C loop on the

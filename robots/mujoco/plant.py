@@ -32,7 +32,7 @@ import numpy as np
 
 from cpgsim.components.core import ModelError, ParameterError
 from cpgsim.components.geometry import YU_SIM, RobotGeometry
-from cpgsim.harness.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
+from cpgsim.harness.cosim.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
 from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.description import CONTACT_OTHER, describe_hexapod, foot_positions_body
 from cpgsim.robots.disturbance import Push
@@ -231,10 +231,10 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         mujoco.mj_step(self.model, data)
         data.xfrc_applied[b] = 0.0
 
-    # -- the closed loop in C (cpgsim.harness.fused) ----------------------------------------------------
+    # -- the closed loop in C (cpgsim.harness.cosim.fused) ----------------------------------------------------
     def fused_loop(self, request: FusedRequest):
         """A :class:`~cpgsim.robots.mujoco.native.FusedLoop` running this plant with the controller's bound
-        compiled step in one C loop (the master's fast path, :mod:`cpgsim.harness.fused`), or None when this
+        compiled step in one C loop (the master's fast path, :mod:`cpgsim.harness.cosim.fused`), or None when this
         set-up cannot (no native step or compiled readout, ``velocity_ff`` on, pushes, an input that is not
         ``q_target``)."""
         if self.native_step is None or self._fused_refusal(request):

@@ -174,7 +174,7 @@ def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, tim
            on_block_error: Callable[[str, str, Exception], Exception],
            on_diverged: Callable[[], None]) -> int:
     """Set the blocks up (each appended to ``started``), record how they execute and, when the
-    compiled step may commit itself, let a block run the loop in C (:mod:`cpgsim.harness.fused`).
+    compiled step may commit itself, let a block run the loop in C (:mod:`cpgsim.harness.cosim.fused`).
 
     Returns the first macro step the Python loop still has to run (0, or where the fused loop stopped).
     A failure after the last ``setup`` is still reported as that block's set-up, as before the split.
@@ -190,11 +190,11 @@ def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, tim
         execution["blocks"] = {path: blk.execution_info() for path, blk in cs.items()}
         k0 = 0
         if commit and n > 0:
-            from cpgsim.harness.fused import fused_runner, run_fused
+            from cpgsim.harness.cosim.fused import fused_runner, run_fused
 
             fused = fused_runner(plan, cs, step, u, y, x.size, z.size, dt)
             execution["fused_loop"] = fused is not None
-            if fused is not None:  # the block runs the loop with the compiled step in C (harness/fused.py)
+            if fused is not None:  # the block runs the loop with the compiled step in C (harness/cosim/fused.py)
                 stage = (next(iter(cs)), "do_step")
                 k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)
                 stage = None

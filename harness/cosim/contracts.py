@@ -8,7 +8,7 @@ method name):
   (``last_snapshot``). :meth:`cpgsim.harness.simulate.Simulator.snapshot` and ``run(..., resume=...)``
   need it of every co-simulation block.
 - :class:`FusedLoopBlock`: it can run the whole closed loop with the controller's compiled step in C
-  (:mod:`cpgsim.harness.fused`). The master hands it a :class:`FusedRequest` and gets a :class:`FusedLoop`
+  (:mod:`cpgsim.harness.cosim.fused`). The master hands it a :class:`FusedRequest` and gets a :class:`FusedLoop`
   or None (this set-up cannot: the block says so by returning None, never by raising).
 
 Ownership in a fused loop: the master owns ``u``, ``y``, the time grid and the recorder; the controller's
@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-FUSED_STATUS_HEADER = "c/fused_status.h"
+FUSED_STATUS_HEADER = "../c/fused_status.h"
 """Where the fused loops' status codes are defined, for Python and every engine's C loop (relative to here)."""
 
 
@@ -111,7 +111,7 @@ class FusedRequest:
 
 
 class FusedLoop(Protocol):
-    """A block's closed loop in C, as :func:`cpgsim.harness.fused.run_fused` drives it."""
+    """A block's closed loop in C, as :func:`cpgsim.harness.cosim.fused.run_fused` drives it."""
 
     output_slices: dict[str, slice]
     """Each output port's columns in ``O``."""

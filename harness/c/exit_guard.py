@@ -3,7 +3,7 @@
 An FMU runs in-process as a shared library; if it calls ``exit(0)`` inside ``doStep``, the C library
 ends the process: Python's exception handling, ``finally`` blocks and ``atexit`` never run and the
 exit status would be 0. :func:`guard_run` arms a C exit handler (``on_exit``, from a few lines of C
-in ``harness/c/exit_guard.c``, compiled once into the cache by :mod:`cpgsim.harness.toolchain` and checked
+in ``harness/c/exit_guard.c``, compiled once into the cache by :mod:`cpgsim.harness.c.toolchain` and checked
 against its digest before every load like any cached library) for the duration of a run: if the process
 exits while it is armed, the handler prints one line naming the run (and where its partial results
 are, marked incomplete) and ends the process with status 1 instead. While armed, the fatal signals
@@ -23,9 +23,9 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from cpgsim.harness.toolchain import NativeUnavailable, c_source, compile_source, library_name
+from cpgsim.harness.c.toolchain import NativeUnavailable, c_source, compile_source, library_name
 
-_SOURCE = c_source(__package__, "c/exit_guard.c")
+_SOURCE = c_source(__package__, "exit_guard.c")
 _OPTIONS = ("-shared", "-fPIC")
 _FLAGS = ("-O1",)
 LIBRARY_NAME = library_name(_SOURCE, "cpgsim_exit_guard", _FLAGS, _OPTIONS)

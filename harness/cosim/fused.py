@@ -1,14 +1,14 @@
 """The master's fast path: a co-simulation block that runs the closed loop with the compiled step in C.
 
 When a graph has exactly one co-simulation block, no direct feedthrough, no free inputs and no 64-bit
-integer ports, and the block is a :class:`~cpgsim.harness.contracts.FusedLoopBlock` (both robot plants), the
+integer ports, and the block is a :class:`~cpgsim.harness.cosim.contracts.FusedLoopBlock` (both robot plants), the
 master hands it the bound compiled step (:class:`cpgsim.harness.native.BoundStep`) as a
-:class:`~cpgsim.harness.contracts.FusedRequest` and lets the loop it returns run chunks of macro steps in one
+:class:`~cpgsim.harness.cosim.contracts.FusedRequest` and lets the loop it returns run chunks of macro steps in one
 C call each: the
-same order as the Python loop of :func:`cpgsim.harness.master.run_master` (block outputs -> ``u``, step
+same order as the Python loop of :func:`cpgsim.harness.cosim.master.run_master` (block outputs -> ``u``, step
 with commit, record, block inputs from ``y``, block step), so the results are the same numbers. Between
 chunks the recorder streams, the progress bar moves and Ctrl-C is seen. The last row (``t_end``: no step)
-is left to the ordinary loop. The contract (:mod:`cpgsim.harness.contracts`) lives here, in the engine layer,
+is left to the ordinary loop. The contract (:mod:`cpgsim.harness.cosim.contracts`) lives here, in the engine layer,
 and the robots implement it: this layer imports no robot. The runner's ``FusedStatus.PLANT_DIVERGED`` (the
 plant's own state diverged) is an error of the block, named as such. A runner made on a trial thread of
 :func:`cpgsim.robots.mujoco.batch.run_batch` advances its chunks together with the other trials' (one C call
@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cpgsim.harness.contracts import FusedLoop, FusedLoopBlock, FusedRequest, FusedStatus
+from cpgsim.harness.cosim.contracts import FusedLoop, FusedLoopBlock, FusedRequest, FusedStatus
 
 CHUNK = 100
 """Macro steps per C call (0.1 s simulated at 1 kHz)."""
@@ -64,16 +64,16 @@ class TimeGrid:
 
 
 class FusedLoopBase:
-    """What every engine's :class:`~cpgsim.harness.contracts.FusedLoop` shares: how it is built and chunked.
+    """What every engine's :class:`~cpgsim.harness.cosim.contracts.FusedLoop` shares: how it is built and chunked.
 
-    Built from the plant block and the master's :class:`~cpgsim.harness.contracts.FusedRequest` (and the
+    Built from the plant block and the master's :class:`~cpgsim.harness.cosim.contracts.FusedRequest` (and the
     index arrays of :meth:`FusedRequest.indices`). Ownership, for the loop's life: ``indices`` (``u_idx``,
     ``o_idx``, ``target_idx``, ``yi`` as contiguous int64: the C loop reads them), ``Y`` (a chunk's recorded
     signals, one row per macro step) and ``O`` (the plant's output vector per row) are this object's; ``u``
     and ``y`` are the master's, the controller's context is the bound step's, and the plant's buffers
     (``plant.buffers``) are the plant's; the C loop only borrows them during a call. :meth:`run` clamps a
     call to one chunk, hands the engine's :meth:`_run_chunk` the time grid as a C pointer, and returns the
-    status as a :class:`~cpgsim.harness.contracts.FusedStatus`. After each call the engine brings the plant's
+    status as a :class:`~cpgsim.harness.cosim.contracts.FusedStatus`. After each call the engine brings the plant's
     Python side up to date through the plant's ``take_fused_steps(t, q_target, target_changed)``."""
 
     def __init__(self, plant: Any, request: FusedRequest, u_idx: np.ndarray, o_idx: np.ndarray,
@@ -89,7 +89,7 @@ class FusedLoopBase:
         self.grid = TimeGrid()
 
     def run(self, k0: int, k1: int, times: np.ndarray) -> tuple[int, FusedStatus, np.ndarray, np.ndarray]:
-        """Macro steps ``k0 .. k1-1`` (at most a chunk); see :class:`~cpgsim.harness.contracts.FusedLoop`."""
+        """Macro steps ``k0 .. k1-1`` (at most a chunk); see :class:`~cpgsim.harness.cosim.contracts.FusedLoop`."""
         k1 = min(k1, k0 + self.chunk)
         rows, status = self._run_chunk(k0, k1, times, self.grid.pointer(times))
         return rows, FusedStatus(status), self.Y[:rows], self.O[:rows]

@@ -396,3 +396,20 @@ def test_a_killed_runs_unlisted_file_is_set_aside_never_deleted(tmp_path, capsys
         make_run(run, {"summary.json": "again"})
     assert [p.name for p in part.iterdir()] == ["elevator_hits.png"]
     assert (run / "summary.json").read_text() == "next"
+
+
+def test_the_demo_passes_run_every_option_run_has():
+    """Found at the end of a session: 'cpgsim demo' failed with "'Namespace' object has no attribute
+    'no_plots'" after 'cpgsim run' gained --no-plots, because the demo built run's arguments by hand. Now it
+    parses them with run's own parser: every option of run, at its default."""
+    import argparse
+
+    from cpgsim.cli.commands import demo
+    from cpgsim.cli.commands import run as run_command
+
+    parser = argparse.ArgumentParser()
+    run_command.add_arguments(parser)
+    options = {a.dest for a in parser._actions if a.dest != "help"}
+    got = demo.run_arguments("step", "runs/demo")
+    assert options <= set(vars(got)), options - set(vars(got))
+    assert (got.scenario, got.output, got.no_plots, got.step_thread) == ("step", "runs/demo", False, False)

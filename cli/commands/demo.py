@@ -18,14 +18,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default="step", help="scenario to run (default step)")
 
 
+def run_arguments(scenario: str, output: str) -> argparse.Namespace:
+    """``cpgsim run SCENARIO -o OUTPUT``'s arguments, parsed by run's own parser (every option at its default,
+    including options added to ``run`` later)."""
+    from cpgsim.cli.commands import run as run_command
+
+    parser = argparse.ArgumentParser(prog="cpgsim run")
+    run_command.add_arguments(parser)
+    return parser.parse_args([scenario, "-o", output])
+
+
 def run(args: argparse.Namespace) -> int:
     """``cpgsim run SCENARIO -o OUTPUT`` (its run directory rules: built beside the previous run and swapped
     in when complete, a folder cpgsim did not write is never emptied), then where to look."""
     from cpgsim.cli.commands import run as run_command
 
-    as_run = argparse.Namespace(scenario=args.scenario, output=args.output, t_end=None, seed=None,
-                                no_progress=False, list=False, show=False, sets=[], csv=False)
-    code = run_command.run(as_run)
+    code = run_command.run(run_arguments(args.scenario, args.output))
     out = Path(args.output)
     print(f"open {out}/report.html in a browser to replay the walk in 3D with its plots (or {out}/gait.png, "
           f"{out}/toe_forces.png, {out}/snapshots.png)")

@@ -23,7 +23,7 @@ and returns a :class:`StopInfo` naming the block.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -200,10 +200,7 @@ def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, tim
                 stage = None
         return k0
     except Exception as exc:
-        error = _block_error(stage, exc, on_block_error)
-        if error is None:
-            raise
-        raise error from exc
+        _raise_for_block(stage, exc, on_block_error)
 
 
 def _macro_steps(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, t_list: list[float],
@@ -301,19 +298,16 @@ def _macro_steps(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: floa
                 rec.tick()  # streaming: the recorder writes new rows every simulated second / few seconds
         return stop
     except Exception as exc:
-        error = _block_error(stage, exc, on_block_error)
-        if error is None:
-            raise
-        raise error from exc
+        _raise_for_block(stage, exc, on_block_error)
 
 
-def _block_error(stage: tuple[str, str] | None, exc: Exception,
-                 on_block_error: Callable[[str, str, Exception], Exception]) -> Exception | None:
-    """The exception to raise from ``exc`` for the block call ``stage = (path, what)``; None to re-raise
-    ``exc`` itself (outside any block call, or already a :class:`SimulationError`)."""
+def _raise_for_block(stage: tuple[str, str] | None, exc: Exception,
+                     on_block_error: Callable[[str, str, Exception], Exception]) -> NoReturn:
+    """Raise ``exc`` as the error of the block call ``stage = (path, what)`` (``on_block_error``'s, chained to
+    it), or ``exc`` itself outside any block call or when it is already a :class:`SimulationError`."""
     if stage is None or _is_simulation_error(exc):
-        return None
-    return on_block_error(*stage, exc)
+        raise exc
+    raise on_block_error(*stage, exc) from exc
 
 
 def _terminate(started: list[CoSimBlock]) -> None:

@@ -408,18 +408,19 @@ class HexapodPlant(CoSimBlock, ABC):
     def take_fused_steps(self, t: float, q_target: np.ndarray, target_changed: bool) -> None:
         """The plant's Python side brought up to date after a fused loop stepped it to ``t``: the clock, the
         engine steps counted, the servo targets it holds (``target_changed``: the next step must apply them
-        again) and the last step's contact readings (:meth:`_take_fused_readings`). The one callback every
+        again) and the last step's contact readings (:meth:`_take_c_readings`). The one callback every
         engine's fused loop calls after each of its C calls that stepped the plant."""
         self._n_steps += int(round((t - self._t) / self.time_step))
         self._t = float(t)
         self._q_target = np.array(q_target, dtype=float)
         self._q_target_prev = self._q_target
         self._target_changed = bool(target_changed)
-        self._take_fused_readings()
+        self._take_c_readings()
 
-    def _take_fused_readings(self) -> None:
-        """The contact readings a fused loop left: by default the C step wrote force and link contacts into
-        the buffers and the body flag into the readout's input."""
+    def _take_c_readings(self) -> None:
+        """The contact readings the engine's C code left (after a fused loop's call, or a C step that does not
+        write every buffer itself): by default force and link contacts are in the buffers already and the
+        body flag is the readout's input."""
         self._body_contact = bool(self._contact[0])
 
     def _fused_refusal(self, request) -> bool:

@@ -205,12 +205,8 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
 
     def _native_steps(self, n: int) -> bool:
         """``n`` MuJoCo steps in C (the contact sums averaged there), then the outputs."""
-        native = self.native_step
-        native.run(n)
-        self._force_world[:] = native.force
-        flags = native.flags
-        self._body_contact = bool(flags[0])
-        self._link_contact[:] = flags[1:] > 0.5
+        self.native_step.run(n)
+        self._take_c_readings()
         self.update_outputs()
         return True
 
@@ -246,8 +242,8 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
 
         return FusedLoop(self, self.native_step, request, *indices)
 
-    def _take_fused_readings(self) -> None:
-        """The C loop's contact sums and flags (body, then the six legs' links) into the buffers."""
+    def _take_c_readings(self) -> None:
+        """The C step's or loop's contact sums and flags (body, then the six legs' links) into the buffers."""
         flags = self.native_step.flags
         self._force_world[:] = self.native_step.force
         self._body_contact = bool(flags[0])

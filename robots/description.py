@@ -28,7 +28,6 @@ properties combine its shapes by the parallel-axis theorem (:func:`combine`).
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,8 +50,9 @@ CONTACT_CODES_HEADER = "c/plant_contacts.h"
 
 def _contact_codes() -> dict[str, int]:
     """The ``CPGSIM_CONTACT_*`` enum of :data:`CONTACT_CODES_HEADER`: the one definition of the codes."""
-    text = (Path(__file__).parent / CONTACT_CODES_HEADER).read_text(encoding="utf-8")
-    return {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_CONTACT_(\w+)\s*=\s*(\d+)", text)}
+    from cpgsim.harness.c.toolchain import c_enum
+
+    return c_enum(Path(__file__).parent / CONTACT_CODES_HEADER, "CPGSIM_CONTACT_")
 
 
 # Contact codes of the robot's shapes, as the plants (and their C steps) sum contacts: a leg index 0-5 for

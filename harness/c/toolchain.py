@@ -51,6 +51,13 @@ def compiler() -> str | None:
 _LOCAL_INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"[^\n]*$', re.MULTILINE)
 
 
+def c_enum(path: Path, prefix: str) -> dict[str, int]:
+    """The constants ``PREFIX_NAME = value`` that the C file ``path`` defines (an ``enum`` of a header that
+    Python and C both read, so the numbers are written once), by ``NAME``."""
+    text = path.read_text(encoding="utf-8")
+    return {m[1]: int(m[2]) for m in re.finditer(rf"\b{re.escape(prefix)}(\w+)\s*=\s*(\d+)", text)}
+
+
 def c_source(package: str, name: str) -> str:
     """The text of the package-data C file ``name`` (relative to the folder of ``package``), with each
     ``#include "file"`` that names a file beside it (relative to the including file, as a C compiler resolves

@@ -23,7 +23,6 @@ the fast path at any chunk boundary.
 
 from __future__ import annotations
 
-import re
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from enum import IntEnum
@@ -32,16 +31,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from cpgsim.harness.c.toolchain import c_enum
+
 FUSED_STATUS_HEADER = "../c/fused_status.h"
 """Where the fused loops' status codes are defined, for Python and every engine's C loop (relative to here)."""
 
 
-def _fused_statuses() -> dict[str, int]:
-    text = (Path(__file__).parent / FUSED_STATUS_HEADER).read_text(encoding="utf-8")
-    return {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_FUSED_(\w+)\s*=\s*(\d+)", text)}
-
-
-FusedStatus = IntEnum("FusedStatus", _fused_statuses(), module=__name__)
+FusedStatus = IntEnum("FusedStatus", c_enum(Path(__file__).parent / FUSED_STATUS_HEADER, "CPGSIM_FUSED_"),
+                      module=__name__)
 FusedStatus.__doc__ = """What a fused loop's call ended with (``harness/c/fused_status.h``, the one definition):
 ``DONE``; ``CONTROLLER_DIVERGED`` (the controller's state went non-finite at the last recorded row, the plant
 not stepped for it); ``EVALUATION_ERROR`` (the controller step or the plant's readout failed);

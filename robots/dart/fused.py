@@ -38,13 +38,12 @@ class FusedLoop(FusedLoopBase):
         q_target, changed = plant.servo_state
         self.q_target = q_target.copy()  # the C loop's targets (handed to the plant after each call)
         self._changed = ctypes.c_int(int(changed))
-        self._updated = ctypes.c_int(0)
         self._fn = native.library.cpgsim_dart_loop
         u_i, o_i, q_i, y_i = self.index_pointers()
         self._head = (native.context, ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx,
                       request.nz, request.u.ctypes.data_as(dp), request.y.ctypes.data_as(dp), len(u_idx), u_i, o_i,
                       out.ctypes.data_as(dp), out.size, q_i, self.q_target.ctypes.data_as(dp),
-                      ctypes.byref(self._changed), ctypes.byref(self._updated), float(plant.values["kp"]),
+                      ctypes.byref(self._changed), float(plant.values["kp"]),
                       len(request.yi), y_i)
         self._qt_idx = np.asarray(qt_idx)
 
@@ -82,5 +81,4 @@ class FusedLoop(FusedLoopBase):
 
     def _sync(self, k: int) -> None:
         """The plant's Python state once the C loop has stepped it to ``times[k]``."""
-        self._updated.value = 0
         self.plant.take_fused_steps(float(self.grid.values[k]), self.q_target, bool(self._changed.value))

@@ -76,7 +76,7 @@ PROTOTYPES: Prototypes = {  # return types as ctypes had them (int where none wa
     "cpgsim_dart_num_dofs": (ctypes.c_size_t, [_vp]),
     "cpgsim_dart_outputs": (_int, [_vp, _int]),
     "cpgsim_dart_step": (_int, [_vp]),
-    "cpgsim_dart_loop": (_int, [_vp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _dp, _int, _lp, _dp, _ip, _ip,
+    "cpgsim_dart_loop": (_int, [_vp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _dp, _int, _lp, _dp, _ip,
                                 _dbl, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]),
     "cpgsim_dart_probe": (ctypes.c_size_t, [ctypes.POINTER(_vp), _vp, ctypes.c_size_t, _dp, ctypes.POINTER(_vp),
                                             ctypes.POINTER(_vp), _dp]),

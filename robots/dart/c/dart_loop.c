@@ -159,7 +159,7 @@ int cpgsim_dart_step(void *vc) {
 typedef int (*commit_t)(void *, double, int, int);
 static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                      int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
-                     const long long *qt_idx, double *qt, int *changed, int *updated, double kp, int npick,
+                     const long long *qt_idx, double *qt, int *changed, double kp, int npick,
                      const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
                      int *status);
 
@@ -169,17 +169,16 @@ static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz
    y[qt] (a new target: forces[6 + i] = kp q_target[i], as DartHexapod._apply_servo); world step,
    contact sums, outputs (the readout writes O). Returns the rows recorded and sets *status
    (harness/c/fused_status.h): DONE, CONTROLLER_DIVERGED, EVALUATION_ERROR, TARGET_NOT_FINITE (the caller
-   hands the target to the plant's Python), NEW_CONTACT_OBJECT (the caller reads that step's contacts). *changed: the plant's "target changed" flag;
-   *updated counts the steps that took a new target. */
+   hands the target to the plant's Python), NEW_CONTACT_OBJECT (the caller reads that step's contacts). *changed: the plant's "target changed" flag. */
 int cpgsim_dart_loop(void *vc, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                      int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
-                     const long long *qt_idx, double *qt, int *changed, int *updated, double kp, int npick,
+                     const long long *qt_idx, double *qt, int *changed, double kp, int npick,
                      const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
                      int *status) {
     plant_ctx *c = vc;
     struct timespec l0;
     clock_gettime(CLOCK_MONOTONIC, &l0);
-    int rows = dart_loop(c, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx, O, nO, qt_idx, qt, changed, updated,
+    int rows = dart_loop(c, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx, O, nO, qt_idx, qt, changed,
                          kp, npick, yi, Yrec, Orec, k0, k1, times, status);
     c->loop_seconds += seconds_since(&l0);
     return rows;
@@ -187,7 +186,7 @@ int cpgsim_dart_loop(void *vc, void *step_commit, void *sctx, int nx, int nz, do
 
 static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                      int nmap, const long long *u_idx, const long long *o_idx, const double *O, int nO,
-                     const long long *qt_idx, double *qt, int *changed, int *updated, double kp, int npick,
+                     const long long *qt_idx, double *qt, int *changed, double kp, int npick,
                      const long long *yi, double *Yrec, double *Orec, int k0, int k1, const double *times,
                      int *status) {
     commit_t commit = (commit_t)step_commit;
@@ -212,7 +211,6 @@ static int dart_loop(plant_ctx *c, void *step_commit, void *sctx, int nx, int nz
         if (*changed || memcmp(q, qt, sizeof q)) {
             memcpy(qt, q, sizeof q);
             for (int i = 0; i < 18; ++i) c->forces.data[6 + i] = qt[i] * kp;
-            ++*updated;
         }
         *changed = 0;
         rc = cpgsim_dart_step(c);

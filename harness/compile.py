@@ -70,10 +70,15 @@ class CompiledModel:
     cosim_feeds: dict[str, str]  # cosim input "path.port" -> source ("$in", "eq.port" or "cs.port")
     feed: dict[str, dict[str, set[str]]] = field(default_factory=dict)  # block -> output -> inputs it reads directly
     grouped: bool = False
-    from_cache: bool = False
+    compile_cache: Literal["hit", "miss", "off"] = "off"  # loaded from the cache, compiled and stored, or not used
     _c_source: str | None = field(default=None, repr=False)
     _schedule: Schedule | None = field(default=None, repr=False)
     _wiring: Wiring | None = field(default=None, repr=False)  # a cached model's, to rebuild its schedule
+
+    @property
+    def from_cache(self) -> bool:
+        """Whether the model was loaded from the compile cache (``compile_cache == "hit"``)."""
+        return self.compile_cache == "hit"
 
     @property
     def schedule(self) -> Schedule:
@@ -126,8 +131,8 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     code size and compile time no longer grow with the number of instances; ``"auto"`` picks
     ``"kinds"`` for graphs of at least :data:`GROUPED_MIN_BLOCKS` equation blocks. ``cache``: look the
     model up in (and store it to) the per-user compile cache (:mod:`cpgsim.harness.cache`; also off for the
-    whole process with :func:`cpgsim.components.memo.set_caching`); the model's ``from_cache`` says whether
-    it came from there.
+    whole process with :func:`cpgsim.components.memo.set_caching`); the model's ``compile_cache`` says whether
+    it came from there (``hit``), was compiled and stored (``miss``) or the cache was not used (``off``).
     """
     if grouping not in ("auto", "flat", "kinds"):
         raise ModelError(f"grouping must be 'auto', 'flat' or 'kinds', got {grouping!r}")
@@ -145,6 +150,7 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     if entry is not None:
         return _from_cache(Wiring(flat, dt, int(substeps), signatures), entry)
     model = _build(flat, dt, int(substeps), grouping, signatures)
+    model.compile_cache = "miss"
     fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
     model_cache.store(key, fns, model.c_step_source(), model.feed, model.grouping)
     return model
@@ -202,6 +208,6 @@ def _from_cache(w: Wiring, entry: dict[str, Any]) -> CompiledModel:
     model = _model(w, entry["functions"], w.cosim_feeds(), None)
     model._wiring = w
     model.grouped = entry["grouping"] == "kinds"
-    model.from_cache = True
+    model.compile_cache = "hit"
     model._c_source = entry["c_source"]
     return model

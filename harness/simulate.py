@@ -24,7 +24,6 @@ from typing import Any, Literal
 import casadi as ca
 import numpy as np
 
-from cpgsim.components import memo
 from cpgsim.components.core import Block, CoSimBlock, ModelError, ParameterError
 from cpgsim.components.graph import Graph
 from cpgsim.harness import prefault
@@ -94,7 +93,6 @@ class Simulator:
             graph.set(**params)
         self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping, cache=cache)
         self.prefault = bool(prefault)
-        self.cache_used = bool(cache) and memo.caching_enabled()
         if backend not in ("auto", "native", "casadi"):
             raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")
         self.order = order
@@ -159,7 +157,7 @@ class Simulator:
         from cpgsim.harness.results.provenance import provenance
 
         rec.meta = {"provenance": provenance(), **(meta or {})}  # code, libraries, machine, command
-        rec.meta["execution"] = {"compile_cache": "hit" if m.from_cache else "miss" if self.cache_used else "off",
+        rec.meta["execution"] = {"compile_cache": m.compile_cache,
                                  "prefault": rec.prefetch.active}  # the run adds the step's path
         integer_columns = self._integer_columns(columns)
         if integer_columns:  # the stream's sidecar says from the start which columns hold exact integers

@@ -170,7 +170,7 @@ def check_clock_schedules(graph: object, t0: float, t_end: float) -> None:
     from cpgsim.fmus.importer.block import fmu_blocks
 
     for blk in fmu_blocks(graph):
-        for clock, ticks in getattr(blk, "schedules", {}).items():
+        for clock, ticks in blk.schedules.items():
             outside = [t for t in ticks if not t0 <= t <= t_end]
             if outside:
                 raise CliError(f"--clock {blk.name}.{clock}: tick at {outside[0]:g} s is outside the run "

@@ -52,13 +52,19 @@ def _enum(text: str) -> dict[str, int]:
     return {m[1]: int(m[2]) for m in re.finditer(r"\bCPGSIM_CONTACT_(\w+)\s*=\s*(\d+)", text)}
 
 
-@pytest.mark.parametrize("package_name, name", [("cpgsim.robots.mujoco", "c/mujoco_loop.c"),
-                                                ("cpgsim.robots.dart", "c/dart_loop.c")])
-def test_each_engines_c_loop_compiles_the_one_contact_header(package_name, name):
-    """Each loop's source includes the shared header (and defines no code of its own: no bare 10/100/1000)."""
-    raw = (Path(cpgsim.__file__).parent / package_name.split(".", 1)[1].replace(".", "/") / name).read_text()
+@pytest.mark.parametrize("package_name, name, step", [("cpgsim.robots.mujoco", "c/mujoco_loop.c", "c/mujoco_step.h"),
+                                                      ("cpgsim.robots.dart", "c/dart_loop.c", "c/dart_loop.c")])
+def test_each_engines_c_loop_compiles_the_one_contact_header(package_name, name, step):
+    """Each engine's step source includes the shared header (and defines no code of its own: no bare
+    10/100/1000); the MuJoCo loop takes its step from mujoco_step.h, which the plant FMU compiles too."""
+    folder = Path(cpgsim.__file__).parent / package_name.split(".", 1)[1].replace(".", "/")
+    raw = (folder / step).read_text()
     assert '#include "../../c/plant_contacts.h"' in raw
-    assert not re.search(r"(?<![\w.])(10|100|1000)(?![\w.])", raw), "a contact code written in the loop itself"
+    if step != name:
+        assert f'#include "{Path(step).name}"' in (folder / name).read_text()
+    for source in {name, step}:
+        text = (folder / source).read_text()
+        assert not re.search(r"(?<![\w.])(10|100|1000)(?![\w.])", text), f"a contact code written in {source}"
     text = c_source(package_name, name)
     assert _enum(text) == _enum(HEADER.read_text())
     assert "cpgsim_add_contact(" in text.split("#endif", 1)[1]  # the loop calls the shared rule

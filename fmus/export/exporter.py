@@ -144,7 +144,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
                      str(fmi), kind, repr(dt), repr(substeps), identifier, "clocks" if clocks else "")
         clock = clock_vr(variables) if clocks else None
         (src / "cpgsim_model.h").write_text(build.generate_header(variables, identifier, guid, kinds, names, clock))
-        for f in ("cpgsim_core.h", f"fmi{fmi}.c"):
+        for f in ("cpgsim_core.h", *build.CORE_COMMON, f"fmi{fmi}.c"):
             shutil.copy(build.TEMPLATES / f, src / f)
         for h in build.fmi_headers(fmi):
             shutil.copy(h, src / h.name)

@@ -19,24 +19,14 @@
 #ifndef CPGSIM_CORE_H
 #define CPGSIM_CORE_H
 
-#include <math.h>
-#include <stdarg.h>
-#include <stddef.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-
+#include "cpgsim_fmi_base.h"
 #include "cpgsim_model.h"
 
 typedef long long int cpg_int;
 typedef int (*cpg_fn)(const double **arg, double **res, cpg_int *iw, double *w, int mem);
 typedef int (*cpg_work_fn)(cpg_int *sz_arg, cpg_int *sz_res, cpg_int *sz_iw, cpg_int *sz_w);
 
-enum { CPG_OK = 0, CPG_WARNING = 1, CPG_DISCARD = 2, CPG_ERROR = 3, CPG_FATAL = 4 };
-enum { CPG_ME = 0, CPG_CS = 1 };
-enum { PH_INSTANTIATED = 0, PH_INIT, PH_EVENT, PH_CONT, PH_STEP, PH_TERMINATED, PH_ERROR };
 enum { CAT_TIME = 0, CAT_INPUT, CAT_OUTPUT, CAT_PARAM, CAT_STATE, CAT_DER, CAT_DSTATE, CAT_SIGNAL };
-enum { LOG_EVENTS = 1, LOG_WARNING = 2, LOG_ERROR = 4 };
 
 #define CPG_VR_STRIDE 1000000u
 /* a value reference (dense, see modelDescription) -> category * CPG_VR_STRIDE + index */
@@ -45,20 +35,8 @@ enum { LOG_EVENTS = 1, LOG_WARNING = 2, LOG_ERROR = 4 };
 #define CPG_TOL_T (1e-3 * CPG_DT)     /* a master's communication point vs the FMU's time (accumulated sums) */
 #define CPG_STATE_LEN (8 + CPG_NX + CPG_NZ + CPG_NU + CPG_NP)
 
-typedef struct cpg_instance cpg_instance;
-typedef void (*cpg_log_fn)(cpg_instance *inst, int status, const char *category, const char *message);
-typedef void *(*cpg_calloc_fn)(size_t n, size_t size);
-typedef void (*cpg_free_fn)(void *p);
-
 struct cpg_instance {
-    char *name;
-    int interface;   /* CPG_ME or CPG_CS */
-    int phase;
-    int logging_on;  /* debug logging switched on by the importer */
-    unsigned log_mask;
-    cpg_log_fn log;
-    cpg_calloc_fn calloc_fn;
-    cpg_free_fn free_fn;
+    CPG_INSTANCE_COMMON
     double t0, t, next_event;
     int clock_active;  /* CPG_CLOCKED: the sample clock ticks in this event mode (fmi3SetClock) */
     long long k;     /* CS: steps done since t0; ME: index of the next sampled update */
@@ -72,50 +50,12 @@ struct cpg_instance {
     double *w;
 };
 
-/* i < n without "comparison always false" warnings when a model has no element of a kind */
-static int cpg_lt(unsigned i, unsigned n) { return i < n; }
+#include "cpgsim_fmi_log.h"
 
 static const char *cpg_category_name(unsigned cat) {
     static const char *names[] = {"time", "input", "output", "parameter", "state", "derivative",
                                   "discrete state", "signal"};
     return cat <= CAT_SIGNAL ? names[cat] : "unknown";
-}
-
-static void cpg_logf(cpg_instance *inst, int status, const char *category, const char *fmt, ...) {
-    char buf[1024];
-    va_list ap;
-    if (!inst || !inst->log) return;
-    if (status == CPG_OK && !(inst->logging_on && (inst->log_mask & LOG_EVENTS))) return;
-    if (status == CPG_WARNING && !(inst->log_mask & LOG_WARNING)) return;
-    va_start(ap, fmt);
-    vsnprintf(buf, sizeof buf, fmt, ap);
-    va_end(ap);
-    inst->log(inst, status, category, buf);
-}
-
-#define CPG_FAIL(inst, ...) (cpg_logf((inst), CPG_ERROR, "logStatusError", __VA_ARGS__), CPG_ERROR)
-
-/* The body of fmi2SetDebugLogging / fmi3SetDebugLogging (``fn`` names the caller in messages):
-   no categories = warnings and errors (+ events when on); else exactly the listed categories. */
-static int cpg_set_debug_logging(cpg_instance *inst, int on, size_t n, const char *const categories[],
-                                 const char *fn) {
-    size_t i;
-    inst->logging_on = on ? 1 : 0;
-    if (n == 0) {
-        inst->log_mask = LOG_WARNING | LOG_ERROR | (on ? LOG_EVENTS : 0);
-        return CPG_OK;
-    }
-    inst->log_mask = LOG_ERROR;
-    for (i = 0; i < n; ++i) {
-        const char *cat = categories[i];
-        if (!cat) continue;
-        if (!strcmp(cat, "logEvents")) inst->log_mask |= LOG_EVENTS;
-        else if (!strcmp(cat, "logStatusWarning")) inst->log_mask |= LOG_WARNING;
-        else if (!strcmp(cat, "logStatusError")) inst->log_mask |= LOG_ERROR;
-        else if (!strcmp(cat, "logAll")) inst->log_mask |= LOG_EVENTS | LOG_WARNING | LOG_ERROR;
-        else return CPG_FAIL(inst, "%s: unknown log category '%s'", fn, cat);
-    }
-    return CPG_OK;
 }
 
 /* name of variable vr, for messages */
@@ -230,13 +170,15 @@ static void cpg_release(cpg_instance *inst) {
     inst->name = NULL; inst->x = NULL; inst->arg = NULL; inst->w = NULL;
 }
 
-/* Allocate the arrays of an instance (the struct itself belongs to the FMI layer). Returns CPG_OK. */
+/* Allocate the arrays of an instance (the struct itself belongs to the FMI layer). Returns CPG_OK, or logs
+   why not and returns CPG_ERROR. `resources`: the FMU's resources folder (unused: the model is all code). */
 static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_log_fn log, int logging_on,
-                     cpg_calloc_fn calloc_fn, cpg_free_fn free_fn) {
+                     cpg_calloc_fn calloc_fn, cpg_free_fn free_fn, const char *resources) {
     static const cpg_work_fn works[] = {CPG_FN_STEP_WORK, CPG_FN_POST_WORK, CPG_FN_ODE_WORK, CPG_FN_SIGNALS_WORK,
                                         CPG_FN_DISCRETE_WORK};
     cpg_int a = 0, r = 0, iw = 0, w = 0, sa, sr, si, sw;
     size_t j, len = strlen(name);
+    (void)resources;
     inst->interface = interface;
     inst->log = log;
     inst->logging_on = logging_on;
@@ -269,7 +211,7 @@ static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_lo
         !inst->xdot || !inst->xn || !inst->zn || !inst->arg || !inst->res || !inst->iw || !inst->w) {
         inst->name = NULL;
         cpg_release(inst);
-        return CPG_ERROR;
+        return CPG_FAIL(inst, "instantiate: out of memory");
     }
     memcpy(inst->name, name, len + 1);
     cpg_reset_values(inst);
@@ -301,10 +243,6 @@ static char cpg_kind_of(unsigned vr, int *ok) {
     }
     *ok = 0;
     return 0;
-}
-
-static const char *cpg_kind_name(char k) {
-    return k == 'r' ? "Real/Float64" : k == 'i' ? "Integer/Int32" : k == 'b' ? "Boolean" : "?";
 }
 
 static int cpg_check_vr(cpg_instance *inst, unsigned vr, char want, const char *api) {

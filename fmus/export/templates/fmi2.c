@@ -1,7 +1,8 @@
 /* cpgsim FMI 2.0 layer (Model Exchange and Co-Simulation) around the generated model functions.
  * See cpgsim_core.h for the semantics. All messages go through the importer's logger callback. */
 #include "fmi2Functions.h"
-#include "cpgsim_core.h"
+#include "cpgsim_model.h" /* generated: the model's tables, and CPG_CORE_HEADER: the core it runs on */
+#include CPG_CORE_HEADER
 
 typedef struct {
     cpg_instance core; /* first member: an fmi2Component is a cpg_instance* too */
@@ -21,6 +22,30 @@ static void fmi2_log(cpg_instance *c, int status, const char *category, const ch
     }
     buf[j] = 0;
     s->cb.logger(s->cb.componentEnvironment, c->name ? c->name : "?", (fmi2Status)status, category, buf);
+}
+
+/* The native path of a "file:" resource location URI (file:///p, file:/p or file://localhost/p, with %XX
+   escapes decoded), ending in '/'; 0 when the location is missing or not a local file URI. */
+static int fmi2_resource_path(const char *uri, char *out, size_t n) {
+    size_t i = 0, j = 0;
+    if (!uri || strncmp(uri, "file:", 5) != 0) return 0;
+    uri += 5;
+    if (!strncmp(uri, "//localhost/", 12)) uri += 11;
+    else if (!strncmp(uri, "///", 3)) uri += 2;
+    else if (!strncmp(uri, "//", 2)) return 0; /* another host */
+    for (i = 0; uri[i] && j + 2 < n; ++i) {
+        unsigned v;
+        if (uri[i] == '%' && uri[i + 1] && uri[i + 2] && sscanf(uri + i + 1, "%2x", &v) == 1) {
+            out[j++] = (char)v;
+            i += 2;
+        } else {
+            out[j++] = uri[i];
+        }
+    }
+    if (uri[i]) return 0; /* too long */
+    if (j && out[j - 1] != '/') out[j++] = '/';
+    out[j] = 0;
+    return 1;
 }
 
 static void *fmi2_calloc_default(size_t n, size_t size) { return calloc(n, size); }
@@ -68,7 +93,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     Fmi2Instance *s;
     cpg_calloc_fn alloc = fmi2_calloc_default;
     cpg_free_fn release = fmi2_free_default;
-    (void)fmuResourceLocation;
+    char resources[4096];
     (void)visible;
     if (!functions || !functions->logger) return NULL; /* nowhere to report anything */
     if (functions->allocateMemory && functions->freeMemory) {
@@ -98,11 +123,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     s->cb = *functions;
+    if (!fmi2_resource_path(fmuResourceLocation, resources, sizeof resources)) resources[0] = 0;
     if (cpg_setup(&s->core, instanceName, fmuType == fmi2CoSimulation ? CPG_CS : CPG_ME, fmi2_log,
-                  loggingOn ? 1 : 0, alloc, release) != CPG_OK) {
-        functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
-                          "fmi2Instantiate: out of memory");
-        release(s);
+                  loggingOn ? 1 : 0, alloc, release, resources[0] ? resources : NULL) != CPG_OK) {
+        release(s); /* cpg_setup logged why */
         return NULL;
     }
     return (fmi2Component)s;

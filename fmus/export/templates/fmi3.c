@@ -1,7 +1,8 @@
 /* cpgsim FMI 3.0 layer (Model Exchange and Co-Simulation without event mode) around the generated model
  * functions. See cpgsim_core.h for the semantics. All messages go through the importer's log callback. */
 #include "fmi3Functions.h"
-#include "cpgsim_core.h"
+#include "cpgsim_model.h" /* generated: the model's tables, and CPG_CORE_HEADER: the core it runs on */
+#include CPG_CORE_HEADER
 
 typedef struct {
     cpg_instance core; /* first member */
@@ -57,8 +58,9 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
     return (fmi3Status)cpg_set_debug_logging(INST, loggingOn, nCategories, categories, "fmi3SetDebugLogging");
 }
 
-static fmi3Instance instantiate(int interface, fmi3String instanceName, fmi3String token, fmi3Boolean loggingOn,
-                                fmi3InstanceEnvironment env, fmi3LogMessageCallback logMessage) {
+static fmi3Instance instantiate(int interface, fmi3String instanceName, fmi3String token, fmi3String resourcePath,
+                                fmi3Boolean loggingOn, fmi3InstanceEnvironment env,
+                                fmi3LogMessageCallback logMessage) {
     Fmi3Instance *s;
     if (!instanceName || !instanceName[0]) {
         if (logMessage) logMessage(env, fmi3Error, "logStatusError", "instantiate: missing instance name");
@@ -83,9 +85,9 @@ static fmi3Instance instantiate(int interface, fmi3String instanceName, fmi3Stri
     }
     s->env = env;
     s->logMessage = logMessage;
-    if (cpg_setup(&s->core, instanceName, interface, fmi3_log, loggingOn ? 1 : 0, fmi3_calloc, fmi3_free)) {
-        if (logMessage) logMessage(env, fmi3Error, "logStatusError", "instantiate: out of memory");
-        free(s);
+    if (cpg_setup(&s->core, instanceName, interface, fmi3_log, loggingOn ? 1 : 0, fmi3_calloc, fmi3_free,
+                  resourcePath)) {
+        free(s); /* cpg_setup logged why */
         return NULL;
     }
     return (fmi3Instance)s;
@@ -95,8 +97,9 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    (void)resourcePath; (void)visible;
-    return instantiate(CPG_ME, instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    (void)visible;
+    return instantiate(CPG_ME, instanceName, instantiationToken, resourcePath, loggingOn, instanceEnvironment,
+                       logMessage);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -107,7 +110,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath; (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
+    (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
     if (eventModeUsed) {
         if (logMessage)
@@ -115,7 +118,8 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                        "fmi3InstantiateCoSimulation: event mode is not supported (hasEventMode=false)");
         return NULL;
     }
-    return instantiate(CPG_CS, instanceName, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate(CPG_CS, instanceName, instantiationToken, resourcePath, loggingOn, instanceEnvironment,
+                       logMessage);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,

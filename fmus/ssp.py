@@ -1,4 +1,4 @@
-"""SSP 1.0 (System Structure and Parameterization): a graph of FMUs as an ``.ssp`` archive, and back.
+"""SSP 1.0 and 2.0 (System Structure and Parameterization): a graph of FMUs as an ``.ssp`` archive, and back.
 
 :func:`export_ssp` writes ``SystemStructure.ssd`` plus one FMU per top-level block under
 ``resources/``: an :class:`~cpgsim.fmus.importer.block.FmuBlock` contributes its FMU file (parameters that
@@ -15,17 +15,30 @@ oms:FixedStepMaster`` with the step): OMSimulator takes a system's type only fro
 system without it. The result validates against the SSP 1.0 schema and fmpy's ``fmpy.ssp`` reads
 (and, for FMI 2 CS, simulates) it.
 
+FMI 3 clock connections (``graph.clock_connections``) need SSP 2.0, whose connectors can be clocks: the
+``.ssd`` then says ``version="2.0"`` (same namespaces as 1.0: SSP 2.0 keeps ``http://ssp-standard.org/SSP1/...``)
+and each clock connector is typed by an ``ssc:Clock`` child (``intervalVariability`` and the interval
+attributes of the FMU's ``<Clock>``); the connection itself is an ordinary ``ssd:Connection`` between the
+two clock connectors (SSP 2.0 schema and spec, modelica/ssp-standard tag ``v2.0``). ``version=None`` (the
+default) writes 1.0 unless the graph has clock connections, then 2.0 with an :class:`SspVersionWarning`
+(1.0-only readers such as fmpy's refuse it); ``version="1.0"`` with clock connections is refused naming
+one; ``version="2.0"`` always writes 2.0. The tick schedules of triggered input clocks (``FmuBlock(clocks=)``)
+are kept in a component annotation (``org.cpgsim.clocks``) in either version, so the graph read back ticks
+the same.
+
 :func:`import_ssp` reads an ``.ssp`` (checked like an FMU: safe extraction, no DTDs) into a
 :class:`~cpgsim.components.graph.Graph` of ``FmuBlock``\\ s, nested ``System``\\ s as nested graphs. Inline
 and ``.ssv`` parameter bindings are applied; connection transformations, signal dictionaries and
-``.ssm`` parameter mappings are refused with a clear error. The extracted files live as long as
-the returned graph.
+``.ssm`` parameter mappings are refused with a clear error. Clock connectors of components (typed
+``ssc:Clock`` or untyped, named after an FMU's clock) connect as clock connections; clock connectors of a
+system are refused. The extracted files live as long as the returned graph.
 """
 
 from __future__ import annotations
 
 import re
 import shutil
+import warnings
 import weakref
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -56,6 +69,8 @@ NS = {
     "ssb": "http://ssp-standard.org/SSP1/SystemStructureSignalDictionary",
 }
 ANNOTATION = "org.cpgsim.simulation"
+CLOCK_ANNOTATION = "org.cpgsim.clocks"  # a component's clock schedules: cpgsim:Clock name= ticks="t1 t2 ..."
+VERSIONS = ("1.0", "2.0")
 OMS_NS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 OMS_DEFAULT_STEP = 1e-3  # the fixed step OpenModelica's annotation states when export_ssp gets no dt
 _INDEXED = re.compile(r"^(.*)\[(\d+)\]$")
@@ -75,14 +90,21 @@ class SspError(FmuError):
     """An SSP cannot be written or read (unsupported feature, unknown connector, ...)."""
 
 
+class SspVersionWarning(UserWarning):
+    """:func:`export_ssp` wrote SSP 2.0 by itself (the graph has clock connections; 1.0-only readers refuse it)."""
+
+
 # ---------------------------------------------------------------------------------------------------
 # export
 # ---------------------------------------------------------------------------------------------------
 def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end: float | None = None,
-               kind: str = "cs", fmi: int = 2, workdir: str | Path | None = None) -> Path:
+               kind: str = "cs", fmi: int = 2, workdir: str | Path | None = None,
+               version: str | None = None) -> Path:
     """Write ``graph`` as an SSP archive at ``path`` (see the module docstring); returns the path.
 
     ``kind``/``fmi`` choose how equation blocks are exported (FmuBlocks keep their FMU and kind).
+    ``version``: ``"1.0"``, ``"2.0"`` or None (1.0, or 2.0 with an :class:`SspVersionWarning` when the graph
+    has FMI 3 clock connections, which only SSP 2.0 can hold).
     """
     if not isinstance(graph, Graph):
         raise SspError(f"export_ssp needs a Graph, got {type(graph).__name__}")
@@ -92,26 +114,21 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
     tmp = private_scratch("cpgsim_ssp_", workdir)
     try:
         members: dict[str, Path] = {}
-        clock_links = getattr(graph, "clock_connections", None) or {}
-        if clock_links:  # SSP 1.0 connectors are signals (Real, Integer, Boolean, String, Enumeration, Binary)
-            dst, src = next(iter(clock_links.items()))
-            raise SspError(f"graph {graph.name!r} connects FMI 3 clocks ({src} -> {dst}"
-                           f"{f' and {len(clock_links) - 1} more' if len(clock_links) > 1 else ''}): SSP 1.0 has no "
-                           f"clock connectors, so cpgsim does not write clock connections to an .ssd")
+        version = _ssp_version(graph, version)
         comps: dict[str, _Comp] = {}
         for name, blk in graph.blocks.items():
             comps[name] = _component(name, blk, tmp, kind, fmi)
             members[comps[name].source] = comps[name].file
         units: dict[str, Any] = {}
         root = ET.Element(_q("ssd", "SystemStructureDescription"),
-                          {"version": "1.0", "name": graph.name, "generationTool": "cpgsim"})
+                          {"version": version, "name": graph.name, "generationTool": "cpgsim"})
         system = ET.SubElement(root, _q("ssd", "System"), {"name": graph.name})
         if graph.description:
             system.set("description", graph.description)
         _system_connectors(system, graph, comps, units)
         elements = ET.SubElement(system, _q("ssd", "Elements"))
         for name, comp in comps.items():
-            _write_component(elements, name, comp, graph, units)
+            _write_component(elements, name, comp, graph, units, version)
         _write_connections(system, graph, comps)
         annotations = ET.SubElement(system, _q("ssd", "Annotations"))
         _openmodelica_annotation(annotations, OMS_DEFAULT_STEP if dt is None else float(dt))
@@ -137,6 +154,28 @@ def export_ssp(graph: Graph, path: str | Path, *, dt: float | None = None, t_end
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
+
+
+def _ssp_version(graph: Graph, version: str | None) -> str:
+    """The SSP version to write: SSP 1.0 connectors are signals only (Real, Integer, Boolean, String,
+    Enumeration, Binary); SSP 2.0 adds ``ssc:Clock``, so clock connections need 2.0."""
+    if version is not None and version not in VERSIONS:
+        raise SspError(f"export_ssp: version {version!r} is not one of {', '.join(VERSIONS)} (or None: 1.0, or 2.0 "
+                       f"for a graph with clock connections)")
+    clock_links = graph.clock_connections
+    if not clock_links:
+        return version or "1.0"
+    dst, src = next(iter(clock_links.items()))
+    what = f"{src} -> {dst}{f' and {len(clock_links) - 1} more' if len(clock_links) > 1 else ''}"
+    if version == "1.0":
+        raise SspError(f"graph {graph.name!r} connects FMI 3 clocks ({what}): SSP 1.0 has no clock connectors, "
+                       f"so cpgsim does not write clock connections to an SSP 1.0 .ssd (SSP 2.0 has them: "
+                       f"version='2.0', or leave version unset)")
+    if version is None:
+        warnings.warn(f"graph {graph.name!r} connects FMI 3 clocks ({what}): written as SSP 2.0 (clock connectors), "
+                      f"which readers that know only SSP 1.0 refuse; pass version='2.0' to say so", SspVersionWarning,
+                      stacklevel=3)
+    return "2.0"
 
 
 def _openmodelica_annotation(annotations: ET.Element, step: float) -> None:
@@ -233,7 +272,33 @@ def _connected_inputs(graph: Graph, block: str) -> set[str]:
     return used
 
 
-def _write_component(elements: ET.Element, name: str, comp: _Comp, graph: Graph, units: dict) -> None:
+def _clock_connector(parent: ET.Element, spec: Any) -> None:
+    """A clock connector (SSP 2.0): typed ``ssc:Clock`` with the FMU clock's interval attributes."""
+    c = ET.SubElement(parent, _q("ssd", "Connector"), {"name": spec.name, "kind": spec.causality})
+    attrs = {"intervalVariability": spec.variability}
+    if spec.supports_fraction and spec.resolution:
+        attrs["supportsFraction"] = "true"
+        attrs["resolution"] = str(spec.resolution)
+        if spec.interval is not None and (spec.interval * spec.resolution).denominator == 1:
+            attrs["intervalCounter"] = str(int(spec.interval * spec.resolution))
+        if spec.shift and (spec.shift * spec.resolution).denominator == 1:
+            attrs["shiftCounter"] = str(int(spec.shift * spec.resolution))
+    if spec.interval is not None and "intervalCounter" not in attrs:
+        attrs["intervalDecimal"] = repr(float(spec.interval))
+    if spec.shift and "shiftCounter" not in attrs:
+        attrs["shiftDecimal"] = repr(float(spec.shift))
+    if spec.priority is not None:
+        attrs["priority"] = str(spec.priority)
+    ET.SubElement(c, _q("ssc", "Clock"), attrs)
+
+
+def _connected_clocks(graph: Graph, block: str) -> set[str]:
+    """Clock ports of ``block`` at either end of a clock connection."""
+    return {r.port for link in graph.clock_connections.items() for r in link if r.block == block}
+
+
+def _write_component(elements: ET.Element, name: str, comp: _Comp, graph: Graph, units: dict,
+                     version: str = "1.0") -> None:
     el = ET.SubElement(elements, _q("ssd", "Component"),
                        {"name": name, "type": "application/x-fmu-sharedlibrary", "source": comp.source,
                         "implementation": _IMPL[comp.kind]})
@@ -247,11 +312,18 @@ def _write_component(elements: ET.Element, name: str, comp: _Comp, graph: Graph,
     for spec in fb.info.outputs.values():
         for fmi_name in _fmi_elements(spec):
             _connector(cons, fmi_name, "output", spec.kind, spec.unit, units)
+    if version != "1.0":  # clock connectors: the connected input clocks and all output clocks
+        clocked = _connected_clocks(graph, name)
+        for port, spec in getattr(fb, "clock_inputs", {}).items():
+            if port in clocked:
+                _clock_connector(cons, spec)
+        for spec in getattr(fb, "clock_outputs", {}).values():
+            _clock_connector(cons, spec)
     if comp.bindings:
         pbs = ET.SubElement(el, _q("ssd", "ParameterBindings"))
         pb = ET.SubElement(pbs, _q("ssd", "ParameterBinding"))
         pv = ET.SubElement(pb, _q("ssd", "ParameterValues"))
-        ps = ET.SubElement(pv, _q("ssv", "ParameterSet"), {"version": "1.0", "name": f"{name}_parameters"})
+        ps = ET.SubElement(pv, _q("ssv", "ParameterSet"), {"version": version, "name": f"{name}_parameters"})
         plist = ET.SubElement(ps, _q("ssv", "Parameters"))
         specs = {s.fmi_name: s for s in fb.info.parameters.values()}
         for fmi_name, value in comp.bindings.items():
@@ -263,6 +335,12 @@ def _write_component(elements: ET.Element, name: str, comp: _Comp, graph: Graph,
                 ET.SubElement(p, _q("ssv", "Integer"), {"value": str(int(value))})
             else:
                 ET.SubElement(p, _q("ssv", "Boolean"), {"value": "true" if value else "false"})
+    schedules = getattr(fb, "schedules", None)
+    if schedules:  # triggered input clocks' tick times (FmuBlock(clocks=)): the graph read back ticks the same
+        ann = ET.SubElement(ET.SubElement(el, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
+                            {"type": CLOCK_ANNOTATION})
+        for clock, ticks in schedules.items():
+            ET.SubElement(ann, "{urn:cpgsim}Clock", {"name": clock, "ticks": " ".join(repr(float(t)) for t in ticks)})
 
 
 def _fmi_elements(spec: Any) -> list[str]:
@@ -307,6 +385,16 @@ def _write_connections(system: ET.Element, graph: Graph, comps: dict[str, _Comp]
         if len(s) != len(d):
             raise SspError(f"cannot write graph output {ref} -> {gout}: sizes differ")
         rows += [{"startElement": ref.block, "startConnector": a, "endConnector": b} for a, b in zip(s, d, strict=True)]
+    for dst, src in graph.clock_connections.items():  # SSP 2.0: between the two clock connectors
+        if src.block not in comps or dst.block not in comps:
+            raise SspError(f"clock connection {src} -> {dst} is not between top-level blocks")
+        s_spec = getattr(comps[src.block].block, "clock_outputs", {}).get(src.port)
+        d_spec = getattr(comps[dst.block].block, "clock_inputs", {}).get(dst.port)
+        if s_spec is None or d_spec is None:
+            raise SspError(f"cannot write clock connection {src} -> {dst}: not an FMU output clock to an FMU "
+                           f"input clock")
+        rows.append({"startElement": src.block, "startConnector": s_spec.name, "endElement": dst.block,
+                     "endConnector": d_spec.name})
     if rows:
         cons = ET.SubElement(system, _q("ssd", "Connections"))
         for r in rows:
@@ -338,7 +426,7 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
     ``params`` overrides parameters after the SSP's bindings (``{"block.param": value}``, block
     parameter names). The graph has ``ssp_step`` (the macro step recorded by
     :func:`export_ssp`, or None), ``ssp_start_time`` and ``ssp_stop_time`` (the
-    ``DefaultExperiment``'s, or None) attributes.
+    ``DefaultExperiment``'s, or None) and ``ssp_version`` (the ``.ssd``'s ``version``) attributes.
     """
     path = Path(path)
     with open_zip(path, "SSP") as zf:
@@ -353,7 +441,7 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
     except ET.ParseError as exc:
         raise ModelDescriptionError(f"SSP {path}: SystemStructure.ssd is not well-formed XML: {exc}") from None
     if root.tag != _q("ssd", "SystemStructureDescription"):
-        raise ModelDescriptionError(f"SSP {path}: SystemStructure.ssd root is {root.tag}, not SSP 1.0 "
+        raise ModelDescriptionError(f"SSP {path}: SystemStructure.ssd root is {root.tag}, not SSP 1.0/2.0 "
                                     f"SystemStructureDescription")
     system = root.find("ssd:System", NS)
     if system is None:
@@ -369,6 +457,7 @@ def import_ssp(path: str | Path, *, workdir: str | Path | None = None, isolate: 
                         step = float(child.get("stepSize"))
         exp = root.find("ssd:DefaultExperiment", NS)
         graph.ssp_step = step  # type: ignore[attr-defined]
+        graph.ssp_version = root.get("version")  # type: ignore[attr-defined]
         graph.ssp_stop_time = float(exp.get("stopTime")) if exp is not None and exp.get("stopTime") else None  # type: ignore[attr-defined]
         graph.ssp_start_time = _experiment_time(exp, "startTime", path)  # type: ignore[attr-defined]
         if graph.ssp_stop_time is not None and not graph.ssp_stop_time > (graph.ssp_start_time or 0.0):
@@ -443,6 +532,10 @@ def _read_system(system: ET.Element, unzipdir: Path, ssp: Path, isolate: bool, w
     if system.find("ssd:SignalDictionaries", NS) is not None:
         raise SspError(f"SSP {ssp}: signal dictionaries are not supported")
     sys_cons = {c.get("name"): c for c in system.findall("ssd:Connectors/ssd:Connector", NS)}
+    for cname, c in sys_cons.items():
+        if c.find("ssc:Clock", NS) is not None:
+            raise SspError(f"SSP {ssp}: system {sname!r} has clock connector {cname!r}: cpgsim connects clocks only "
+                           f"between FMU components of one system (not supported)")
     graph.ssp_connectors = list(sys_cons)  # type: ignore[attr-defined]
     # connections, grouped per (start port, end port) so vector ports connect whole
     wires: dict[tuple, list[tuple[int, int]]] = {}
@@ -464,7 +557,7 @@ def _read_system(system: ET.Element, unzipdir: Path, ssp: Path, isolate: bool, w
             exposed_in.setdefault(sp, []).append(f"{eb}.{ep}")
         elif eb is None:  # component output -> system output
             graph.expose_output(ep, f"{sb}.{sp}")
-        else:
+        else:  # a clock connection when both ends are clocks (Graph.connect tells them apart)
             graph.connect(f"{sb}.{sp}", f"{eb}.{ep}")
     for name, targets in exposed_in.items():
         first = parse_ref(targets[0])
@@ -497,7 +590,40 @@ def _read_component(el: ET.Element, bname: str, unzipdir: Path, ssp: Path, isola
             raise SspError(f"SSP {ssp}: component {el.get('name')!r} has no parameter {name!r} "
                            f"(parameters: {', '.join(sorted(by_fmi)) or 'none'})")
         blk.set(**{by_fmi[name].name: _binding_value(typ, value, f"SSP {ssp}: parameter {name!r}")})
+    _check_clock_connectors(el, blk, ssp)
+    for ann in el.findall("ssd:Annotations/ssc:Annotation", NS):
+        if ann.get("type") == CLOCK_ANNOTATION:
+            for c in ann.findall("{urn:cpgsim}Clock"):
+                where = f"SSP {ssp}: component {el.get('name')!r} clock {c.get('name')!r}"
+                try:
+                    ticks = [float(t) for t in (c.get("ticks") or "").split()]
+                except ValueError:
+                    raise SspError(f"{where}: ticks {c.get('ticks')!r} are not numbers") from None
+                try:
+                    blk.schedule_clock(c.get("name") or "", ticks)
+                except Exception as exc:  # noqa: BLE001 - a ModelError naming the clock
+                    raise SspError(f"{where}: {one_line(exc)}") from None
     return blk
+
+
+def _check_clock_connectors(el: ET.Element, blk: FmuBlock, ssp: Path) -> None:
+    """A connector typed ``ssc:Clock`` names a clock of the FMU of that causality, and a typed connector that
+    names an FMU clock is typed ``ssc:Clock`` (SSP: a connector's type that differs from the FMU variable's is
+    an error)."""
+    clocks = {c.name: c for c in (*blk.clock_inputs.values(), *blk.clock_outputs.values())}
+    for c in el.findall("ssd:Connectors/ssd:Connector", NS):
+        name, typed = c.get("name") or "", [ch for ch in c if ch.tag.startswith(f"{{{NS['ssc']}}}")]
+        is_clock = any(ch.tag == _q("ssc", "Clock") for ch in typed)
+        where = f"SSP {ssp}: component {el.get('name')!r} connector {name!r}"
+        if is_clock and name not in clocks:
+            raise SspError(f"{where} is a clock, but {blk.path.name} has no clock {name!r} (clocks: "
+                           f"{', '.join(sorted(clocks)) or 'none'})")
+        if name in clocks:
+            if typed and not is_clock:
+                raise SspError(f"{where} is typed {typed[0].tag.split('}')[-1]}, but it is a clock of {blk.path.name}")
+            if c.get("kind") != clocks[name].causality:
+                raise SspError(f"{where} has kind {c.get('kind')!r}, but it is an {clocks[name].causality} clock of "
+                               f"{blk.path.name}")
 
 
 def _binding_value(typ: str, value: str, where: str) -> float | int:
@@ -531,6 +657,10 @@ def _end(graph: Graph, names: dict[str, str], sys_cons: dict, element: str | Non
             for pname, spec in table.items():
                 if connector in spec.fmi_names:
                     return names[element], pname, spec.fmi_names.index(connector)
+        for clocks in (blk.clock_inputs, blk.clock_outputs):  # FMI 3 clocks (SSP 2.0 clock connectors)
+            for pname, cspec in clocks.items():
+                if connector == cspec.name:
+                    return names[element], pname, 0
         raise SspError(f"SSP {ssp}: component {element!r} has no variable {connector!r} usable as a connector")
     # a nested system: its connectors are exposed graph ports
     base, idx = _split_index(connector, getattr(blk, "ssp_connectors", ()))

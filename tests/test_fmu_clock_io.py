@@ -205,20 +205,6 @@ def test_cli_clock_schedule_and_results_show_the_ticks(trig_fmu, tmp_path, capsy
     assert len(err.strip().splitlines()) == 1
 
 
-def test_ssp_export_refuses_clock_connections_by_name(trig_fmu, tmp_path):
-    from cpgsim.components.graph import Graph
-    from cpgsim.fmus.importer.block import FmuBlock
-    from cpgsim.fmus.ssp import SspError, export_ssp
-
-    g = Graph("chain")
-    g.add(FmuBlock("a", trig_fmu, kind="cs", clocks={"trig": SCHEDULE}))
-    g.add(FmuBlock("b", trig_fmu, kind="cs"))
-    g.connect("a.every", "b.trig")
-    with pytest.raises(SspError, match=r"graph 'chain' connects FMI 3 clocks \(a\.every -> b\.trig\): SSP 1\.0 has "
-                                       r"no clock connectors"):
-        export_ssp(g, tmp_path / "c.ssp")
-
-
 @pytest.mark.parametrize("kind", ["cs", "me"])
 def test_output_clock_every_third_tick_of_a_periodic_input_clock(trig_fmu, tmp_path, kind):
     """The same C FMU with ``trig`` a constant 25 ms clock: ticks at k/40 (k = 0..19 in [0, 0.5)), the output clock

@@ -386,7 +386,8 @@ def serve(monkeypatch, requests: list[tuple]) -> list:
             if request[0] == "terminate":
                 replies.append(conn.recv())
                 break
-            replies.append(conn.recv())
+            for _ in range(request[1][3] if request[0] == "ahead" else 1):  # "ahead": one reply per step
+                replies.append(conn.recv())
         conn.close()
 
     thread = threading.Thread(target=client)
@@ -397,7 +398,24 @@ def serve(monkeypatch, requests: list[tuple]) -> list:
     finally:
         signal.signal(signal.SIGINT, old)
     thread.join(10)
-    return replies
+    return unpacked(replies)
+
+
+def unpacked(replies: list) -> list:
+    """The replies with packed outputs (``("out", (layout or None, bytes, ticks))``) as ``("ok", outputs)``: the
+    layout is sent when it changes, so the replies are read in order, as the parent does."""
+    out, fields = [], None
+    for status, value in replies:
+        if status == "out":
+            layout, data, ticks = value
+            if layout is not None:
+                fields = isolation._fields(layout)
+            outputs = isolation._unpack(fields, data)
+            if ticks:
+                outputs[isolation._TICKS] = ticks
+            status, value = "ok", outputs
+        out.append((status, value))
+    return out
 
 
 def test_the_child_loop_answers_each_request_and_reports_each_failure_by_class(monkeypatch):

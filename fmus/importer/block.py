@@ -262,9 +262,11 @@ class FmuBlock(CoSimBlock):
             args["schedules"] = dict(self.schedules)
         self.clock_ticks = {p: [] for p in self.clock_outputs}
         if self.isolate:
-            from cpgsim.fmus.importer.isolation import IsolatedRuntime
+            from cpgsim.fmus.importer.isolation import RUN_AHEAD, IsolatedRuntime
 
-            rt = IsolatedRuntime(args, timeout=self.timeout)
+            # without inputs or clocks the FMU's steps are known in advance: the child runs ahead on the grid
+            ahead = RUN_AHEAD if not self.info.inputs and not self.info.clocks and self.kind in ("cs", "me") else 0
+            rt = IsolatedRuntime(args, timeout=self.timeout, run_ahead=ahead)
         else:
             from cpgsim.fmus.importer.clocked import make_runtime
 

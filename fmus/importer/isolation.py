@@ -14,7 +14,21 @@ is counted and reported in one line.
 
 One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``, whose reply
 carries the outputs after the step; ``get_outputs`` asks the child only when inputs changed since the
-last answer (direct feedthrough).
+last answer (direct feedthrough). Numeric arrays travel as their bytes with a layout (dtypes, shapes; sent
+again only when it changes), not as pickled numpy arrays, and the parent reads whatever messages have
+arrived in one system call.
+
+An FMU without inputs or clocks (``run_ahead``, :data:`RUN_AHEAD` from :class:`~cpgsim.fmus.importer.block.FmuBlock`)
+has its steps known in advance when the master steps on its grid ``t0 + k dt`` (the Simulator's ``times``):
+the first ``do_step`` at ``t0`` asks the child for ``run_ahead`` steps, the next request goes when half of
+them are taken, and the child sends each step's outputs as soon as the step is done, so the parent reads
+them instead of waiting for a round trip per step. The rows are the same numbers. A stop request, an error,
+a crash or a hang at a step is reported when the parent takes that step, with the same message, and the
+child steps no further after a stop or an error (it answers "skip" for the steps asked ahead). The FMU may
+have computed up to 1.5 ``run_ahead`` steps past the master's last one when the run ends (those are read
+and dropped before the next call or at ``terminate``; an error there is not reported). A step off the grid
+after the child ran ahead raises :class:`~cpgsim.fmus.errors.FmuRuntimeError` (the FMU cannot go back);
+a first step not at ``t0`` or inputs to send turn running ahead off for the run.
 
 If the child dies (segmentation fault, abort, out of memory, killed, exit from inside the FMU) the
 call raises :class:`~cpgsim.fmus.errors.FmuCrashedError` naming the FMU, the call, the time and the signal.
@@ -29,8 +43,11 @@ detected while waiting, killed, and reported as a crash. The master turns these 
 from __future__ import annotations
 
 import os
+import pickle
+import select
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -54,6 +71,9 @@ DEFAULT_CALL_TIMEOUT = 10.0
 1 ms macro step in real time, far beyond any FMU meant for such steps."""
 MIN_SETUP_TIMEOUT = 10.0
 """``setup`` (extract, load, instantiate, initialise) may take the call timeout or this, whichever is longer."""
+RUN_AHEAD = 32
+"""Macro steps an isolated FMU without inputs or clocks computes ahead of the master, per request (it is
+asked for the next ones when half are taken, so it is at most 1.5 times this ahead)."""
 STARTUP_TIMEOUT = 60.0
 """Seconds the child's interpreter may take to start and import numpy and fmpy (a loaded machine)."""
 
@@ -86,7 +106,7 @@ def _signal_name(returncode: int | None) -> str:
 class IsolatedRuntime:
     """An :class:`~cpgsim.fmus.importer.runtime.FmuRuntime` living in a child process (see module docstring)."""
 
-    def __init__(self, args: Mapping[str, Any], timeout: float | None = None) -> None:
+    def __init__(self, args: Mapping[str, Any], timeout: float | None = None, run_ahead: int = 0) -> None:
         self.args = dict(args)
         # the child works in its scratch directory: every path it gets must be absolute
         self.args["path"] = str(Path(self.args["path"]).resolve())
@@ -103,6 +123,14 @@ class IsolatedRuntime:
         self._sent: dict[str, np.ndarray] = {}
         self._outputs: dict[str, np.ndarray] | None = None
         self._time = 0.0
+        self.run_ahead = max(0, int(run_ahead))
+        self._fields: tuple | None = None  # how the child's packed outputs are laid out (see _Packer)
+        self._grid_t0 = 0.0
+        self._grid_dt: float | None = None
+        self._k = 0  # macro steps on the grid the parent has taken (replies read)
+        self._asked = 0  # macro steps on the grid the child was asked for (ahead of _k by the replies owed)
+        self._halted = False  # the child stopped running ahead (a stop or an error): the replies owed are "skip"
+        self.requests = 0  # messages sent to the child (round trips and run-ahead requests), for tests
         parent, child = socket.socketpair()
         # the lifeline: the child's watchdog thread reads it; it ends (EOF) when this process closes it or
         # dies, however it dies (SIGKILL included), and the child then ends its whole process tree
@@ -124,35 +152,81 @@ class IsolatedRuntime:
             child.close()
             os.close(life_read)
         self.conn = Connection(parent.detach())
+        self._poller: _Reader | None = None
 
     # -- protocol ---------------------------------------------------------------------------------
     def _call(self, what: str, *payload: Any, timeout: float | None = None) -> Any:
-        where = f"FMU {self.path.name} (block {self.name!r}, isolated process pid {self.proc.pid})"
+        if self._asked > self._k and not self._halted and what != "terminate":
+            raise FmuRuntimeError(f"{self._where()}: {what} at t={self._time:g} s after the child ran ahead of the "
+                                  f"master on its grid; it cannot go back")
+        self._drain()
+        self._send(what, payload)
+        return self._reply(what, timeout)
+
+    def _where(self) -> str:
+        return f"FMU {self.path.name} (block {self.name!r}, isolated process pid {self.proc.pid})"
+
+    def _send(self, what: str, payload: tuple) -> None:
         try:
             self.conn.send((what, payload))
         except OSError:  # BrokenPipeError, ConnectionResetError: the child is gone
-            self._raise_dead(where, what)
-        deadline = None if timeout is None else time.monotonic() + timeout
-        wait = 0.001
-        while not self.conn.poll(wait):
-            wait = min(0.2, wait * 2)  # quick answers are seen at once, a slow call is polled 5 times a second
-            if self.proc.poll() is not None and not self.conn.poll(0):
-                self._raise_dead(where, what)
+            self._raise_dead(self._where(), what)
+        self.requests += 1
+
+    def _reader(self) -> _Reader:
+        reader = self._poller
+        if reader is None or reader.conn is not self.conn:
+            try:
+                reader = self._poller = _Reader(self.conn)
+            except OSError:  # the connection is closed
+                self._raise_dead(self._where(), "a call")
+        return reader
+
+    def _reply(self, what: str, timeout: float | None) -> Any:
+        """The child's next reply (the answer to ``what``), waited for under the watchdog."""
+        reader = self._reader()
+        poll = reader.poll
+        frame = reader.frame()
+        deadline = None
+        wait = 0
+        while frame is None:
+            if poll(wait):  # readable, or the end of the connection
+                try:
+                    more = reader.read()
+                except OSError:
+                    more = False
+                if not more:
+                    self._raise_dead(self._where(), what)
+                frame = reader.frame()
+                continue
+            if not wait:  # quick answers are seen at once, a slow call is polled 5 times a second
+                wait = 1
+                deadline = None if timeout is None else time.monotonic() + timeout
+                continue
+            wait = min(200, wait * 2)
+            if self.proc.poll() is not None and not poll(0):
+                self._raise_dead(self._where(), what)
             if _stopped(self.proc.pid):
                 self.kill()
                 self._close_conn()
-                raise FmuCrashedError(f"{where} was stopped (SIGSTOP or SIGTSTP) during {what} at t={self._time:g} s; "
-                                      f"the process was killed")
+                raise FmuCrashedError(f"{self._where()} was stopped (SIGSTOP or SIGTSTP) during {what} at "
+                                      f"t={self._time:g} s; the process was killed")
             if deadline is not None and time.monotonic() > deadline:
                 self.kill()
-                raise FmuTimeoutError(f"{where}: {what} at t={self._time:g} s took longer than {timeout:g} s "
-                                      f"(--fmu-timeout); the process was killed")
-        try:
-            reply = self.conn.recv()
-        except (EOFError, OSError):
-            self._raise_dead(where, what)
+                raise FmuTimeoutError(f"{self._where()}: {what} at t={self._time:g} s took longer than "
+                                      f"{timeout:g} s (--fmu-timeout); the process was killed")
+        reply = pickle.loads(frame)
         status, value = reply
-        if status == "ok":
+        if status == "out":  # outputs, packed (see _Packer)
+            layout, data, ticks = value
+            if layout is not None:
+                self._fields = _fields(layout)
+            assert self._fields is not None
+            out = _unpack(self._fields, data)
+            if ticks:
+                out[_TICKS] = ticks
+            return out
+        if status in ("ok", "skip"):
             return value
         if status == "stop":  # the FMU asked to end the run: its outputs are read again from the child
             self._outputs = None
@@ -162,7 +236,21 @@ class IsolatedRuntime:
             raise _ERRORS[cls_name](message)
         if cls_name == "load":
             raise FmuError(message)
-        raise FmuRuntimeError(f"{where}: {what} failed: {message}")
+        raise FmuRuntimeError(f"{self._where()}: {what} failed: {message}")
+
+    def _drain(self) -> None:
+        """Read the replies still owed for steps the child ran ahead and the parent will not take (the run
+        ended early, or the child stopped at a stop request or an error): they are dropped, except a crash
+        or a hang of the child, which is raised."""
+        while self._asked > self._k:
+            self._k += 1
+            try:
+                self._reply("step", self.timeout)
+            except (FmuCrashedError, FmuTimeoutError):
+                raise
+            except (FmuError, FmuRuntimeError, StopRequested):
+                pass
+        self._halted = False
 
     def _raise_dead(self, where: str, what: str) -> None:
         try:
@@ -177,16 +265,18 @@ class IsolatedRuntime:
     def setup(self, t0: float, params: Mapping[str, float] | None = None,
               inputs: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
         self._time = float(t0)
+        self._grid_t0, self._grid_dt = float(t0), None
         if not self._ready:
             self._call("ready", timeout=STARTUP_TIMEOUT)
             self._ready = True
-        self._outputs = self._call("setup", self.args, float(t0), dict(params or {}), dict(inputs or {}),
+        self._outputs = self._call("setup", self.args, float(t0), dict(params or {}), _pack_inputs(inputs or {}),
                                    timeout=self.setup_timeout)
+        self._k = self._asked = 0
         return self._outputs
 
     def get_outputs(self) -> dict[str, np.ndarray]:
         if self._pending or self._outputs is None:
-            self._outputs = self._call("outputs", self._pending, timeout=self.timeout)
+            self._outputs = self._call("outputs", _pack_inputs(self._pending), timeout=self.timeout)
             self._sent.update(self._pending)
             self._pending = {}
         return self._outputs
@@ -200,11 +290,44 @@ class IsolatedRuntime:
             self._pending[k] = arr
 
     def do_step(self, t: float, dt: float) -> None:
-        self._time = float(t)
-        self._outputs = self._call("step", self._pending, float(t), float(dt), timeout=self.timeout)
+        t, dt = float(t), float(dt)
+        if self.run_ahead and not self._pending and self._on_grid(t, dt):
+            self._step_ahead(t, dt)
+            return
+        if self._asked > self._k and not self._halted:
+            raise FmuRuntimeError(f"{self._where()}: step at t={t:g} s (dt {dt:g} s) is not the next step on the grid "
+                                  f"t0 + k dt the child was running ahead on; it cannot go back")
+        self.run_ahead = 0  # off the grid (or inputs to send): one round trip per step from now on
+        self._time = t
+        self._outputs = self._call("step", _pack_inputs(self._pending), t, dt, timeout=self.timeout)
         self._sent.update(self._pending)
         self._pending = {}
-        self._time = float(t) + float(dt)
+        self._time = t + dt
+
+    def _on_grid(self, t: float, dt: float) -> bool:
+        """Whether step ``(t, dt)`` is the next on the master's grid ``t0 + k dt`` (``times`` of the Simulator)."""
+        if self._grid_dt is None:
+            if self._k or t != self._grid_t0:
+                return False
+            self._grid_dt = dt
+        return dt == self._grid_dt and t == self._grid_t0 + dt * self._k
+
+    def _step_ahead(self, t: float, dt: float) -> None:
+        """One step on the grid, from the replies of a child that runs up to ``run_ahead`` steps ahead: a
+        request asks for ``run_ahead`` steps when half of those asked before are taken, and the child sends
+        each step's outputs (or its stop, error or crash, after which it steps no further) as it goes."""
+        if self._asked - self._k <= self.run_ahead // 2:
+            self._send("ahead", (self._grid_t0, dt, self._asked, self.run_ahead))
+            self._asked += self.run_ahead
+        self._time = t
+        self._k += 1
+        try:
+            self._outputs = self._reply("step", self.timeout)
+        except (FmuError, FmuRuntimeError, StopRequested):
+            self._halted = True  # the child steps no further; the replies still owed say "skip"
+            self.run_ahead = 0
+            raise
+        self._time = t + dt
 
     def take_ticks(self) -> dict[str, list[float]]:
         """Output clock ticks the child reported with its last outputs (once)."""
@@ -264,6 +387,45 @@ class IsolatedRuntime:
         if self.proc.poll() is not None:
             self._end_group()
             remove_tree(self.scratch)
+
+
+class _Reader:
+    """The parent's end of a connection, read in large pieces: a child running ahead sends a message per
+    step, and one ``read`` takes all that have arrived (``Connection.recv`` makes two system calls per
+    message). Messages are framed as ``multiprocessing.connection.Connection.send`` frames them (the child
+    sends with it): a 4-byte big-endian length, or -1 and an 8-byte length, then the pickle."""
+
+    def __init__(self, conn: Connection) -> None:
+        self.conn = conn
+        self.fd = conn.fileno()
+        poller = select.poll()  # made once: Connection.poll builds a selector at every call
+        poller.register(self.fd, select.POLLIN)
+        self.poll = poller.poll
+        self.buf = bytearray()
+
+    def read(self) -> bool:
+        """Append what has arrived; False at the end of the connection."""
+        data = os.read(self.fd, 1 << 16)
+        self.buf += data
+        return bool(data)
+
+    def frame(self) -> bytes | None:
+        """The next whole message, or None until it has arrived."""
+        buf = self.buf
+        if len(buf) < 4:
+            return None
+        size, = struct.unpack_from("!i", buf)
+        start = 4
+        if size == -1:
+            if len(buf) < 12:
+                return None
+            size, = struct.unpack_from("!Q", buf, 4)
+            start = 12
+        if len(buf) < start + size:
+            return None
+        frame = bytes(buf[start:start + size])
+        del buf[:start + size]
+        return frame
 
 
 OUTPUT_LIMIT = 1 << 20
@@ -392,70 +554,163 @@ def _watch_lifeline(fd: int) -> None:
 _TICKS = "__clock_ticks__"
 
 
-def _add_ticks(rt: Any, value: dict) -> None:
-    """Output clock ticks ride along with the outputs (taken once by :meth:`IsolatedRuntime.take_ticks`)."""
-    ticks = rt.take_ticks() if hasattr(rt, "take_ticks") else None
-    if ticks:
-        value[_TICKS] = ticks
+# -- values on the wire: numeric arrays as (layout, bytes), not as pickled numpy arrays -------------------
+def _layout(values: Mapping[str, Any]) -> tuple | None:
+    """``((name, dtype, shape), ...)`` of a dict of numeric numpy arrays, or None if a value is anything else."""
+    layout = []
+    for name, a in values.items():
+        if type(a) is not np.ndarray or a.dtype.kind not in "biuf":
+            return None
+        layout.append((name, a.dtype.str, a.shape))
+    return tuple(layout)
+
+
+def _fields(layout: tuple) -> tuple[np.dtype | None, list[tuple[str, np.dtype, int, int, tuple]]]:
+    """How to unpack ``layout``: the dtype shared by all its 1-D arrays (None if they differ or one is not
+    1-D) and ``(name, dtype, count, offset, shape)`` of each array, the offset in bytes (in elements when
+    the dtype is shared)."""
+    out, offset = [], 0
+    dtypes = {np.dtype(d) for _, d, _ in layout}
+    shared = dtypes.pop() if len(dtypes) == 1 and all(len(shape) == 1 for _, _, shape in layout) else None
+    for name, dtype_str, shape in layout:
+        dtype = np.dtype(dtype_str)
+        count = int(np.prod(shape, dtype=np.int64))
+        out.append((name, dtype, count, offset, tuple(shape)))
+        offset += count if shared is not None else count * dtype.itemsize
+    return shared, out
+
+
+def _unpack(fields: tuple, data: bytes) -> dict[str, np.ndarray]:
+    """The arrays of a packed message: writable, C-ordered, the dtypes and shapes that were packed (the
+    bytes are the arrays' own: the values are bit for bit those of the other process)."""
+    shared, entries = fields
+    buf = bytearray(data)
+    if shared is not None:  # one array, a slice of it per name (each step's arrays are new)
+        whole = np.frombuffer(buf, shared) if buf else np.empty(0, shared)
+        return {name: whole[offset:offset + count] for name, _, count, offset, _ in entries}
+    out = {}
+    for name, dtype, count, offset, shape in entries:
+        if count:
+            a = np.frombuffer(buf, dtype, count, offset)
+            out[name] = a if a.shape == shape else a.reshape(shape)
+        else:
+            out[name] = np.empty(shape, dtype)
+    return out
+
+
+def _pack_inputs(values: Mapping[str, Any]) -> Any:
+    """Inputs for the child: ``(layout, bytes)`` when they are numeric arrays, else the dict itself."""
+    layout = _layout(values) if values else None
+    if layout is None:
+        return dict(values)
+    return layout, b"".join([a.tobytes() for a in values.values()])
+
+
+def _unpack_inputs(payload: Any) -> Mapping[str, Any]:
+    if isinstance(payload, tuple):
+        layout, data = payload
+        return _unpack(_fields(layout), data)
+    return payload
+
+
+class _Packer:
+    """The child's replies with outputs: ``("out", (layout or None when unchanged, bytes, ticks or None))``,
+    or ``("ok", outputs)`` when an output is not a numeric array."""
+
+    def __init__(self) -> None:
+        self.layout: tuple | None = None
+
+    def reply(self, rt: Any, value: dict) -> tuple:
+        ticks = rt.take_ticks() if hasattr(rt, "take_ticks") else None
+        layout = _layout(value)
+        if layout is None:
+            if ticks:
+                value[_TICKS] = ticks
+            return "ok", value
+        data = b"".join([a.tobytes() for a in value.values()])
+        if layout == self.layout:
+            return "out", (None, data, ticks or None)
+        self.layout = layout
+        return "out", (layout, data, ticks or None)
+
+
+def _failure(exc: BaseException) -> tuple:
+    """The child's reply for a failure: a stop request, a load error or the error's class and message."""
+    from cpgsim.fmus.errors import one_line
+
+    if isinstance(exc, StopRequested):
+        return "stop", (str(exc), exc.time)
+    if isinstance(exc, FmuError):
+        return "err", ("load", str(exc))
+    name = type(exc).__name__
+    return "err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS else f"{name}: {one_line(exc)}")
 
 
 def _serve(fd: int) -> None:
-    from cpgsim.fmus.errors import one_line
     from cpgsim.fmus.importer.clocked import make_runtime
     from cpgsim.fmus.importer.runtime import FmuRuntime
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn = Connection(fd)
+    send = conn.send
+    packer = _Packer()
     rt: FmuRuntime | None = None
+    halted = False  # a step run ahead stopped or failed: further steps asked ahead are skipped
     while True:
         try:
             what, payload = conn.recv()
         except (EOFError, OSError):
             break
+        if what == "ahead":  # steps k0 .. k0+n-1 at t0 + k dt, one reply each, sent as each is done
+            t0, dt, k0, n = payload
+            for k in range(k0, k0 + n):
+                if halted:
+                    send(("skip", None))  # if the socket is gone, the caller ends the child: exit status 3
+                    continue
+                try:
+                    assert rt is not None
+                    rt.do_step(t0 + dt * k, dt)
+                    reply = packer.reply(rt, rt.get_outputs())
+                except Exception as exc:  # noqa: BLE001 - report every failure to the parent
+                    reply = _failure(exc)
+                    halted = True
+                send(reply)
+            continue
+        halted = False
         try:
             if what == "ready":  # the interpreter is up and the runtime imported
-                value: Any = None
+                reply = ("ok", None)
             elif what == "setup":
                 args, t0, params, inputs = payload
                 rt = make_runtime(**args)
-                value = rt.setup(t0, params, inputs)
-                _add_ticks(rt, value)
+                reply = packer.reply(rt, rt.setup(t0, params, _unpack_inputs(inputs)))
             elif what == "outputs":
                 assert rt is not None
                 if payload[0]:
-                    rt.set_inputs(payload[0])
-                value = rt.get_outputs()
-                _add_ticks(rt, value)
+                    rt.set_inputs(_unpack_inputs(payload[0]))
+                reply = packer.reply(rt, rt.get_outputs())
             elif what == "step":
                 assert rt is not None
                 inputs, t, dt = payload
                 if inputs:
-                    rt.set_inputs(inputs)
+                    rt.set_inputs(_unpack_inputs(inputs))
                 rt.do_step(t, dt)
-                value = rt.get_outputs()
-                _add_ticks(rt, value)
+                reply = packer.reply(rt, rt.get_outputs())
             elif what == "ticks":
                 assert rt is not None
                 rt.add_ticks(*payload)  # type: ignore[attr-defined]
-                value = None
+                reply = ("ok", None)
             elif what == "terminate":
                 if rt is not None:
                     rt.terminate()
                     rt = None
-                conn.send(("ok", None))
+                send(("ok", None))
                 break
             else:
                 raise FmuRuntimeError(f"unknown request {what!r}")
-            reply: tuple = ("ok", value)
-        except StopRequested as exc:
-            reply = ("stop", (str(exc), exc.time))
-        except FmuError as exc:
-            reply = ("err", ("load", str(exc)))
         except Exception as exc:  # noqa: BLE001 - report every failure to the parent
-            name = type(exc).__name__
-            reply = ("err", (name if name in _ERRORS else "other", str(exc) if name in _ERRORS
-                             else f"{name}: {one_line(exc)}"))
-        conn.send(reply)  # if the socket is gone (the FMU closed it), the caller ends the child: exit status 3
+            reply = _failure(exc)
+        send(reply)  # if the socket is gone (the FMU closed it), the caller ends the child: exit status 3
     if rt is not None:
         rt.terminate()
     conn.close()

@@ -4,8 +4,13 @@ BLOCK_OR_GRAPH is a built-in graph name (see `cpgsim simulate --list`), path/to/
 returning a Graph or Block, or an importable module:Name where Name is a Block class (instantiated with
 its default parameters, named after --name or the class) or a function returning a Graph or Block.
 
+`cpgsim export plant --scenario NAME` exports the scenario's robot on its terrain instead: a Co-Simulation
+FMU with MuJoCo inside (libmujoco bundled; runs without Python), inputs q_target[0..17], the plant's outputs,
+parameters kp, kd, friction (docs/fmu_export.md, "The robot as an FMU"); --set then overrides scenario keys.
+
 Examples:
   cpgsim export network -o network.fmu
+  cpgsim export plant --scenario step -o plant.fmu --fmi 3
   cpgsim export vdp -o vdp3.fmu --fmi 3 --kind cs --set z.eps=0.2
   cpgsim export cpgsim.components.neurons:VanDerPolNeuron -o neuron.fmu --kind me
 """
@@ -19,7 +24,7 @@ import re
 from pathlib import Path
 
 from cpgsim.cli import catalog
-from cpgsim.cli.common import CliError, add_set_argument, parse_sets, positive_float
+from cpgsim.cli.common import CliError, add_set_argument, parse_scenario_sets, parse_sets, positive_float
 from cpgsim.components.core import Block
 from cpgsim.components.graph import Graph
 
@@ -30,8 +35,11 @@ _MODULE_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("item", metavar="BLOCK_OR_GRAPH", help="graph name, path/to/module.py:function or module:Name")
+    p.add_argument("item", metavar="BLOCK_OR_GRAPH",
+                   help="graph name, path/to/module.py:function or module:Name; or 'plant' with --scenario")
     p.add_argument("-o", "--output", required=True, help="FMU file to write (.fmu)")
+    p.add_argument("--scenario", help="with 'plant': the scenario (built-in name or FILE.toml) whose robot and "
+                                      "terrain the plant FMU holds")
     p.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
     p.add_argument("--kind", choices=("cs", "me", "both"), default="both",
                    help="co-simulation, model exchange or both (default both)")
@@ -77,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"output {out} must end in .fmu")
     if int(args.substeps) < 1:
         raise CliError(f"--substeps must be a positive integer, got {args.substeps}")
+    if args.item == "plant" or args.scenario is not None:
+        return export_plant(args, out)
     item = load_item(args.item, args.name)
     params = parse_sets(args.sets)
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
@@ -88,4 +98,23 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {result.path} (FMI {args.fmi}.0, {kinds}; {counts['input']} inputs, {counts['output']} outputs, "
           f"{counts['parameter']} parameters, {counts['state']} continuous and {counts['dstate']} discrete states"
           + (f"; discrete states clocked by 'sample', interval {args.dt:g} s" if args.clocks else "") + ")")
+    return 0
+
+
+def export_plant(args: argparse.Namespace, out: Path) -> int:
+    """``cpgsim export plant --scenario NAME``: the scenario's robot as a Co-Simulation FMU, MuJoCo inside."""
+    from cpgsim.experiments.plant_fmu import export_plant_fmu
+
+    if args.item != "plant":
+        raise CliError(f"--scenario exports the robot: write 'cpgsim export plant --scenario {args.scenario}' "
+                       f"(got {args.item!r})")
+    if args.scenario is None:
+        raise CliError("cpgsim export plant needs --scenario NAME (a built-in scenario or FILE.toml)")
+    if args.kind == "me" or args.clocks:
+        raise CliError("the plant FMU is Co-Simulation only (no --kind me, no --clocks)")
+    result = export_plant_fmu(args.scenario, out, fmi=args.fmi, sets=parse_scenario_sets(args.sets), name=args.name)
+    counts = {c: len(result.variables.of(c)) for c in ("input", "output", "parameter")}
+    print(f"wrote {result.path} (FMI {args.fmi}.0 co-simulation: the robot of scenario {result.scenario} on its "
+          f"terrain, MuJoCo inside, step {result.time_step:g} s; {counts['input']} inputs, {counts['output']} "
+          f"outputs, {counts['parameter']} parameters; default experiment 0-{result.t_end:g} s in steps of 0.001 s)")
     return 0

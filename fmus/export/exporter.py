@@ -31,8 +31,6 @@ See :mod:`cpgsim.fmus.export.model_description` for variable names and value ref
 
 from __future__ import annotations
 
-import hashlib
-import re
 import shutil
 import tempfile
 from collections.abc import Mapping
@@ -47,16 +45,11 @@ from cpgsim.components.core import Block
 from cpgsim.components.graph import Graph
 from cpgsim.fmus import trust
 from cpgsim.fmus.export import build
+from cpgsim.fmus.export.build import model_identifier
 from cpgsim.fmus.export.model_description import ExportError, Variables, clock_vr, collect_variables, model_description
 from cpgsim.harness.compile import compile_graph
 
 KINDS = {"cs": ("cs",), "me": ("me",), "both": ("me", "cs")}
-
-
-def model_identifier(name: str) -> str:
-    """A C identifier (and file name) from a model name."""
-    ident = re.sub(r"[^A-Za-z0-9_]", "_", name).strip("_") or "model"
-    return ident if not ident[0].isdigit() else "m_" + ident
 
 
 def _tool() -> str:
@@ -65,11 +58,6 @@ def _tool() -> str:
     except metadata.PackageNotFoundError:  # pragma: no cover - running from a checkout
         version = "dev"
     return f"cpgsim {version} (CasADi {ca.__version__})"
-
-
-def _guid(*parts: str) -> str:
-    h = hashlib.sha256("\0".join(parts).encode()).hexdigest()
-    return "{" + f"{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}" + "}"
 
 
 @dataclass
@@ -140,7 +128,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         src.mkdir(parents=True)
         names = build.functions_for(kinds)
         model_c = build.generate_model_sources(model, identifier, src, names)
-        guid = _guid(*model_c.values(), repr([(v.name, v.vr, v.kind, v.start) for v in variables.items]),
+        guid = build.fmu_guid(*model_c.values(), repr([(v.name, v.vr, v.kind, v.start) for v in variables.items]),
                      str(fmi), kind, repr(dt), repr(substeps), identifier, "clocks" if clocks else "")
         clock = clock_vr(variables) if clocks else None
         (src / "cpgsim_model.h").write_text(build.generate_header(variables, identifier, guid, kinds, names, clock))

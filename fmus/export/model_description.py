@@ -90,8 +90,13 @@ class Variables:
     """All variables of an exported model, in ``modelDescription`` order, plus what the C layer needs."""
 
     items: list[Variable]
-    model: CompiledModel
+    model: CompiledModel | None  # None for a model that is not a compiled graph (the plant FMU)
     has_events: bool  # whether the sampled discrete part changes anything (ME time events)
+    model_name: str = ""  # the modelName; default the compiled model's name
+
+    @property
+    def name(self) -> str:
+        return self.model_name or self.model.name
 
     def of(self, category: str) -> list[Variable]:
         return [v for v in self.items if v.category == category]
@@ -293,13 +298,21 @@ def _type_attrs(v: Variable, fmi: int) -> dict[str, str]:
 
 
 def model_description(variables: Variables, *, fmi: int, identifier: str, guid: str, kinds: tuple[str, ...],
-                      description: str, sources: list[str], dt: float, tool: str, clocks: bool = False) -> bytes:
+                      description: str, sources: list[str], dt: float, tool: str, clocks: bool = False,
+                      internal_dt: float | None = None, stop_time: float | None = None) -> bytes:
     """The ``modelDescription.xml`` bytes for FMI ``fmi`` (2 or 3) and interface ``kinds`` ("me", "cs");
-    ``clocks`` (FMI 3): declare the sample clock (:func:`clock_vr`) that ticks the discrete states."""
+    ``clocks`` (FMI 3): declare the sample clock (:func:`clock_vr`) that ticks the discrete states.
+    ``dt`` is the default experiment's step; ``internal_dt`` the FMU's own fixed step when it differs (FMI 3
+    ``fixedInternalStepSize``), ``stop_time`` the default experiment's end; ``sources`` the source files an
+    importer may compile alone (FMI 2 ``SourceFiles``; none listed when empty)."""
+    experiment = {"startTime": "0.0", "stepSize": repr(float(dt))}
+    if stop_time is not None:
+        experiment["stopTime"] = repr(float(stop_time))
     if fmi == 2:
-        return _fmi2(variables, identifier, guid, kinds, description, sources, dt, tool)
+        return _fmi2(variables, identifier, guid, kinds, description, sources, experiment, tool)
     if fmi == 3:
-        return _fmi3(variables, identifier, guid, kinds, description, dt, tool, clocks)
+        return _fmi3(variables, identifier, guid, kinds, description, experiment,
+                     dt if internal_dt is None else internal_dt, tool, clocks)
     raise ExportError(f"FMI version must be 2 or 3, got {fmi!r}")
 
 
@@ -309,10 +322,9 @@ def _finish(root: ET.Element) -> bytes:
 
 
 def _fmi2(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ...], description: str,
-          sources: list[str], dt: float, tool: str) -> bytes:
-    m = variables.model
+          sources: list[str], experiment: dict[str, str], tool: str) -> bytes:
     root = ET.Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": m.name, "guid": guid, "description": description,
+        "fmiVersion": "2.0", "modelName": variables.name, "guid": guid, "description": description,
         "generationTool": tool, "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
     common = {"modelIdentifier": identifier, "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"}
     for kind in ("me", "cs"):
@@ -322,12 +334,13 @@ def _fmi2(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ..
             el = ET.SubElement(root, "ModelExchange", {**common, "completedIntegratorStepNotNeeded": "true"})
         else:
             el = ET.SubElement(root, "CoSimulation", {**common, "canHandleVariableCommunicationStepSize": "true"})
-        files = ET.SubElement(el, "SourceFiles")
-        for s in sources:
-            ET.SubElement(files, "File", name=s)
+        if sources:
+            files = ET.SubElement(el, "SourceFiles")
+            for s in sources:
+                ET.SubElement(files, "File", name=s)
     _unit_elements(root, variables)
     _log_categories(root)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=repr(float(dt)))
+    ET.SubElement(root, "DefaultExperiment", experiment)
     mv = ET.SubElement(root, "ModelVariables")
     pos = {id(v): k + 1 for k, v in enumerate(variables.items)}  # 1-based ScalarVariable index
     state_pos = {v.index: pos[id(v)] for v in variables.of("state")}
@@ -362,10 +375,9 @@ def clock_vr(variables: Variables) -> int:
 
 
 def _fmi3(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ...], description: str,
-          dt: float, tool: str, clocks: bool = False) -> bytes:
-    m = variables.model
+          experiment: dict[str, str], dt: float, tool: str, clocks: bool = False) -> bytes:
     root = ET.Element("fmiModelDescription", {
-        "fmiVersion": "3.0", "modelName": m.name, "instantiationToken": guid, "description": description,
+        "fmiVersion": "3.0", "modelName": variables.name, "instantiationToken": guid, "description": description,
         "generationTool": tool, "variableNamingConvention": "structured"})
     common = {"modelIdentifier": identifier, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true"}
     if "me" in kinds:
@@ -375,7 +387,7 @@ def _fmi3(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ..
                                              "fixedInternalStepSize": repr(float(dt)), "hasEventMode": "false"})
     _unit_elements(root, variables)
     _log_categories(root)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stepSize=repr(float(dt)))
+    ET.SubElement(root, "DefaultExperiment", experiment)
     mv = ET.SubElement(root, "ModelVariables")
     ET.SubElement(mv, "Float64", name="time", valueReference="0", causality="independent",
                   variability="continuous", description="simulation time")

@@ -113,11 +113,7 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
                 model.geom_conaffinity[gid] = 0
         data = mujoco.MjData(model)
         self.model, self.data = model, data
-        z = self.body_height if self.body_height is not None else self._touching_height(
-            foot_positions_body(self.geometry, self.q0))
-        data.qpos[:3] = (0.0, 0.0, z)
-        data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
-        data.qpos[7:] = self.q0
+        data.qpos[:] = self.initial_qpos()
         data.qvel[:] = 0.0
         mujoco.mj_forward(model, data)
         self._apply_gains()
@@ -146,6 +142,14 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         data.time = float(t0)
         self._t = float(t0)
         self.update_outputs()
+
+    def initial_qpos(self) -> np.ndarray:
+        """Where :meth:`setup` places the robot (MuJoCo's ``qpos``, 25 values): the body at the world origin's
+        ``x, y``, at ``body_height`` (default: the lowest foot touching the ground), level, facing ``+y``
+        (quaternion ``1, 0, 0, 0``), the joints at ``q0``."""
+        z = self.body_height if self.body_height is not None else self._touching_height(
+            foot_positions_body(self.geometry, self.q0))
+        return np.concatenate(([0.0, 0.0, z, 1.0, 0.0, 0.0, 0.0], self.q0))
 
     def terminate(self) -> None:
         """Keep the final state (:attr:`last_snapshot`), then drop the model."""

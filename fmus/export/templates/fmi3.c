@@ -320,7 +320,9 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
         if (vr[i] != (fmi3ValueReference)CPG_CLOCK_VR)
             return (fmi3Status)CPG_FAIL(INST, "fmi3SetClock: value reference %u is not a clock (the clock is %d)",
                                         (unsigned)vr[i], CPG_CLOCK_VR);
+#if CPG_CLOCKED /* a core without clocks has no clock_active */
         INST->clock_active = values[i] ? 1 : 0;
+#endif
     }
     return fmi3OK;
 }

@@ -266,7 +266,9 @@ class FmuBlock(CoSimBlock):
 
             # without inputs or clocks the FMU's steps are known in advance: the child runs ahead on the grid
             ahead = RUN_AHEAD if not self.info.inputs and not self.info.clocks and self.kind in ("cs", "me") else 0
-            rt = IsolatedRuntime(args, timeout=self.timeout, run_ahead=ahead)
+            # setting the inputs runs the event iteration (ME) or the ticks (SE, clocks) at that instant
+            acts = bool(self.info.inputs) and (self.kind in ("me", "se") or bool(self.info.clocks))
+            rt = IsolatedRuntime(args, timeout=self.timeout, run_ahead=ahead, inputs_act=acts)
         else:
             from cpgsim.fmus.importer.clocked import make_runtime
 

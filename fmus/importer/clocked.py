@@ -24,8 +24,12 @@ or before it (held over the macro step, as for any CS block). A tick at a commun
 for the inputs at that point: it runs when the master sets them (for an FMU without inputs, at once),
 so outputs read at a point before the inputs are set show the values just before the tick there. The
 first tick (at the start time, for a clock without shift: FMI 3.0's periodic clocks tick at ``t_start + shift +
-k * interval``) therefore runs when the first inputs are set, and a run from 0 to T activates the ticks in
-[0, T) (plus the one at T if the FMU has no inputs).
+k * interval``) therefore runs when the first inputs are set. The master sets the inputs at t before it records
+the row at t only for a block with direct feedthrough (and re-reads all its outputs then), so the row at t shows
+the ticks in [t0, t] for such a block and for an FMU without inputs, [t0, t) for an FMU with inputs and no
+feedthrough; a run to T activates the tick at T in the first two cases, not in the third. An isolated FMU
+(:mod:`cpgsim.fmus.importer.isolation`) passes every ``set_inputs`` call on, changed values or not, so the rows
+are the same in both processes.
 
 Output clocks (CS with event mode, ME): ``fmi3GetClock`` after every event iteration (still in event mode, the
 clocked inputs set before ``fmi3UpdateDiscreteStates``, the clocked outputs read after it); each tick is

@@ -14,7 +14,10 @@ is counted and reported in one line.
 
 One round trip per macro step: ``set_inputs`` is buffered and sent with ``do_step``, whose reply
 carries the outputs after the step; ``get_outputs`` asks the child only when inputs changed since the
-last answer (direct feedthrough). Numeric arrays travel as their bytes with a layout (dtypes, shapes; sent
+last answer (direct feedthrough), or, for an FMU with inputs where setting them runs something (``inputs_act``:
+model exchange, Scheduled Execution, clocks: the event iteration or the clock ticks at that instant), when
+``set_inputs`` was called since, so that the outputs re-read are those an in-process run reads. Numeric
+arrays travel as their bytes with a layout (dtypes, shapes; sent
 again only when it changes), not as pickled numpy arrays, and the parent reads whatever messages have
 arrived in one system call.
 
@@ -106,8 +109,14 @@ def _signal_name(returncode: int | None) -> str:
 class IsolatedRuntime:
     """An :class:`~cpgsim.fmus.importer.runtime.FmuRuntime` living in a child process (see module docstring)."""
 
-    def __init__(self, args: Mapping[str, Any], timeout: float | None = None, run_ahead: int = 0) -> None:
+    def __init__(self, args: Mapping[str, Any], timeout: float | None = None, run_ahead: int = 0,
+                 inputs_act: bool = False) -> None:
         self.args = dict(args)
+        # setting the inputs does more than set values (ME: the event iteration at this instant; SE and clocked
+        # CS: the ticks due at this communication point): a set_inputs call reaches the child before the next
+        # outputs are read even when no value changed, as in-process
+        self.inputs_act = bool(inputs_act)
+        self._act = False  # set_inputs was called since the child last got inputs
         # the child works in its scratch directory: every path it gets must be absolute
         self.args["path"] = str(Path(self.args["path"]).resolve())
         # the child extracts and works in a scratch directory the parent removes, even after a crash
@@ -265,6 +274,7 @@ class IsolatedRuntime:
     def setup(self, t0: float, params: Mapping[str, float] | None = None,
               inputs: Mapping[str, Any] | None = None) -> dict[str, np.ndarray]:
         self._time = float(t0)
+        self._act = False
         self._grid_t0, self._grid_dt = float(t0), None
         if not self._ready:
             self._call("ready", timeout=STARTUP_TIMEOUT)
@@ -275,14 +285,17 @@ class IsolatedRuntime:
         return self._outputs
 
     def get_outputs(self) -> dict[str, np.ndarray]:
-        if self._pending or self._outputs is None:
-            self._outputs = self._call("outputs", _pack_inputs(self._pending), timeout=self.timeout)
+        if self._pending or self._outputs is None or self._act:
+            self._outputs = self._call("outputs", _pack_inputs(self._pending), self._act, timeout=self.timeout)
             self._sent.update(self._pending)
             self._pending = {}
+            self._act = False
         return self._outputs
 
     def set_inputs(self, values: Mapping[str, Any]) -> None:
-        """Buffer inputs; values equal to those the FMU already has are not sent again."""
+        """Buffer inputs; values equal to those the FMU already has are not sent again. With ``inputs_act``
+        the call itself is passed on (with the next outputs request or step), changed values or not."""
+        self._act = self.inputs_act
         for k, v in values.items():
             arr = np.array(v, copy=True)  # 64-bit integers stay exact
             if k in self._sent and k not in self._pending and np.array_equal(self._sent[k], arr):
@@ -299,6 +312,7 @@ class IsolatedRuntime:
                                   f"t0 + k dt the child was running ahead on; it cannot go back")
         self.run_ahead = 0  # off the grid (or inputs to send): one round trip per step from now on
         self._time = t
+        self._act = False  # the step runs what setting the inputs runs (the ticks, the event iteration at t)
         self._outputs = self._call("step", _pack_inputs(self._pending), t, dt, timeout=self.timeout)
         self._sent.update(self._pending)
         self._pending = {}
@@ -686,7 +700,7 @@ def _serve(fd: int) -> None:
                 reply = packer.reply(rt, rt.setup(t0, params, _unpack_inputs(inputs)))
             elif what == "outputs":
                 assert rt is not None
-                if payload[0]:
+                if payload[0] or payload[1:2] == (True,):  # the master set the inputs (unchanged values too)
                     rt.set_inputs(_unpack_inputs(payload[0]))
                 reply = packer.reply(rt, rt.get_outputs())
             elif what == "step":

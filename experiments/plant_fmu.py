@@ -83,14 +83,29 @@ def export_plant_fmu(scenario: str | Path, path: str | Path, *, fmi: int = 2,
     the FMU cannot hold (pushes, ``velocity_ff``) or cannot be built (no compiler, no libmujoco)."""
     from cpgsim.experiments.runner import build_scenario
 
+    _check_target(path, fmi)
+    return export_setup_plant(build_scenario(scenario, {**(sets or {}), "robot.engine": "mujoco"}), path,
+                              fmi=fmi, name=name, label=str(scenario))
+
+
+def _check_target(path: str | Path, fmi: int) -> None:
     if fmi not in (2, 3):
         raise ExportError(f"FMI version must be 2 or 3, got {fmi!r}")
-    path = Path(path)
-    if path.suffix.lower() != ".fmu":
+    if Path(path).suffix.lower() != ".fmu":
         raise ExportError(f"output {path} must end in .fmu")
-    setup = build_scenario(scenario, {**(sets or {}), "robot.engine": "mujoco"})
+
+
+def export_setup_plant(setup, path: str | Path, *, fmi: int = 2, name: str | None = None,
+                       label: str | None = None) -> PlantFmu:
+    """The plant FMU of a built scenario (:class:`~cpgsim.experiments.setup.RunSetup` on MuJoCo), as
+    :func:`export_plant_fmu`."""
+    _check_target(path, fmi)
+    path = Path(path)
     plant = setup.graph.blocks[setup.robot]
-    label = setup.scenario.name if setup.scenario is not None else str(scenario)
+    if getattr(plant, "engine", None) != "mujoco":
+        raise ExportError(f"the plant FMU holds a MuJoCo robot; this scenario's robot runs on "
+                          f"{getattr(plant, 'engine', type(plant).__name__)!r} (set robot.engine = \"mujoco\")")
+    label = setup.scenario.name if setup.scenario is not None else (label or setup.graph.name)
     if plant.pushes:
         raise ExportError(f"scenario {label}: the plant FMU does not model pushes ([[disturbance]]); export the "
                           "scenario without them")

@@ -7,10 +7,13 @@ its default parameters, named after --name or the class) or a function returning
 `cpgsim export plant --scenario NAME` exports the scenario's robot on its terrain instead: a Co-Simulation
 FMU with MuJoCo inside (libmujoco bundled; runs without Python), inputs q_target[0..17], the plant's outputs,
 parameters kp, kd, friction (docs/fmu_export.md, "The robot as an FMU"); --set then overrides scenario keys.
+`cpgsim export closed-loop --scenario NAME -o loop.ssp` writes the scenario's controller FMU and plant FMU
+wired as in the scenario, as an SSP that `cpgsim simulate loop.ssp` (and OMSimulator) runs.
 
 Examples:
   cpgsim export network -o network.fmu
   cpgsim export plant --scenario step -o plant.fmu --fmi 3
+  cpgsim export closed-loop --scenario step -o loop.ssp
   cpgsim export vdp -o vdp3.fmu --fmi 3 --kind cs --set z.eps=0.2
   cpgsim export cpgsim.components.neurons:VanDerPolNeuron -o neuron.fmu --kind me
 """
@@ -36,8 +39,9 @@ _MODULE_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("item", metavar="BLOCK_OR_GRAPH",
-                   help="graph name, path/to/module.py:function or module:Name; or 'plant' with --scenario")
-    p.add_argument("-o", "--output", required=True, help="FMU file to write (.fmu)")
+                   help="graph name, path/to/module.py:function or module:Name; or 'plant' or "
+                        "'closed-loop' with --scenario")
+    p.add_argument("-o", "--output", required=True, help="FMU file to write (.fmu; closed-loop: .ssp)")
     p.add_argument("--scenario", help="with 'plant': the scenario (built-in name or FILE.toml) whose robot and "
                                       "terrain the plant FMU holds")
     p.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
@@ -81,12 +85,12 @@ def run(args: argparse.Namespace) -> int:
     from cpgsim.fmus.export.exporter import export_fmu
 
     out = Path(args.output)
+    if args.item in ("plant", "closed-loop") or args.scenario is not None:
+        return export_robot(args, out)
     if out.suffix.lower() != ".fmu":
         raise CliError(f"output {out} must end in .fmu")
     if int(args.substeps) < 1:
         raise CliError(f"--substeps must be a positive integer, got {args.substeps}")
-    if args.item == "plant" or args.scenario is not None:
-        return export_plant(args, out)
     item = load_item(args.item, args.name)
     params = parse_sets(args.sets)
     result = export_fmu(item, out, fmi=args.fmi, kind=args.kind, dt=args.dt, substeps=args.substeps,
@@ -101,18 +105,31 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def export_plant(args: argparse.Namespace, out: Path) -> int:
-    """``cpgsim export plant --scenario NAME``: the scenario's robot as a Co-Simulation FMU, MuJoCo inside."""
-    from cpgsim.experiments.plant_fmu import export_plant_fmu
-
-    if args.item != "plant":
+def export_robot(args: argparse.Namespace, out: Path) -> int:
+    """``cpgsim export plant|closed-loop --scenario NAME``: the scenario's robot as a Co-Simulation FMU with
+    MuJoCo inside, or its whole closed loop (controller FMU + plant FMU) as an SSP."""
+    if args.item not in ("plant", "closed-loop"):
         raise CliError(f"--scenario exports the robot: write 'cpgsim export plant --scenario {args.scenario}' "
-                       f"(got {args.item!r})")
+                       f"or 'cpgsim export closed-loop --scenario {args.scenario}' (got {args.item!r})")
     if args.scenario is None:
-        raise CliError("cpgsim export plant needs --scenario NAME (a built-in scenario or FILE.toml)")
+        raise CliError(f"cpgsim export {args.item} needs --scenario NAME (a built-in scenario or FILE.toml)")
     if args.kind == "me" or args.clocks:
         raise CliError("the plant FMU is Co-Simulation only (no --kind me, no --clocks)")
-    result = export_plant_fmu(args.scenario, out, fmi=args.fmi, sets=parse_scenario_sets(args.sets), name=args.name)
+    sets = parse_scenario_sets(args.sets)
+    if args.item == "closed-loop":
+        from cpgsim.experiments.closed_loop import export_closed_loop
+
+        if out.suffix != ".ssp":
+            raise CliError(f"output {out} must end in .ssp (an SSP of the controller FMU and the plant FMU)")
+        path = export_closed_loop(args.scenario, out, fmi=args.fmi, sets=sets)
+        print(f"wrote {path} (SSP: the controller FMU and the plant FMU of scenario {args.scenario}, FMI "
+              f"{args.fmi}.0 co-simulation, wired as in the scenario; run it with 'cpgsim simulate {path}')")
+        return 0
+    from cpgsim.experiments.plant_fmu import export_plant_fmu
+
+    if out.suffix.lower() != ".fmu":
+        raise CliError(f"output {out} must end in .fmu")
+    result = export_plant_fmu(args.scenario, out, fmi=args.fmi, sets=sets, name=args.name)
     counts = {c: len(result.variables.of(c)) for c in ("input", "output", "parameter")}
     print(f"wrote {result.path} (FMI {args.fmi}.0 co-simulation: the robot of scenario {result.scenario} on its "
           f"terrain, MuJoCo inside, step {result.time_step:g} s; {counts['input']} inputs, {counts['output']} "

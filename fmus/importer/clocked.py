@@ -31,8 +31,11 @@ feedthrough; a run to T activates the tick at T in the first two cases, not in t
 (:mod:`cpgsim.fmus.importer.isolation`) passes every ``set_inputs`` call on, changed values or not, so the rows
 are the same in both processes.
 
-Output clocks (CS with event mode, ME): ``fmi3GetClock`` after every event iteration (still in event mode, the
-clocked inputs set before ``fmi3UpdateDiscreteStates``, the clocked outputs read after it); each tick is
+Output clocks: CS with event mode and ME: ``fmi3GetClock`` after every event iteration (still in event mode, the
+clocked inputs set before ``fmi3UpdateDiscreteStates``, the clocked outputs read after it); Scheduled Execution:
+``fmi3GetClock`` after every ``fmi3ActivateModelPartition`` (the FMU signals a tick through the ``clockUpdate``
+callback cpgsim gives it, :meth:`ClockedRuntime._instantiate3`; it is read after each activation all the same),
+the tick at the activation's time; each tick is
 recorded (:attr:`ClockedRuntime.out_ticks`, :meth:`ClockedRuntime.take_ticks`) and shown by a boolean output
 port: 1 when the clock ticked since the row before (the reading before the last ``do_step``), else 0.
 
@@ -42,8 +45,8 @@ Triggered input clocks tick at the times handed in (``schedules=`` by clock name
 between communication points needs a CS FMU with ``canHandleVariableCommunicationStepSize``.
 
 Refused (a :class:`~cpgsim.fmus.importer.clocks.ClockError` naming the FMU and the clock, when the block
-is built): output clocks of Scheduled Execution FMUs (signalled through ``clockUpdate``, not handled), clocks
-of a Co-Simulation FMU without ``hasEventMode``; triggered input clocks nothing ticks (when the graph is wired).
+is built): clocks of a Co-Simulation FMU without ``hasEventMode``; triggered input clocks nothing ticks (when
+the graph is wired).
 """
 
 from __future__ import annotations
@@ -75,9 +78,6 @@ def check_clocks(desc: FmuDescription, kind: str, driven: bool = False) -> None:
     for c in desc.clocks:
         what = f"FMU {name}: {c.causality} clock {c.name!r} ({c.variability})"
         if c.causality == "output":
-            if kind == "se":
-                raise ClockError(f"{what} is not supported: cpgsim does not read output clocks of model "
-                                 f"partitions (Scheduled Execution signals them through clockUpdate)")
             if kind == "cs" and not desc.event_mode:
                 raise ClockError(f"{what}: the CoSimulation interface has no event mode (hasEventMode is not "
                                  f"true), so fmi3GetClock cannot be called; use its ModelExchange interface if it "
@@ -144,6 +144,7 @@ class ClockedRuntime(FmuRuntime):
         self._row_base: dict[str, int] = {}
         self._last_read: dict[str, int] = {}
         self._tick_time: float | None = None  # the input tick an event iteration runs for (its exact float)
+        self.clock_updates = 0  # Scheduled Execution: clockUpdate calls of the FMU
 
     def setup(self, t0: float, params: Any = None, inputs: Any = None) -> dict:
         self._cs_event_mode = self.kind == "cs"  # eventModeUsed: in event mode after initialisation
@@ -219,6 +220,40 @@ class ClockedRuntime(FmuRuntime):
 
     def _instantiate_options(self) -> dict[str, Any]:
         return {"eventModeUsed": True} if self.kind == "cs" else {}
+
+    def _instantiate3(self, options: dict[str, Any]) -> None:
+        """Scheduled Execution: ``fmi3InstantiateScheduledExecution`` with a ``clockUpdate`` callback of our own
+        (fmpy passes one that does nothing): the FMU calls it during an activation when an output clock ticked
+        or a countdown clock's interval changed; :meth:`_fire` then reads them. The preemption callbacks do
+        nothing (the partitions run one after the other in this thread)."""
+        if self.kind != "se":
+            return super()._instantiate3(options)
+        import os
+
+        from fmpy import fmi3
+
+        fmu = self.fmu
+
+        def noop() -> None:
+            pass
+
+        # kept on the fmpy object: the FMU holds the pointers until it is freed
+        fmu.logMessage = fmi3.fmi3LogMessageCallback(self._log3)
+        fmu.clockUpdate = fmi3.fmi3ClockUpdateCallback(self._clock_update)
+        fmu.lockPreemption = fmi3.fmi3LockPreemptionCallback(noop)
+        fmu.unlockPreemption = fmi3.fmi3UnlockPreemptionCallback(noop)
+        resources = os.path.join(fmu.unzipDirectory, "resources") + os.path.sep
+        fmu.component = fmu.fmi3InstantiateScheduledExecution(
+            fmu.instanceName.encode("utf-8"), fmu.guid.encode("utf-8"), resources.encode("utf-8"),
+            fmi3.fmi3Boolean(False), fmi3.fmi3Boolean(True), fmi3.fmi3InstanceEnvironment(), fmu.logMessage,
+            fmu.clockUpdate, fmu.lockPreemption, fmu.unlockPreemption)
+        if not fmu.component:
+            raise RuntimeError("fmi3InstantiateScheduledExecution returned NULL")
+
+    def _clock_update(self, _env: Any) -> None:
+        """The FMU's ``clockUpdate``: counted; what it signals is read when the activation returns (no FMI call
+        from inside it): the output clocks after every activation, the countdown clocks after every instant."""
+        self.clock_updates += 1
 
     # -- intervals ----------------------------------------------------------------------------------
     def _interval(self, vrs: list[int]) -> list[tuple[float, int]]:
@@ -310,11 +345,16 @@ class ClockedRuntime(FmuRuntime):
             at = batch[0][0]
             if self.kind == "se":
                 for _at, vr in batch:
+                    where = f"fmi3ActivateModelPartition of clock {self.by_vr[vr].name!r} at t={float(at):.12g}"
                     try:
                         self.fmu.fmi3ActivateModelPartition(self.fmu.component, vr, float(at))
                     except Exception as exc:  # noqa: BLE001
-                        raise self._fail(f"fmi3ActivateModelPartition of clock {self.by_vr[vr].name!r} "
-                                         f"at t={float(at):.12g}", exc) from None
+                        raise self._fail(where, exc) from None
+                    self._tick_time = float(at)
+                    try:  # output clocks after every activation (clockUpdate or not: reading one resets it)
+                        self._read_out_clocks(f"after {where}")
+                    finally:
+                        self._tick_time = None
                     self._after_tick(vr, at)
             else:
                 self._event_with_clocks(batch, at)

@@ -124,6 +124,10 @@ class FmuRuntime:
         """Extra arguments of fmpy's FMI 3 ``instantiate`` (the clocked runtime asks for event mode)."""
         return {}
 
+    def _instantiate3(self, options: dict[str, Any]) -> None:
+        """Instantiate an FMI 3 FMU (the clocked runtime gives a Scheduled Execution FMU its clockUpdate)."""
+        self.fmu.instantiate(loggingOn=True, logMessage=self._log3, **options)
+
     def _event_iterated(self) -> None:
         """After the event iteration converged, still in event mode (the clocked runtime reads output clocks)."""
 
@@ -220,7 +224,7 @@ class FmuRuntime:
                 options = self._instantiate_options()
                 if self.kind == "cs":
                     options.setdefault("earlyReturnAllowed", True)  # handled: see the module docstring
-                self.fmu.instantiate(loggingOn=True, logMessage=self._log3, **options)
+                self._instantiate3(options)
                 self._state = "instantiated"
             for name, value in (params or {}).items():
                 vspec = self.desc.value_parameters.get(name)

@@ -16,10 +16,11 @@ What the FMU holds (docs/fmu_export.md, "The robot as an FMU"):
 
 Variables: the plant block's ports with their names, units and sizes (``q_target[0..17]`` in, ``q``, ``qd``,
 ``toe_force``, ``body_position``, ``body_rpy``, ``foot_position``, ``body_contact`` out, no direct
-feedthrough) and the parameters that need no rebuild: ``kp``, ``kd``, ``friction`` (fixed after
-initialization). Baked in at export: the terrain, the contact model and MuJoCo step, the robot's geometry,
-start posture and placement, the settle time, amputated legs. Not exported: pushes (the scenario's
-``[[disturbance]]``) and ``velocity_ff``, refused by name.
+feedthrough) and the parameters that need no rebuild: ``kp``, ``kd``, ``friction`` and each of the scenario's
+pushes (``push[i].start_s``, ``.duration_s``, ``.force_N[0..2]``, ``.point_m[0..2]``), fixed after
+initialization. Baked in at export: the terrain, the contact model and MuJoCo step, the robot's geometry,
+start posture and placement, the settle time, amputated legs, the number of pushes. Not exported:
+``velocity_ff``, refused by name.
 
 Driving the FMU with the joint targets a cpgsim run recorded, one communication step of the run's ``dt`` per
 row, reproduces the run's plant outputs bit for bit (tests/test_plant_fmu.py).
@@ -80,7 +81,7 @@ def export_plant_fmu(scenario: str | Path, path: str | Path, *, fmi: int = 2,
     """Export the robot of ``scenario`` (a built-in name or a ``.toml`` file, with ``--set``-style ``sets``) on
     its terrain as a Co-Simulation FMU at ``path`` (FMI ``fmi`` 2 or 3), MuJoCo inside whatever the
     scenario's ``robot.engine``. Raises :class:`~cpgsim.fmus.export.model_description.ExportError` for what
-    the FMU cannot hold (pushes, ``velocity_ff``) or cannot be built (no compiler, no libmujoco)."""
+    the FMU cannot hold (``velocity_ff``) or cannot be built (no compiler, no libmujoco)."""
     from cpgsim.experiments.runner import build_scenario
 
     _check_target(path, fmi)
@@ -106,9 +107,6 @@ def export_setup_plant(setup, path: str | Path, *, fmi: int = 2, name: str | Non
         raise ExportError(f"the plant FMU holds a MuJoCo robot; this scenario's robot runs on "
                           f"{getattr(plant, 'engine', type(plant).__name__)!r} (set robot.engine = \"mujoco\")")
     label = setup.scenario.name if setup.scenario is not None else (label or setup.graph.name)
-    if plant.pushes:
-        raise ExportError(f"scenario {label}: the plant FMU does not model pushes ([[disturbance]]); export the "
-                          "scenario without them")
     if plant.values["velocity_ff"]:
         raise ExportError(f"scenario {label}: the plant FMU does not feed the target velocity forward "
                           "(robot.velocity_ff = true)")
@@ -179,6 +177,47 @@ def _readout(plant, identifier: str):
     return ca.Function(f"{identifier}_readout", fn.sx_in(), fn.call(fn.sx_in()), fn.name_in(), fn.name_out())
 
 
+@dataclass(frozen=True)
+class PlantParameter:
+    """One tunable parameter of the plant FMU: its start value, unit, bounds (``strict``: exclusive)."""
+
+    name: str
+    value: float
+    unit: str
+    lo: float
+    hi: float
+    strict: bool
+    description: str
+
+
+def plant_parameters(plant) -> list[PlantParameter]:
+    """The FMU's parameters, in the order ``plant_fmu_core.h`` reads them: ``kp``, ``kd``, ``friction``, then per
+    push of the scenario ``push[i].start_s``, ``.duration_s``, ``.force_N[0..2]``, ``.point_m[0..2]``
+    (C's ``cpgsim_push`` layout; the bounds of :mod:`cpgsim.robots.disturbance` per component)."""
+    from cpgsim.robots.disturbance import MAX_FORCE_N, MAX_POINT_M
+
+    out = []
+    for pname in PARAMETERS:
+        par = plant.parameters[pname]
+        lo, hi = par.bounds
+        rule = f"> {lo:g}" if not np.isfinite(hi) else f"strictly between {lo:g} and {hi:g}"
+        out.append(PlantParameter(pname, float(plant.values[pname]), par.unit, lo, hi, True,
+                                  f"{par.description} (must be {rule})"))
+    for i, push in enumerate(plant.pushes):
+        head = f"push[{i}]"
+        out.append(PlantParameter(f"{head}.start_s", push.start_s, "s", 0.0, np.inf, False,
+                                  "the push starts (steps starting from here, less half a step, feel it)"))
+        out.append(PlantParameter(f"{head}.duration_s", push.duration_s, "s", 0.0, np.inf, True,
+                                  "how long the push lasts (must be > 0)"))
+        for j, f in enumerate(push.force_N):
+            out.append(PlantParameter(f"{head}.force_N[{j}]", f, "N", -MAX_FORCE_N, MAX_FORCE_N, False,
+                                      "push force, world frame"))
+        for j, q in enumerate(push.point_m):
+            out.append(PlantParameter(f"{head}.point_m[{j}]", q, "m", -MAX_POINT_M, MAX_POINT_M, False,
+                                      "where the push acts, body frame"))
+    return out
+
+
 def plant_variables(plant, fmi: int, name: str) -> Variables:
     """The FMU's variables: ``q_target[i]`` (inputs), the output ports element by element, the parameters; value
     references dense in that order after FMI 3's ``time`` (the order ``plant_fmu_core.h`` decodes)."""
@@ -196,12 +235,10 @@ def plant_variables(plant, fmi: int, name: str) -> Variables:
                                   "continuous" if out.kind == "real" else "discrete", "calculated", None, out.unit,
                                   out.description))
             k += 1
-    for i, pname in enumerate(PARAMETERS):
-        par = plant.parameters[pname]
-        lo, hi = par.bounds
-        rule = f"> {lo:g}" if not np.isfinite(hi) else f"strictly between {lo:g} and {hi:g}"
-        items.append(Variable(pname, "parameter", i, "real", "parameter", "fixed", "exact",
-                              float(plant.values[pname]), par.unit, f"{par.description} (must be {rule})"))
+    for i, par in enumerate(plant_parameters(plant)):
+        items.append(Variable(par.name, "parameter", i, "real", "parameter", "fixed", "exact", par.value, par.unit,
+                              par.description, None if par.strict or not np.isfinite(par.lo) else par.lo,
+                              None if par.strict or not np.isfinite(par.hi) else par.hi))
     first = 1 if fmi == 3 else 0
     for k, v in enumerate(items):
         v.vr = first + k
@@ -214,8 +251,7 @@ def plant_header(plant, facts, variables: Variables, identifier: str, guid: str,
     c = build
     outputs = variables.of("output")
     shapes = describe_hexapod(plant.geometry).shapes()
-    lo = [plant.parameters[p].bounds[0] for p in PARAMETERS]
-    hi = [plant.parameters[p].bounds[1] for p in PARAMETERS]
+    params = plant_parameters(plant)
     tag = int(hashlib.sha256(guid.encode()).hexdigest()[:12], 16)
     settle = int(round(plant.settle / plant.time_step))
     fn = f"{identifier}_readout"
@@ -231,7 +267,7 @@ def plant_header(plant, facts, variables: Variables, identifier: str, guid: str,
         f"#define CPG_DT {plant.time_step!r}",
         f"#define CPG_VR_FIRST {1 if fmi == 3 else 0}u",
         f"#define CPG_NU {len(variables.of('input'))}", f"#define CPG_NOUT {len(outputs)}",
-        f"#define CPG_NP {len(PARAMETERS)}",
+        f"#define CPG_NP {len(params)}", f"#define CPG_NPUSH {len(plant.pushes)}",
         f"#define CPG_MJCF_NAME {c.c_string(MJCF_NAME)}",
         f"#define CPG_MJ_VERSION {facts.mj_version}",
         f"#define CPG_MJ_STATE_SIZE {facts.state_size}",
@@ -243,14 +279,15 @@ def plant_header(plant, facts, variables: Variables, identifier: str, guid: str,
         f"#define CPG_FN_READOUT {fn}", f"#define CPG_FN_READOUT_WORK {fn}_work", "",
         f"static const double CPG_U0[] = {c.c_doubles([v.start for v in variables.of('input')])};",
         f"static const double CPG_Q0[] = {c.c_doubles(plant.q0)};",
-        f"static const double CPG_P0[] = {c.c_doubles([plant.values[p] for p in PARAMETERS])};",
-        f"static const double CPG_P_LO[] = {c.c_doubles(lo)};",
-        f"static const double CPG_P_HI[] = {c.c_doubles(hi)};",
+        f"static const double CPG_P0[] = {c.c_doubles([p.value for p in params])};",
+        f"static const double CPG_P_LO[] = {c.c_doubles([p.lo for p in params])};",
+        f"static const double CPG_P_HI[] = {c.c_doubles([p.hi for p in params])};",
+        f"static const char CPG_P_STRICT[] = {c.c_string(''.join('01'[p.strict] for p in params))};",
         f"static const double CPG_QPOS0[] = {c.c_doubles(plant.initial_qpos())};",
         f"static const char CPG_OUT_KIND[] = {c.c_string(''.join('rb'[v.kind == 'boolean'] for v in outputs))};",
         f"static const char *const CPG_U_NAME[] = {c.c_strings([v.name for v in variables.of('input')])};",
         f"static const char *const CPG_OUT_NAME[] = {c.c_strings([v.name for v in outputs])};",
-        f"static const char *const CPG_P_NAME[] = {c.c_strings(list(PARAMETERS))};",
+        f"static const char *const CPG_P_NAME[] = {c.c_strings([p.name for p in params])};",
         f"static const char *const CPG_SHAPE_NAME[] = {c.c_strings([s.name for s in shapes])};",
         f"static const int CPG_SHAPE_CODE[] = {{{', '.join(str(s.contact_code(plant.sense_shank)) for s in shapes)}}};",
         f"static const int CPG_SHAPE_OFF[] = {{{', '.join(str(int(s.leg in plant.amputated)) for s in shapes)}}};",

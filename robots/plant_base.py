@@ -15,7 +15,7 @@ indices. An engine's plant supplies the rest (the engine contract, docs/architec
 - ``_world_step(pushes)``: one engine step with the servo inputs held and the pushes on the body;
 - ``_robot_contacts()``, ``_contact_force(contact)``: the last engine step's contacts that touch the robot
   (its shape's code, the force's sign) and a contact's force (world frame), for :meth:`HexapodPlant.read_contacts`;
-- ``_native_steps(n)`` (optional): ``n`` engine steps through the engine's C step;
+- ``_native_steps(n, t)`` (optional): ``n`` engine steps from ``t`` through the engine's C step;
 - ``_read_state()``: the engine's generalized positions and velocities into the buffers;
 - ``_body_rotation()``, ``_state_finite()``: for :meth:`HexapodPlant.fell`;
 - for the capabilities ``snapshot_restore`` and ``fused_loop``: also derive
@@ -163,11 +163,11 @@ class HexapodPlant(CoSimBlock, ABC):
     # -- the macro step (the same in every engine) ---------------------------------------------------
     def do_step(self, t: float, dt: float) -> None:
         """Advance ``[t, t + dt]``: ``dt / time_step`` engine steps with the servo targets held (the engine's C
-        step when it has one and no push is set, else :meth:`_python_steps`), then the outputs."""
+        step when it has one and can take this step, else :meth:`_python_steps`), then the outputs."""
         self._check_step(t)
         n = self.steps_for(dt)
         self._update_servo(dt)
-        if self.native_step is None or self.pushes or not self._native_steps(n):
+        if self.native_step is None or not self._native_steps(n, t):
             self._python_steps(t, n)
             self.update_outputs()
         self._t = t + dt
@@ -204,9 +204,10 @@ class HexapodPlant(CoSimBlock, ABC):
                 self._world_step(())
                 self.read_contacts()
 
-    def _native_steps(self, n: int) -> bool:
-        """``n`` engine steps through the engine's C step, leaving the contact readings and the outputs current;
-        False (nothing done) when the C step cannot take this macro step."""
+    def _native_steps(self, n: int, t: float | None = None) -> bool:
+        """``n`` engine steps through the engine's C step, the first starting at ``t`` (the pushes it covers act;
+        None: none act, as in the settle phase), leaving the contact readings and the outputs current; False
+        (nothing done) when the C step cannot take this macro step."""
         return False
 
     @abstractmethod

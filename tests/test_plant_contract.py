@@ -117,13 +117,22 @@ def _walk(plant, steps: int) -> np.ndarray:
     return np.array(rows)
 
 
+PUSHES = [{"start_s": 0.3, "duration_s": 0.2, "force_N": [25.0, -10.0, 5.0], "point_m": [0.05, 0.1, 0.02]},
+          {"start_s": 0.4, "duration_s": 0.0105, "force_N": [0.0, 40.0, 0.0]}]
+"""Two pushes during a walk, overlapping, one off the body's origin, one not a whole number of steps long."""
+
+
+@pytest.mark.parametrize("pushes", [(), PUSHES], ids=["no push", "pushes"])
 @pytest.mark.parametrize("engine", _engines("native"))
-def test_the_c_step_equals_the_python_step(engine):
+def test_the_c_step_equals_the_python_step(engine, pushes):
     """``native=`` is a constructor argument of every engine that offers the choice; over 2 s of moving
-    targets the two give the same outputs bit for bit."""
+    targets the two give the same outputs bit for bit, with pushes too (MuJoCo's C step applies them with the
+    same sums as the Python step: mujoco_step.h's cpgsim_push_wrench; DART's takes its push steps in Python)."""
+    if pushes and "pushes" not in UNDER_TEST[engine].capabilities:
+        pytest.skip(f"engine {engine!r} takes no pushes")
     runs = {}
     for native in (False, True):
-        plant = make_plant(engine, settle=0.1, native=native)
+        plant = make_plant(engine, settle=0.1, native=native, disturbances=list(pushes))
         plant.setup(0.0)
         if native and plant.native_step is None:
             pytest.skip(f"engine {engine!r}: no C step here (no C compiler or no engine library symbols)")
@@ -252,13 +261,15 @@ def test_a_push_moves_the_flying_robot_by_its_impulse(engine):
     plant.terminate()
 
 
+@pytest.mark.parametrize("native", [False, True], ids=["python step", "c step"])
 @pytest.mark.parametrize("engine", _engines("pushes", "native"))
-def test_pushes_act_from_t0_not_in_the_settle_phase(engine):
+def test_pushes_act_from_t0_not_in_the_settle_phase(engine, native):
     """The settle phase comes before the run's clock starts: a push timed at 0 s must not act in it (the
-    MuJoCo plant's Python sub-steps applied it there before the step moved to the shared base; DART did not)."""
+    MuJoCo plant's Python sub-steps applied it there before the step moved to the shared base; DART did not),
+    in the Python step and in the C step alike."""
     outs = []
     for pushes in ([], [{"start_s": 0.0, "duration_s": 0.05, "force_N": [30.0, 0.0, 0.0]}]):
-        plant = make_plant(engine, settle=0.2, disturbances=pushes, native=False)
+        plant = make_plant(engine, settle=0.2, disturbances=pushes, native=native)
         plant.setup(0.0)
         outs.append(np.concatenate([v.ravel() for v in plant.get_outputs().values()]))
         plant.terminate()

@@ -181,6 +181,30 @@ def test_an_amputated_robot_replays_too(tmp_path):
 
 
 @slow
+def test_a_scenarios_pushes_are_tunable_parameters(tmp_path):
+    """A scenario's push becomes parameters push[0].start_s, .duration_s, .force_N[0..2], .point_m[0..2]; the
+    FMU replays the run with that push exactly, and with the force set otherwise it replays a run with that
+    force exactly (the pushes are applied by the same C as cpgsim's MuJoCo step: mujoco_step.h)."""
+    from cpgsim.experiments.plant_fmu import export_plant_fmu
+
+    push = {"start_s": 0.5, "duration_s": 0.2, "force_N": [30.0, 0.0, 0.0], "point_m": [0.0, 0.05, 0.0]}
+    fmu = export_plant_fmu("flat", tmp_path / "pushed.fmu", sets={"disturbance": [push]})
+    names = [v.name for v in fmu.variables.of("parameter")]
+    assert names[3:] == ["push[0].start_s", "push[0].duration_s", *(f"push[0].force_N[{j}]" for j in range(3)),
+                         *(f"push[0].point_m[{j}]" for j in range(3))]
+    outs = []
+    for force in ([30.0, 0.0, 0.0], [-20.0, 10.0, 0.0]):
+        res, robot, targets = _run("flat", {"disturbance": [{**push, "force_N": force}]}, t_end=1.2)
+        drv = Driver(fmu)
+        drv.start({f"push[0].force_N[{j}]": f for j, f in enumerate(force)})
+        outs.append(drv.replay(res.time, targets))
+        assert np.array_equal(outs[-1], drv.reference(res, robot))
+        drv.close()
+    y = Driver(fmu).outputs.index("body_position[0]")
+    assert abs(outs[0][-1, y] - outs[1][-1, y]) > 0.01  # the push moved the robot
+
+
+@slow
 def test_fmu_state_get_set_and_serialize_replay_exactly(step_fmu, step_run):
     """An FMU state saved at 1 s and restored (also through serialize/deserialize) replays the next steps
     exactly; a reset instance replays the run from the start again."""
@@ -321,14 +345,11 @@ def test_no_leak_over_a_thousand_instances(step_fmu, tmp_path):
 
 
 def test_what_the_fmu_cannot_hold_is_refused_by_name(tmp_path, capsys):
-    """Pushes and velocity feed-forward are refused naming the scenario key; the CLI needs --scenario and a
-    Co-Simulation kind; nothing is written."""
+    """Velocity feed-forward is refused naming the scenario key; the CLI needs --scenario and a Co-Simulation
+    kind; nothing is written."""
     from cpgsim.experiments.plant_fmu import export_plant_fmu
 
     out = tmp_path / "plant.fmu"
-    push = [{"start_s": 1.0, "duration_s": 0.1, "force_N": [10.0, 0.0, 0.0]}]
-    with pytest.raises(ExportError, match=r"does not model pushes \(\[\[disturbance\]\]\)"):
-        export_plant_fmu("flat", out, sets={"disturbance": push})
     with pytest.raises(ExportError, match="velocity_ff"):
         export_plant_fmu("flat", out, sets={"robot.velocity_ff": True})
     with pytest.raises(ExportError, match="must end in .fmu"):

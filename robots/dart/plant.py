@@ -321,9 +321,10 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         self._object_code = {}
 
     # -- stepping (the macro step, averaging and servo law: HexapodPlant) ------------------------------
-    def _native_steps(self, n: int) -> bool:
-        """One world step through the C step (which also runs the readout); it takes no longer macro steps."""
-        if n != 1:
+    def _native_steps(self, n: int, t: float | None = None) -> bool:
+        """One world step through the C step (which also runs the readout); it takes no longer macro steps and
+        no pushes (those steps run in Python)."""
+        if n != 1 or (t is not None and self.pushes):
             return False
         self._step_native()
         return True

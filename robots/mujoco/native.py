@@ -48,7 +48,7 @@ _LOOP_ARGS = [_vp, _vp, _int, _ip, _dp, _dp, _vp, _vp, _int, _int, _dp, _dp, _in
               _dp, _int, _lp, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]
 
 PROTOTYPES: Prototypes = {
-    "cpgsim_mj_run": (_int, [_vp, _vp, _int, _ip, _dp, _dp]),
+    "cpgsim_mj_run": (_int, [_vp, _vp, _int, _ip, _dp, _dp, _dp, _int, _int, ctypes.c_double]),
     "cpgsim_mj_loop": (_int, _LOOP_ARGS),
     "cpgsim_mj_trial_new": (_vp, _LOOP_ARGS[:27]),
     "cpgsim_mj_trial_range": (None, [_vp, _int, _int, _dp]),
@@ -85,10 +85,13 @@ def library() -> ctypes.CDLL:
 
 
 class NativeMujocoStep:
-    """``run(n)``: ``n`` MuJoCo steps of ``model``/``data`` with the contact sums, in one C call."""
+    """``run(n, t)``: ``n`` MuJoCo steps of ``model``/``data`` with the contact sums and the pushes, in one C call.
+
+    ``pushes``: :class:`~cpgsim.robots.disturbance.Push` values acting on body ``body`` (its id), applied by the
+    C step at every MuJoCo step they cover (``mujoco_step.h``: ``cpgsim_push_wrench``)."""
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, codes: np.ndarray,
-                 force: np.ndarray | None = None) -> None:
+                 force: np.ndarray | None = None, pushes=(), body: int = 0) -> None:
         self._lib = library()
         self._model, self._data = model, data  # keep the owners of the pointers alive
         self._codes = np.ascontiguousarray(codes, dtype=np.int32)
@@ -101,6 +104,8 @@ class NativeMujocoStep:
         ip, dp = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
         self._args = (ctypes.c_void_p(model._address), ctypes.c_void_p(data._address))
         self._ptrs = (self._codes.ctypes.data_as(ip), self.force.ctypes.data_as(dp), self.flags.ctypes.data_as(dp))
+        self._pushes = push_table(pushes)  # the C struct's layout: start, duration, force[3], point[3]
+        self._push_args = (self._pushes.ctypes.data_as(dp), len(pushes), int(body))
         self._fn = self._lib.cpgsim_mj_run
 
     @property
@@ -118,10 +123,20 @@ class NativeMujocoStep:
         """``(geom codes, force, flags)`` pointers, as the C loop takes them."""
         return self._ptrs
 
-    def run(self, n: int) -> bool:
-        """Advance ``n`` steps; ``force``/``flags`` hold the sums. False when the state went non-finite."""
+    def run(self, n: int, t: float | None = None) -> bool:
+        """Advance ``n`` steps, the first starting at ``t`` (None: no pushes, as in the settle phase);
+        ``force``/``flags`` hold the sums. False when the state went non-finite."""
         m, d = self._args
-        return self._fn(m, d, n, *self._ptrs) == 0
+        if t is None:
+            return self._fn(m, d, n, *self._ptrs, None, 0, 0, 0.0) == 0
+        return self._fn(m, d, n, *self._ptrs, *self._push_args, float(t)) == 0
+
+
+def push_table(pushes) -> np.ndarray:
+    """Pushes as rows ``start_s, duration_s, force_N[3], point_m[3]`` (C's ``cpgsim_push``); one row of zeros
+    when there are none (a valid pointer; the C is told the count)."""
+    rows = [(p.start_s, p.duration_s, *p.force_N, *p.point_m) for p in pushes]
+    return np.ascontiguousarray(rows or [(0.0,) * 8], dtype=np.float64)
 
 
 class FusedLoop(FusedLoopBase):

@@ -46,7 +46,7 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
 
     Constructor: the arguments of :class:`~cpgsim.robots.plant_base.HexapodPlant` (amputated legs' geoms get
     ``contype = conaffinity = 0``; pushes are applied through ``xfrc_applied`` at every MuJoCo step they
-    cover, by the Python sub-steps: a run with pushes does not use the native step loop); ``native``: use
+    cover, by the C step, or by the Python sub-steps without one; the fused loop takes no pushes); ``native``: use
     the C macro step when it can be built (default); ``contact`` a :class:`~cpgsim.robots.mujoco.mjcf.ContactModel`
     (its ``timestep`` is the MuJoCo step; ``do_step``'s ``dt`` must be a multiple of it). ``time_step``,
     if given, replaces ``contact.timestep``.
@@ -127,11 +127,12 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         self._bind_readout()
         self.native_step = None
         self._body_id = model.body("body").id
-        if self.native and not self.pushes:
+        if self.native:
             try:
                 from cpgsim.robots.mujoco.native import NativeMujocoStep
 
-                self.native_step = NativeMujocoStep(model, data, self._geom_code, force=self._force_world)
+                self.native_step = NativeMujocoStep(model, data, self._geom_code, force=self._force_world,
+                                                    pushes=self.pushes, body=self._body_id)
             except NativeUnavailable:  # no compiler or no libmujoco: Python sub-steps (slower, same results)
                 self.native_step = None
         resume = self._take_resume(t0)
@@ -207,29 +208,42 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
             ctrl += v["kd"] / v["kp"] * velocity
         self.data.ctrl[:] = ctrl
 
-    def _native_steps(self, n: int) -> bool:
-        """``n`` MuJoCo steps in C (the contact sums averaged there), then the outputs."""
-        self.native_step.run(n)
+    def _native_steps(self, n: int, t: float | None = None) -> bool:
+        """``n`` MuJoCo steps in C from ``t`` (the contact sums averaged there, the pushes applied there), then the
+        outputs."""
+        self.native_step.run(n, t)
         self._take_c_readings()
         self.update_outputs()
         return True
 
     def _world_step(self, pushes: Sequence[Push]) -> None:
-        """One ``mj_step``; the pushes as the body's ``xfrc_applied`` for that step: the force at the body's
-        centre of mass plus the torque of its offset from there."""
+        """One ``mj_step``; the pushes as the body's ``xfrc_applied`` for that step (:meth:`_push_wrench`)."""
         if not pushes:
             mujoco.mj_step(self.model, self.data)
             return
         data, b = self.data, self._body_id
-        wrench = np.zeros(6)
-        for push in pushes:
-            force = np.asarray(push.force_N)
-            point = data.xpos[b] + data.xmat[b].reshape(3, 3) @ np.asarray(push.point_m)
-            wrench[:3] += force
-            wrench[3:] += np.cross(point - data.xipos[b], force)
-        data.xfrc_applied[b] = wrench
+        data.xfrc_applied[b] = self._push_wrench(pushes)
         mujoco.mj_step(self.model, data)
         data.xfrc_applied[b] = 0.0
+
+    def _push_wrench(self, pushes: Sequence[Push]) -> list[float]:
+        """The forces summed and the torque of each about the body's centre of mass, ``(xpos + R point - xipos) x
+        force``: the C step's ``cpgsim_push_wrench`` (robots/mujoco/c/mujoco_step.h), the same sums in the same
+        order, so the Python and the C step give the same numbers."""
+        data, b = self.data, self._body_id
+        x, R, c = data.xpos[b].tolist(), data.xmat[b].tolist(), data.xipos[b].tolist()
+        w = [0.0] * 6
+        for push in pushes:
+            f0, f1, f2 = push.force_N
+            q0, q1, q2 = push.point_m
+            r0, r1, r2 = ((x[j] + (R[3 * j] * q0 + R[3 * j + 1] * q1 + R[3 * j + 2] * q2)) - c[j] for j in range(3))
+            w[0] += f0
+            w[1] += f1
+            w[2] += f2
+            w[3] += r1 * f2 - r2 * f1
+            w[4] += r2 * f0 - r0 * f2
+            w[5] += r0 * f1 - r1 * f0
+        return w
 
     # -- the closed loop in C (cpgsim.harness.cosim.fused) ----------------------------------------------------
     def fused_loop(self, request: FusedRequest):

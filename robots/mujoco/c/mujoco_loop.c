@@ -9,8 +9,10 @@
 #include "../../../harness/c/fused_status.h"
 void cpgsim_mj_quiet(void) { mju_user_warning = cpgsim_mj_no_log; }
 
-int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
-  return substeps(m, d, n, codes, force, flags);
+/* n steps with the contact sums; the pushes (np, or none: NULL, 0) on body b, the first step starting at t. */
+int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags,
+                  const double *pushes, int np, int b, double t) {
+  return substeps(m, d, n, codes, force, flags, (const cpgsim_push *)pushes, np, b, t);
 }
 
 /* One trial of the closed loop: everything the loop reads and writes (the Python side owns the arrays). */
@@ -54,7 +56,7 @@ static void trial_loop(cpgsim_mj_trial *t) {
     if (rc == 1) { t->status = CPGSIM_FUSED_CONTROLLER_DIVERGED; t->rows = k - k0 + 1; return; }
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
     nbad0 = bad_state_warnings(d);
-    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags) || bad_state_warnings(d) != nbad0) {
+    if (substeps(m, d, t->nsub, t->codes, t->force, t->flags, 0, 0, 0, 0.0) || bad_state_warnings(d) != nbad0) {
       t->status = CPGSIM_FUSED_PLANT_DIVERGED; t->rows = k - k0 + 1; return;
     }
     for (i = 0; i < m->nq; ++i) t->rpos[i] = d->qpos[i];

@@ -13,8 +13,10 @@
  *
  * Co-Simulation only. A communication step of n MuJoCo steps (it must be a whole number) holds ctrl = q_target
  * and averages the toe forces over the n steps (or-ing the contact flags), exactly as the plant's macro step.
+ * Pushes (robots/disturbance.py): the scenario's, each a parameter group push[i].start_s, .duration_s,
+ * .force_N[3], .point_m[3] (tunable as the others), applied at the MuJoCo steps they cover by mujoco_step.h.
  * Value references: FMI 3 time 0; then q_target[0..17] (inputs), the outputs in the plant's port order, then
- * the parameters kp, kd, friction (CPG_VR_FIRST is 0 in FMI 2 and 1 in FMI 3).
+ * the parameters kp, kd, friction and the pushes' (CPG_VR_FIRST is 0 in FMI 2 and 1 in FMI 3).
  * The set-up runs when the outputs are first needed or at the first step, with the parameters set then;
  * parameters are fixed after initialization (a change before re-runs the set-up). FMU states hold MuJoCo's
  * integration state (mj_getState, mjSTATE_INTEGRATION), the inputs, parameters and the last step's contact
@@ -31,7 +33,7 @@
 #define CPG_STATE_LEN (8 + CPG_NU + CPG_NP + CPG_NSUMS + CPG_MJ_STATE_SIZE)
 #define CPG_MJ_SPEC mjSTATE_INTEGRATION
 enum { VAR_TIME, VAR_INPUT, VAR_OUTPUT, VAR_PARAM, VAR_NONE };
-enum { P_KP, P_KD, P_FRICTION };
+enum { P_KP, P_KD, P_FRICTION, P_PUSHES }; /* then CPG_NPUSH pushes of 8 values: cpgsim_push's layout */
 
 struct cpg_instance {
     CPG_INSTANCE_COMMON
@@ -41,6 +43,7 @@ struct cpg_instance {
     mjModel *m;
     mjData *d;
     int *codes;    /* per geom: its contact code (robots/c/plant_contacts.h) */
+    int body;      /* the body's id: pushes act on it */
     double u[CPG_NU], p[CPG_NP], sums[CPG_NSUMS], out[CPG_NOUT];
     const double **arg;
     double **res;
@@ -117,7 +120,7 @@ static int cpg_prepare(cpg_instance *inst) {
     for (i = 0; i < CPG_NSUMS; ++i) inst->sums[i] = 0.0;
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = CPG_Q0[i];
     for (i = 0; i < CPG_SETTLE_STEPS; ++i)
-        if (substeps(m, d, 1, inst->codes, inst->sums, inst->sums + 18)) {
+        if (substeps(m, d, 1, inst->codes, inst->sums, inst->sums + 18, NULL, 0, 0, 0.0)) {
             inst->phase = PH_ERROR;
             return CPG_FAIL(inst, "the robot's state went non-finite while settling (step %d of %d)", i + 1,
                             CPG_SETTLE_STEPS);
@@ -172,6 +175,8 @@ static int cpg_load(cpg_instance *inst, const char *resources) {
     if (m->nq != 25 || m->nv != 24 || m->nu != CPG_NU || mj_stateSize(m, CPG_MJ_SPEC) != CPG_MJ_STATE_SIZE)
         return CPG_FAIL(inst, "instantiate: %s is not the model this FMU was built for (nq %d, nu %d, state %d)",
                         path, m->nq, m->nu, mj_stateSize(m, CPG_MJ_SPEC));
+    inst->body = mj_name2id(m, mjOBJ_BODY, "body");
+    if (inst->body < 0) return CPG_FAIL(inst, "instantiate: %s has no body named 'body'", path);
     inst->d = mj_makeData(m);
     inst->codes = (int *)inst->calloc_fn((size_t)m->ngeom + 1, sizeof(int));
     if (!inst->d || !inst->codes) return CPG_FAIL(inst, "instantiate: out of memory");
@@ -266,9 +271,10 @@ static int cpg_set(cpg_instance *inst, unsigned vr, char have, double v, const c
     if (inst->phase != PH_INSTANTIATED && inst->phase != PH_INIT)
         return CPG_FAIL(inst, "%s: parameter %s is fixed: set it before exiting initialization mode (or call Reset)",
                         api, cpg_name(cat, i));
-    if (!(CPG_P_LO[i] < v && v < CPG_P_HI[i]))
-        return CPG_FAIL(inst, "%s: parameter %s = %g is out of bounds: need %g < %s < %g", api, cpg_name(cat, i), v,
-                        CPG_P_LO[i], cpg_name(cat, i), CPG_P_HI[i]);
+    if (CPG_P_STRICT[i] == '1' ? !(CPG_P_LO[i] < v && v < CPG_P_HI[i]) : !(CPG_P_LO[i] <= v && v <= CPG_P_HI[i]))
+        return CPG_FAIL(inst, "%s: parameter %s = %g is out of bounds: need %g %s %s %s %g", api, cpg_name(cat, i), v,
+                        CPG_P_LO[i], CPG_P_STRICT[i] == '1' ? "<" : "<=", cpg_name(cat, i),
+                        CPG_P_STRICT[i] == '1' ? "<" : "<=", CPG_P_HI[i]);
     if (inst->p[i] != v) inst->ready = 0; /* set up again with it */
     inst->p[i] = v;
     return CPG_OK;
@@ -292,7 +298,8 @@ static int cpg_do_step(cpg_instance *inst, double tc, double h) {
     if (n == 0) return CPG_OK;
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = inst->u[i];
     bad0 = bad_state_warnings(d);
-    if (substeps(m, d, n, inst->codes, inst->sums, inst->sums + 18) || bad_state_warnings(d) != bad0) {
+    if (substeps(m, d, n, inst->codes, inst->sums, inst->sums + 18, (const cpgsim_push *)(inst->p + P_PUSHES),
+                 CPG_NPUSH, inst->body, tc) || bad_state_warnings(d) != bad0) {
         inst->phase = PH_ERROR;
         inst->out_valid = 0;
         return CPG_FAIL(inst, "the robot's state went non-finite or out of range between t=%.9g and t=%.9g (MuJoCo "

@@ -81,7 +81,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     summary and the scenario (a benchmark of hundreds of trials). The results are streamed to
     ``results.arrow`` (Arrow IPC, :mod:`cpgsim.harness.results.arrow`); ``csv=True`` also writes
     ``results.csv`` at the end."""
+    build_wall0 = time.perf_counter()
     setup = build_scenario(name, sets, **kw)
+    build_wall = time.perf_counter() - build_wall0
     t_end = float(t_end if t_end is not None else setup.t_end)
     label = setup.scenario.name if setup.scenario is not None else str(name)
     out = Path(out_dir)
@@ -110,6 +112,9 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
         res.save(out / "results.csv")  # with its own sidecar results.meta.json (results.arrow has its .arrow.meta.json)
     summary = summarize(label, setup, res, wall)
     summary["setup_time_s"] = setup_wall
+    summary["timing_s"] = run_timing(build_wall, setup_wall, wall, sim.timing)
+    steps = len(res.time) - 1
+    summary["loop_us_per_step"] = summary["timing_s"]["loop"] / steps * 1e6 if steps > 0 else None
     summary["execution"] = res.meta.get("execution", {})  # which path ran: step, fused loop, engine, C step
     from cpgsim.harness.results.provenance import provenance
 
@@ -134,6 +139,21 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     if error is not None:
         raise error
     return RunSummary(summary)
+
+
+def run_timing(build: float, compile_: float, run: float, parts: Mapping[str, float]) -> dict[str, float]:
+    """A run's wall time (s) by part, so that a short run's fixed costs are seen apart from its loop (issue 46):
+    the scenario built, the model compiled (or loaded from the compile cache) with its C step, and
+    ``Simulator.run`` (``wall_time_s``) split into the plant's set-up (the MuJoCo or DART model, the settle
+    phase), the stepping loop, the results stream finished (the last rows, the sidecar, the fsyncs) and the
+    rest (the record plan, the stream opened, the last row). The summary's ``loop_us_per_step`` is the loop's
+    cost per macro step, the figure that does not depend on the run's length."""
+    loop = parts.get("loop_s")
+    out = {"build": build, "compile": compile_, "run": run,
+           "plant_setup": parts.get("plant_setup_s", 0.0), "loop": loop if loop is not None else run,
+           "results_close": parts.get("results_close_s", 0.0)}
+    out["run_other"] = run - out["plant_setup"] - out["loop"] - out["results_close"]
+    return out
 
 
 def judge(setup: RunSetup, res: Results, checks: Mapping[str, bool] | None = None,

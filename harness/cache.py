@@ -80,6 +80,16 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatur
     return h.hexdigest()[:32]
 
 
+LOADED_ENTRIES = 16
+"""Entries whose deserialized functions this process keeps (the most recently loaded): deserializing a robot
+run's two models took 30-60 ms of every run, paid once per process now (a suite of short trials in one process,
+``cpgsim bench terrain``). The entry is still read and its digest checked on every load; a changed entry is
+deserialized again. The functions are shared by the models loaded from one entry (CasADi functions are not
+changed after they are made)."""
+
+_LOADED: dict[str, tuple[bytes, dict[str, Any]]] = {}
+
+
 def load(key: str) -> dict[str, Any] | None:
     """The cached entry for ``key`` (functions deserialized), or None."""
     if not memo.caching_enabled():
@@ -89,10 +99,20 @@ def load(key: str) -> dict[str, Any] | None:
         stored = private_store.read_entry(path)
         if stored is None:
             return None
-        entry = json.loads(stored)
-        if entry.get("format") != FORMAT:
-            return None
-        entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
+        digest = hashlib.sha256(stored).digest()
+        known = _LOADED.get(key)
+        if known is not None and known[0] == digest:  # read and checked again above; deserialized once
+            entry = dict(known[1])
+            _LOADED[key] = _LOADED.pop(key)  # most recently used last
+        else:
+            entry = json.loads(stored)
+            if entry.get("format") != FORMAT:
+                return None
+            entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
+            _LOADED[key] = (digest, dict(entry))
+            while len(_LOADED) > LOADED_ENTRIES:
+                _LOADED.pop(next(iter(_LOADED)))
+        entry["functions"] = dict(entry["functions"])
         entry["feed"] = {p: {o: set(ins) for o, ins in d.items()} for p, d in entry["feed"].items()}
         return entry
     except Exception:  # noqa: BLE001 -- a damaged entry is recompiled and overwritten

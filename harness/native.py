@@ -233,6 +233,29 @@ class NativeHorizon:
         return x, (z_buf if z.size else z), out, rc, bad_row.value
 
 
+FUNCTION_LIBRARIES = 32
+"""The libraries of this many functions (the most recent) :func:`function_library` keeps loaded by function."""
+
+_FUNCTION_LIBS: dict[int, tuple[ca.Function, ctypes.CDLL]] = {}
+
+
+def function_library(fn: ca.Function) -> ctypes.CDLL:
+    """The loaded C library of ``fn`` with :data:`FUNCTION_DRIVER`, made once per function object and process.
+
+    Generating the C again (CasADi's code generator), hashing it and checking the cached library took 10-17 ms
+    of every robot run's plant set-up for the same readout function (:func:`cpgsim.robots.plant_base.readout_for`
+    keeps one per geometry); ``dlopen`` of a library already loaded returns the loaded one anyway."""
+    known = _FUNCTION_LIBS.get(id(fn))
+    if known is not None and known[0] is fn:
+        return known[1]
+    path = build_shared_library(renamed(fn, "cpgsim_fn_impl"), FUNCTION_DRIVER, "cpgsim_fn")
+    lib = declare(ctypes.CDLL(str(path)), FUNCTION_PROTOTYPES)
+    _FUNCTION_LIBS[id(fn)] = (fn, lib)  # the function is kept: its id is not reused while the entry lives
+    while len(_FUNCTION_LIBS) > FUNCTION_LIBRARIES:
+        _FUNCTION_LIBS.pop(next(iter(_FUNCTION_LIBS)))
+    return lib
+
+
 class NativeFunction:
     """A CasADi function compiled to C, evaluated in place on numpy buffers bound once.
 
@@ -248,8 +271,7 @@ class NativeFunction:
                                      + [(a, fn.nnz_out(k)) for k, a in enumerate(outputs)]):
             if arr.dtype != np.float64 or not arr.flags.c_contiguous or arr.size != n:
                 raise ValueError(f"buffer {i} of {fn.name()} must be contiguous float64 of size {n}")
-        path = build_shared_library(renamed(fn, "cpgsim_fn_impl"), FUNCTION_DRIVER, "cpgsim_fn")
-        self._lib = declare(ctypes.CDLL(str(path)), FUNCTION_PROTOTYPES)
+        self._lib = function_library(fn)
         self._keep = list(inputs) + list(outputs)
         ptr_t = ctypes.POINTER(ctypes.c_double)
         ins = (ptr_t * max(len(inputs), 1))(*[a.ctypes.data_as(ptr_t) for a in inputs])

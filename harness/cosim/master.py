@@ -22,6 +22,7 @@ and returns a :class:`StopInfo` naming the block.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
 from typing import Any, NoReturn
 
@@ -163,10 +164,21 @@ def run_master(m: CompiledModel, cs: dict[str, CoSimBlock], step, buffers, times
     try:
         k0 = _start(plan, cs, step, buffers, m.dt, times, t_list, n, commit, rec, progress_bar,
                     started, on_block_error, on_diverged)
-        return _macro_steps(plan, cs, step, buffers, m.dt, t_list, n, k0, commit, order == "gauss-seidel",
-                            calls, u_free, rec, progress_bar, on_block_error, on_diverged)
+        t0 = time.perf_counter()
+        try:
+            return _macro_steps(plan, cs, step, buffers, m.dt, t_list, n, k0, commit, order == "gauss-seidel",
+                                calls, u_free, rec, progress_bar, on_block_error, on_diverged)
+        finally:
+            _add_time(rec, "loop_s", t0)
     finally:
         _terminate(started)
+
+
+def _add_time(rec, part: str, since: float) -> None:
+    """Add the wall time since ``since`` to the recorder's ``timing[part]`` (a recorder without one: nothing)."""
+    timing = getattr(rec, "timing", None)
+    if timing is not None:
+        timing[part] = timing.get(part, 0.0) + time.perf_counter() - since
 
 
 def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, times: np.ndarray,
@@ -182,10 +194,12 @@ def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, tim
     x, z, u, y, _x_next, _z_next = buffers
     stage: tuple[str, str] | None = None
     try:
+        t0 = time.perf_counter()
         for path, blk in cs.items():
             stage = (path, "setup")
             blk.setup(t_list[0])
             started.append(blk)
+        _add_time(rec, "plant_setup_s", t0)
         execution = rec.meta.setdefault("execution", {})
         execution["blocks"] = {path: blk.execution_info() for path, blk in cs.items()}
         k0 = 0
@@ -196,7 +210,11 @@ def _start(plan: _Plan, cs: dict[str, CoSimBlock], step, buffers, dt: float, tim
             execution["fused_loop"] = fused is not None
             if fused is not None:  # the block runs the loop with the compiled step in C (harness/cosim/fused.py)
                 stage = (next(iter(cs)), "do_step")
-                k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)
+                t0 = time.perf_counter()
+                try:
+                    k0 = run_fused(fused, plan, rec, times, n, progress_bar, on_diverged)
+                finally:
+                    _add_time(rec, "loop_s", t0)
                 stage = None
         return k0
     except Exception as exc:

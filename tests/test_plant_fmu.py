@@ -244,6 +244,9 @@ def test_bad_calls_get_an_fmi_error_and_a_log_line(step_fmu):
         drv.set(drv.vr_in[:1], [float("nan")])
     assert "q_target[0]" in log[-1] and "not finite" in log[-1]
     with pytest.raises(FMICallException):
+        drv.set(drv.vr_in[1:2], [1e12])
+    assert "q_target[1] = 1e+12 rad is beyond MuJoCo's control limit" in log[-1]
+    with pytest.raises(FMICallException):
         drv.set([step_fmu.vr("friction")], [0.5])
     assert "friction is fixed" in log[-1]
     with pytest.raises(FMICallException):
@@ -381,3 +384,36 @@ def test_the_closed_loop_as_ssp_runs_as_the_native_loop(tmp_path, capsys):
     assert np.array_equal(a[:1001], b[:1001])
     assert np.abs(a - b).max() <= 1e-3
     assert a[-1, 1] - a[0, 1] > 0.05  # it walked
+
+
+@slow
+def test_a_mujoco_error_is_an_fmi_error_not_the_end_of_the_process(step_fmu, tmp_path):
+    """MuJoCo's fatal errors end the process by default (its handler must not return). The FMU catches them
+    while it steps MuJoCo and reports an FMI error with MuJoCo's message: here an FMU whose model was given too
+    small a memory arena (edited in its resources) runs out of stack while settling; the importer (fmpy alone, no
+    other MuJoCo user in the process) gets the error and goes on."""
+    fmu = tmp_path / "small_arena.fmu"
+    with zipfile.ZipFile(step_fmu.path) as zi, zipfile.ZipFile(fmu, "w") as zo:
+        for item in zi.infolist():
+            data = zi.read(item.filename)
+            if item.filename == "resources/hexapod.xml":
+                assert b'memory="4M"' in data
+                data = data.replace(b'memory="4M"', b'memory="30K"')
+            zo.writestr(item, data)
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import sys\n"
+        "from fmpy import simulate_fmu\n"
+        "log = []\n"
+        "def logger(*args):\n    log.append(args[-1])\n"
+        "try:\n"
+        f"    simulate_fmu({str(fmu)!r}, stop_time=0.3, output_interval=1e-3, logger=logger)\n"
+        "except Exception as exc:\n"
+        "    print('FMI error', type(exc).__name__)\n"
+        "print('messages', [m.decode() if isinstance(m, bytes) else str(m) for m in log][-1:])\n"
+        "print('mujoco imported', 'mujoco' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-2000:]
+    assert "FMI error" in proc.stdout
+    assert "mj_stackAlloc: out of memory" in proc.stdout
+    assert "mujoco imported False" in proc.stdout

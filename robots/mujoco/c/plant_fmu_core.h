@@ -25,6 +25,7 @@
 #ifndef CPGSIM_PLANT_FMU_CORE_H
 #define CPGSIM_PLANT_FMU_CORE_H
 
+#include <setjmp.h>
 #include "cpgsim_fmi_base.h"
 #include "cpgsim_model.h"
 #include "mujoco_step.h"
@@ -52,6 +53,38 @@ struct cpg_instance {
 };
 
 #include "cpgsim_fmi_log.h"
+
+/* ---- MuJoCo's fatal errors ----------------------------------------------------------------------- */
+
+/* MuJoCo's error handler must not return (its default prints and ends the process: the importer's). While this
+   FMU steps MuJoCo, an error jumps back to the FMU call, which reports it as an FMI error (the instance then
+   needs Reset); outside those calls the default handler is restored and called. Installed only when the
+   process has no handler of its own. */
+static __thread jmp_buf *cpgsim_mj_jump;
+static __thread char cpgsim_mj_message[300];
+
+static void cpgsim_mj_error(const char *msg) {
+    snprintf(cpgsim_mj_message, sizeof cpgsim_mj_message, "%s", msg);
+    if (cpgsim_mj_jump) longjmp(*cpgsim_mj_jump, 1);
+    mju_user_error = 0; /* not ours to catch: MuJoCo's default handling */
+    mju_error("%s", msg);
+}
+
+/* substeps() guarded against MuJoCo's fatal errors: -1 (message in cpgsim_mj_message, data reset) or its
+   result. */
+static int cpg_guarded_substeps(cpg_instance *inst, int n, const cpgsim_push *pushes, int np, double t) {
+    jmp_buf jump;
+    int bad;
+    if (setjmp(jump)) {
+        cpgsim_mj_jump = NULL;
+        mj_resetData(inst->m, inst->d);
+        return -1;
+    }
+    cpgsim_mj_jump = &jump;
+    bad = substeps(inst->m, inst->d, n, inst->codes, inst->sums, inst->sums + 18, pushes, np, inst->body, t);
+    cpgsim_mj_jump = NULL;
+    return bad;
+}
 
 /* ---- variables --------------------------------------------------------------------------------- */
 
@@ -119,12 +152,14 @@ static int cpg_prepare(cpg_instance *inst) {
     cpg_apply_parameters(inst);
     for (i = 0; i < CPG_NSUMS; ++i) inst->sums[i] = 0.0;
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = CPG_Q0[i];
-    for (i = 0; i < CPG_SETTLE_STEPS; ++i)
-        if (substeps(m, d, 1, inst->codes, inst->sums, inst->sums + 18, NULL, 0, 0, 0.0)) {
+    for (i = 0; i < CPG_SETTLE_STEPS; ++i) {
+        int bad = cpg_guarded_substeps(inst, 1, NULL, 0, 0.0);
+        if (bad) {
             inst->phase = PH_ERROR;
-            return CPG_FAIL(inst, "the robot's state went non-finite while settling (step %d of %d)", i + 1,
-                            CPG_SETTLE_STEPS);
+            return CPG_FAIL(inst, "%s while settling (step %d of %d)", bad < 0 ? cpgsim_mj_message :
+                            "the robot's state went non-finite", i + 1, CPG_SETTLE_STEPS);
         }
+    }
     d->time = inst->t0;
     inst->t = inst->t0;
     inst->ready = 1;
@@ -201,6 +236,7 @@ static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_lo
     inst->calloc_fn = calloc_fn;
     inst->free_fn = free_fn;
     if (!mju_user_warning) mju_user_warning = cpgsim_mj_no_log; /* no MUJOCO_LOG.TXT in the user's folder */
+    if (!mju_user_error) mju_user_error = cpgsim_mj_error;
     CPG_FN_READOUT_WORK(&sa, &sr, &si, &sw);
     inst->name = (char *)calloc_fn(len + 1, 1);
     inst->arg = (const double **)calloc_fn((size_t)sa + 4, sizeof(double *));
@@ -264,6 +300,9 @@ static int cpg_set(cpg_instance *inst, unsigned vr, char have, double v, const c
     if (cpg_check(inst, vr, have, api, &cat, &i)) return CPG_ERROR;
     if (!isfinite(v)) return CPG_FAIL(inst, "%s: value %g for %s is not finite", api, v, cpg_name(cat, i));
     if (cat == VAR_INPUT) {
+        if (fabs(v) >= mjMAXVAL) /* MuJoCo would zero such a control and only warn */
+            return CPG_FAIL(inst, "%s: %s = %g rad is beyond MuJoCo's control limit (%g)", api, cpg_name(cat, i), v,
+                            mjMAXVAL);
         inst->u[i] = v;
         return CPG_OK;
     }
@@ -286,7 +325,7 @@ static int cpg_do_step(cpg_instance *inst, double tc, double h) {
     mjModel *m = inst->m;
     mjData *d = inst->d;
     double dt = m->opt.timestep, n_real;
-    int i, n, bad0;
+    int i, n, bad0, bad;
     if (cpg_prepare(inst)) return CPG_ERROR;
     if (fabs(tc - inst->t) > 1e-3 * dt)
         return CPG_FAIL(inst, "DoStep from t=%.17g but the FMU is at t=%.17g", tc, inst->t);
@@ -298,8 +337,14 @@ static int cpg_do_step(cpg_instance *inst, double tc, double h) {
     if (n == 0) return CPG_OK;
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = inst->u[i];
     bad0 = bad_state_warnings(d);
-    if (substeps(m, d, n, inst->codes, inst->sums, inst->sums + 18, (const cpgsim_push *)(inst->p + P_PUSHES),
-                 CPG_NPUSH, inst->body, tc) || bad_state_warnings(d) != bad0) {
+    bad = cpg_guarded_substeps(inst, n, (const cpgsim_push *)(inst->p + P_PUSHES), CPG_NPUSH, tc);
+    if (bad < 0) {
+        inst->phase = PH_ERROR;
+        inst->out_valid = 0;
+        return CPG_FAIL(inst, "MuJoCo failed between t=%.9g and t=%.9g: %s (Reset, or restore an FMU state)", tc,
+                        tc + h, cpgsim_mj_message);
+    }
+    if (bad || bad_state_warnings(d) != bad0) {
         inst->phase = PH_ERROR;
         inst->out_valid = 0;
         return CPG_FAIL(inst, "the robot's state went non-finite or out of range between t=%.9g and t=%.9g (MuJoCo "

@@ -14,7 +14,9 @@ outputs (no direct feedthrough) go to the controller; the controller FMU's outpu
 after its sampled update with those inputs (its declared feedthrough), and they go to the plant; then both step
 over ``[t_k, t_k + dt]``. That is Gauss-Seidel with the plant first, or equally a Jacobi master that honours the
 controller's declared output dependencies on its inputs (cpgsim's does): the native loop does the same (the
-plant's outputs into the controller's step at ``t_k``, its targets into the plant's step).
+plant's outputs into the controller's step at ``t_k``, its targets into the plant's step). With Yu's controller
+(no feedthrough) any ordering gives the native run; with Fukuhara's (load sensing: feedthrough) a plain Jacobi
+master departs from it (docs/fmu_export.md, "The robot as an FMU").
 """
 
 from __future__ import annotations

@@ -94,6 +94,7 @@ class Simulator:
         elif params:
             graph.set(**params)
         self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping, cache=cache)
+        self.graph = graph  # what the graph owns lives as long as this simulator (an imported SSP's extracted FMUs)
         self.prefault = bool(prefault)
         if backend not in ("auto", "native", "casadi"):
             raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")

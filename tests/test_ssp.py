@@ -18,7 +18,7 @@ from cpgsim.components.graph import Graph
 from cpgsim.fmus.errors import ModelDescriptionError, UnsafeArchiveError
 from cpgsim.fmus.importer.block import FmuBlock
 from cpgsim.fmus.ssp import SspError, export_ssp, import_ssp
-from cpgsim.harness.simulate import simulate
+from cpgsim.harness.simulate import Simulator, simulate
 
 pytestmark = pytest.mark.slow  # FMU and SSP builds: the full suite only
 
@@ -80,6 +80,19 @@ def test_ssp_round_trip_and_fmpy_reads_it(tmp_path, integrator):
     assert len(out) == 100
     np.testing.assert_allclose(out["a.x"], ref["a.x"][:100], atol=1e-12)
     np.testing.assert_allclose(out["y"], ref["b.x"][:100], atol=1e-12)
+
+
+def test_a_simulator_keeps_an_imported_ssps_files(tmp_path, integrator):
+    """``Simulator(import_ssp(path))`` with no other reference to the graph: the extracted FMUs live as long as
+    the simulator (they were removed when the graph was collected, so the run failed with 'FMU file ... does
+    not exist')."""
+    import gc
+
+    ssp = export_ssp(_chain(integrator), tmp_path / "chain.ssp", dt=0.01, t_end=1.0)
+    sim = Simulator(import_ssp(ssp), dt=0.01)
+    gc.collect()
+    res = sim.run(0.5, inputs={"u": 2.0})
+    assert res["y"][-1] > 0.0
 
 
 def test_ssp_of_openmodelica_fmus_in_a_loop(tmp_path):

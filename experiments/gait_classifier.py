@@ -233,3 +233,47 @@ def classify(time: np.ndarray, stance: np.ndarray, t_start: float = 0.0, legs: l
     report.reason = (f"phase lags match {matching[0]} but the duty factor {duty:.2f} is outside "
                      f"{DUTY_BANDS[matching[0]]}")
     return report
+
+
+@dataclass
+class LeadLag:
+    """When ``front`` lifts off in ``hind``'s cycles (Fukuhara 2022, Sec. 3.2, Fig. 8A: with the middle legs
+    amputated the robot walks a lateral sequence, each hind leg lifting off shortly before the front leg on its
+    side). ``phases``: per ``hind`` cycle (lift-off to lift-off) with a ``front`` lift-off in it, the first one's
+    time as a fraction of the cycle; ``hind_leads`` when the circular mean is in ``(0, 1/2)`` (the front leg
+    follows the hind one within half a cycle: the lateral sequence), ``R`` its consistency (1: every cycle alike)."""
+
+    hind: str
+    front: str
+    phases: list[float]
+    mean: float
+    R: float
+    hind_leads: bool
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def lead_lag(time: np.ndarray, stance: np.ndarray, hind: int, front: int, t_start: float = 0.0,
+             min_bout: float = 0.15) -> LeadLag:
+    """The lift-off order of two legs (see :class:`LeadLag`), from the stance pattern (time x 6 booleans) after
+    ``t_start``, debounced as :func:`classify` does (bouts under ``min_bout`` s merged). A front leg that lifts
+    off again within the same hind cycle (a re-lift after rule 3 set it down) counts once: its first lift-off.
+    ``mean`` is NaN (and ``hind_leads`` False) without a hind cycle holding a front lift-off."""
+    time = np.asarray(time, dtype=float)
+    keep = time >= t_start
+    t = time[keep]
+    dt = float(np.median(np.diff(t))) if len(t) > 2 else 1.0
+    min_len = max(1, int(round(min_bout / dt)))
+    pattern = {i: debounce(np.asarray(stance)[keep, i], min_len) for i in (hind, front)}
+    hind_lo, front_lo = t[lift_offs(pattern[hind])], t[lift_offs(pattern[front])]
+    phases = []
+    for a, b in zip(hind_lo[:-1], hind_lo[1:], strict=True):
+        inside = front_lo[(front_lo >= a) & (front_lo < b)]
+        if len(inside):
+            phases.append(float((inside[0] - a) / (b - a)))
+    if not phases:
+        return LeadLag(LEG_NAMES[hind], LEG_NAMES[front], [], math.nan, 0.0, False)
+    z = np.mean(np.exp(2j * np.pi * np.asarray(phases)))
+    mean = float((np.angle(z) / (2 * np.pi)) % 1.0)
+    return LeadLag(LEG_NAMES[hind], LEG_NAMES[front], phases, mean, float(abs(z)), 0.0 < mean < 0.5)

@@ -4,7 +4,8 @@ Sources written to ``sources/`` (also shipped, so the FMU can be rebuilt on anot
 
     cpgsim_<fn>.c      CasADi CodeGenerator output, one file per function <id>_<fn>, each
                        (t, x, z, u, p) -> ..., derived from CompiledModel: step, post, ode for
-                       Co-Simulation; ode, signals, discrete for Model Exchange
+                       Co-Simulation (with clocks also flow, signals, discrete); ode, signals,
+                       discrete for Model Exchange
     cpgsim_model.h     sizes, start values, kinds, bounds and names of every vector (generated)
     cpgsim_core.h      instance data, value-reference decoding, semantics (template)
     cpgsim_fmi_base.h, cpgsim_fmi_log.h
@@ -41,8 +42,11 @@ from cpgsim.harness.compile import CompiledModel
 TEMPLATES = Path(__file__).parent / "templates"
 CORE_COMMON = ("cpgsim_fmi_base.h", "cpgsim_fmi_log.h")
 """The headers every FMU core includes (with the FMI layer ``fmi2.c``/``fmi3.c``)."""
-FUNCTIONS = ("step", "post", "ode", "signals", "discrete")
+FUNCTIONS = ("step", "post", "ode", "signals", "discrete", "flow")
 NEEDED = {"cs": ("step", "post", "ode"), "me": ("ode", "signals", "discrete")}
+CLOCKED_CS = ("flow", "signals", "discrete")
+"""What a Co-Simulation FMU exported with clocks calls besides: in event mode ``discrete`` at a tick of the sample
+clock, ``signals`` for the values read, and in ``fmi3DoStep`` ``flow`` (RK4 with the discrete states held)."""
 
 
 def model_identifier(name: str) -> str:
@@ -57,9 +61,10 @@ def fmu_guid(*parts: str) -> str:
     return "{" + f"{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}" + "}"
 
 
-def functions_for(kinds: tuple[str, ...]) -> tuple[str, ...]:
-    """The generated functions an FMU of these interface kinds calls."""
-    return tuple(f for f in FUNCTIONS if any(f in NEEDED[k] for k in kinds))
+def functions_for(kinds: tuple[str, ...], clocks: bool = False) -> tuple[str, ...]:
+    """The generated functions an FMU of these interface kinds calls (``clocks``: exported with clocks)."""
+    extra = CLOCKED_CS if clocks and "cs" in kinds else ()
+    return tuple(f for f in FUNCTIONS if f in extra or any(f in NEEDED[k] for k in kinds))
 
 
 def auto_optimization(source_bytes: int) -> str:
@@ -97,11 +102,13 @@ def binary_dir(fmi: int) -> tuple[str, str]:
                       "them with the CMakeLists.txt in sources/")
 
 
-def model_functions(model: CompiledModel, identifier: str) -> list[ca.Function]:
-    """The five functions the FMU calls, named ``<identifier>_<name>``, all derived from ``model``.
+def model_functions(model: CompiledModel, identifier: str, flow: bool = False) -> list[ca.Function]:
+    """The functions the FMU calls, named ``<identifier>_<name>``, all derived from ``model``.
 
     ``post(t,x,z,u,p) -> (x_plus, z_plus, y)`` is ``discrete`` followed by ``signals``: the values
     at a communication point. ``step``, ``ode``, ``signals`` and ``discrete`` are the model's own.
+    ``flow`` (only asked for by a Co-Simulation FMU exported with clocks) is ``step`` without the sampled
+    update: the same RK4 substeps from ``(x, z)`` with ``z`` held, ``(x_next, z_next = z, y at t)``.
     """
     args = model.step.sx_in()
     names = ["t", "x", "z", "u", "p"]
@@ -109,8 +116,18 @@ def model_functions(model: CompiledModel, identifier: str) -> list[ca.Function]:
     y = model.signals.call([args[0], xp, zp, args[3], args[4]])[0]
     post = ca.Function("post", args, [xp, zp, y], names, ["x_plus", "z_plus", "y"])
     out = []
-    for name, fn in (("step", model.step), ("post", post), ("ode", model.ode), ("signals", model.signals),
-                     ("discrete", model.discrete)):
+    fns = [("step", model.step), ("post", post), ("ode", model.ode), ("signals", model.signals),
+           ("discrete", model.discrete)]
+    if flow:
+        from cpgsim.harness.compiler.casadi_form import NAMES, _cse, rk4_step
+
+        ode, signals = model.ode, model.signals
+
+        def first_stage(t_, x_, z_, u_, p_):
+            return ode(t_, x_, z_, u_, p_), signals(t_, x_, z_, u_, p_)
+
+        fns.append(("flow", rk4_step(args, NAMES, None, first_stage, ode, model.dt, model.substeps, _cse)))
+    for name, fn in fns:
         out.append(ca.Function(f"{identifier}_{name}", fn.sx_in(), fn.call(fn.sx_in()), fn.name_in(), fn.name_out()))
     return out
 
@@ -118,7 +135,7 @@ def model_functions(model: CompiledModel, identifier: str) -> list[ca.Function]:
 def generate_model_sources(model: CompiledModel, identifier: str, directory: Path,
                            names: tuple[str, ...] = FUNCTIONS) -> dict[str, str]:
     """Write ``cpgsim_<name>.c`` (CasADi, one file per function) into ``directory``; ``{file: text}``."""
-    fns = {f.name()[len(identifier) + 1:]: f for f in model_functions(model, identifier)}
+    fns = {f.name()[len(identifier) + 1:]: f for f in model_functions(model, identifier, "flow" in names)}
     return {f"cpgsim_{name}.c": casadi_source(fns[name], f"cpgsim_{name}.c", directory, "the compiled cpgsim model")
             for name in names}
 
@@ -165,7 +182,7 @@ def c_strings(values: list[str]) -> str:
 def generate_header(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ...],
                     names: tuple[str, ...] = FUNCTIONS, clock_vr: int | None = None) -> str:
     """``cpgsim_model.h``: sizes, start values, kinds, bounds, names and the function declarations;
-    ``clock_vr``: the value reference of the sample clock (exported with clocks, FMI 3 ME)."""
+    ``clock_vr``: the value reference of the sample clock (exported with clocks, FMI 3)."""
     m = variables.model
     nx, nz, nu, np_, ny = m.states.size, m.dstates.size, m.inputs.size, m.params.size, m.signals_layout.size
     outputs = variables.of("output")

@@ -1,5 +1,5 @@
-"""Export with clocks (``cpgsim export ... --fmi 3 --kind me --clocks``): the graph's sampled blocks as a
-clocked partition.
+"""Export with clocks (``cpgsim export ... --fmi 3 --clocks``, Model Exchange and/or Co-Simulation): the graph's
+sampled blocks as a clocked partition.
 
 Every block with discrete states is sampled at the export's ``dt`` (the compiled model has one sample
 period: the simulator's macro step). Exported with clocks, the FMU declares one time-based input clock::
@@ -11,11 +11,19 @@ sampled update (the compiled ``discrete`` function: the gait FSM's transitions, 
 continuous states) runs in ``fmi3UpdateDiscreteStates`` exactly when the importer has set that clock
 active in the event mode (``fmi3SetClock``). No time events are announced: the importer schedules the
 ticks from ``intervalDecimal`` (``fmi3GetIntervalDecimal`` answers the same, ``fmi3IntervalUnchanged``).
-Between ticks the FMU is an ordinary Model Exchange FMU (``ode`` with the discrete states held).
+Between ticks the Model Exchange FMU is an ordinary one (``ode`` with the discrete states held).
 
-Only FMI 3 Model Exchange: FMI 2 has no clocks, and the Co-Simulation interface is exported without event
-mode (its ``doStep`` runs the sampled update itself at every internal step), so a clock there could not be
-ticked. A graph without discrete states has nothing to clock and is refused too.
+Co-Simulation with clocks declares ``hasEventMode="true"``. Instantiated with ``eventModeUsed``, it is in
+event mode after ``fmi3ExitInitializationMode`` (as FMI 3.0 says); ``fmi3EnterEventMode`` / ``fmi3SetClock``
+/ ``fmi3UpdateDiscreteStates`` run the sampled update at a tick, ``fmi3EnterStepMode`` returns to stepping,
+and ``fmi3DoStep`` runs the generated ``flow`` function: the same RK4 steps as ``step``, with the discrete
+states held and no sampled update. It reports no event (``eventHandlingNeeded`` stays false, no early
+return): the FMU has no event of its own, and the sample clock is an input clock the importer ticks from
+``intervalDecimal``; a communication step over several ticks integrates across them with the discrete states
+held (the importer ticked none). Instantiated without event mode, the same FMU steps as the unclocked export
+(the sampled update at every internal step), so an importer without clock support still gets the graph.
+
+FMI 2 has no clocks. A graph without discrete states has nothing to clock and is refused too.
 """
 
 from __future__ import annotations
@@ -27,9 +35,6 @@ def check_clocked_export(variables: Variables, fmi: int, kind: str, dt: float) -
     """Refuse (one line) an export with clocks that cannot be one."""
     if fmi != 3:
         raise ExportError(f"--clocks needs FMI 3 (--fmi 3): FMI {fmi} has no clocks")
-    if kind != "me":
-        raise ExportError(f"--clocks exports Model Exchange only (--kind me, got {kind}): the Co-Simulation "
-                          f"interface has no event mode in which a clock could tick")
     if not variables.has_events:
         raise ExportError(f"--clocks: model {variables.model.name!r} has no sampled blocks (no discrete states or "
                           f"resets), so there is nothing to run at the clock's ticks")

@@ -21,6 +21,9 @@ Semantics
   in the event iteration right after initialization. Models whose update is the identity (no discrete
   states, no resets) announce no events at all. Step events were not chosen: they would make the
   update instants depend on the importer's integrator steps.
+- **With clocks** (``clocks=True``, FMI 3): the sampled update runs at the ticks of the input clock ``sample``
+  instead: in ME's event mode, and in CS's event mode (``hasEventMode``, instantiated with ``eventModeUsed``;
+  ``fmi3DoStep`` then only integrates), see :mod:`cpgsim.fmus.export.clocks`.
 - Parameters are ``causality="parameter" variability="fixed"``: settable after instantiation and in
   initialization mode (validated against their bounds, errors reported through the logger), not during
   the simulation. Continuous and discrete state start values can be set the same way. ``Reset`` restores
@@ -95,7 +98,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
     for the model code (default: ``-O2``, less for very large models, see
     :func:`cpgsim.fmus.export.build.auto_optimization`;
     the results do not depend on it); ``clocks``: the sampled blocks' discrete updates run at the ticks of
-    an input clock ``sample`` (FMI 3 Model Exchange only, see :mod:`cpgsim.fmus.export.clocks`).
+    an input clock ``sample`` (FMI 3; Co-Simulation with event mode, see :mod:`cpgsim.fmus.export.clocks`).
     Raises :class:`ExportError` (a
     :class:`~cpgsim.components.core.ModelError`) for anything that cannot be exported.
     """
@@ -126,7 +129,7 @@ def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str
         staging = Path(tmp) / "fmu"
         src = staging / "sources"
         src.mkdir(parents=True)
-        names = build.functions_for(kinds)
+        names = build.functions_for(kinds, clocks)
         model_c = build.generate_model_sources(model, identifier, src, names)
         guid = build.fmu_guid(*model_c.values(), repr([(v.name, v.vr, v.kind, v.start) for v in variables.items]),
                      str(fmi), kind, repr(dt), repr(substeps), identifier, "clocks" if clocks else "")

@@ -384,7 +384,8 @@ def _fmi3(variables: Variables, identifier: str, guid: str, kinds: tuple[str, ..
         ET.SubElement(root, "ModelExchange", {**common, "needsCompletedIntegratorStep": "false"})
     if "cs" in kinds:
         ET.SubElement(root, "CoSimulation", {**common, "canHandleVariableCommunicationStepSize": "true",
-                                             "fixedInternalStepSize": repr(float(dt)), "hasEventMode": "false"})
+                                             "fixedInternalStepSize": repr(float(dt)),
+                                             "hasEventMode": "true" if clocks else "false"})
     _unit_elements(root, variables)
     _log_categories(root)
     ET.SubElement(root, "DefaultExperiment", experiment)

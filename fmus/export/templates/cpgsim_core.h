@@ -9,6 +9,10 @@
  *    time t_k. doStep runs the compiled step (discrete update with the current inputs, then RK4) once
  *    per internal step dt. Values read at a communication point are those after the sampled update at
  *    that point, computed with the inputs set at that time (what the recorder stores).
+ *  - Co-Simulation exported with clocks (CPG_CLOCKED) and instantiated with eventModeUsed (event_mode): the
+ *    sampled update runs in event mode at a tick of the input clock `sample` (UpdateDiscreteStates), doStep
+ *    runs the flow function (the same RK4 steps, the discrete states held); the state held is the one
+ *    reported (x, z), as in Model Exchange. Without eventModeUsed it steps as the unclocked export.
  *  - Model Exchange: the sampled update at t_k = t0 + k*dt is a time event handled in
  *    NewDiscreteStates/UpdateDiscreteStates; between events the derivatives come from the ode function
  *    with the discrete states and the inputs as set by the importer.
@@ -39,6 +43,7 @@ struct cpg_instance {
     CPG_INSTANCE_COMMON
     double t0, t, next_event;
     int clock_active;  /* CPG_CLOCKED: the sample clock ticks in this event mode (fmi3SetClock) */
+    int event_mode;    /* CS instantiated with eventModeUsed (CPG_CLOCKED only): clocked update, flow steps */
     long long k;     /* CS: steps done since t0; ME: index of the next sampled update */
     int point_valid, sig_valid, der_valid;
     double *x, *z, *u, *p;       /* state at t (CS: before the update at t), inputs, parameters */
@@ -116,7 +121,7 @@ static int cpg_check_finite(cpg_instance *inst, const double *xn, const double *
 /* (xp, zp): the state reported at t. CS: after the sampled update at t (also gives y); ME: (x, z). */
 static int cpg_point(cpg_instance *inst) {
     if (inst->point_valid) return CPG_OK;
-    if (inst->interface == CPG_CS) {
+    if (inst->interface == CPG_CS && !inst->event_mode) {
         if (cpg_call(inst, CPG_FN_POST, "post-update", inst->t, inst->x, inst->z, inst->xp, inst->zp, inst->y))
             return CPG_ERROR;
         inst->sig_valid = 1;
@@ -175,7 +180,7 @@ static void cpg_release(cpg_instance *inst) {
 static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_log_fn log, int logging_on,
                      cpg_calloc_fn calloc_fn, cpg_free_fn free_fn, const char *resources) {
     static const cpg_work_fn works[] = {CPG_FN_STEP_WORK, CPG_FN_POST_WORK, CPG_FN_ODE_WORK, CPG_FN_SIGNALS_WORK,
-                                        CPG_FN_DISCRETE_WORK};
+                                        CPG_FN_DISCRETE_WORK, CPG_FN_FLOW_WORK};
     cpg_int a = 0, r = 0, iw = 0, w = 0, sa, sr, si, sw;
     size_t j, len = strlen(name);
     (void)resources;
@@ -346,7 +351,10 @@ static int cpg_do_step(cpg_instance *inst, double tc, double h) {
                         CPG_DT);
     for (j = 0; j < n; ++j) {
         tk = inst->t0 + (double)inst->k * CPG_DT;
-        if (cpg_call(inst, CPG_FN_STEP, "step", tk, inst->x, inst->z, inst->xn, inst->zn, NULL)) return CPG_ERROR;
+        if (inst->event_mode) { /* clocked: the sampled update ran (or not) in event mode; integrate only */
+            if (cpg_call(inst, CPG_FN_FLOW, "flow", tk, inst->x, inst->z, inst->xn, inst->zn, NULL))
+                return CPG_ERROR;
+        } else if (cpg_call(inst, CPG_FN_STEP, "step", tk, inst->x, inst->z, inst->xn, inst->zn, NULL)) return CPG_ERROR;
         if (cpg_check_finite(inst, inst->xn, inst->x, inst->zn, tk + CPG_DT)) {
             inst->t = tk;
             cpg_invalidate(inst);
@@ -414,11 +422,17 @@ static int cpg_event_update(cpg_instance *inst, int *changed, int *next_defined,
             if (inst->xn[i] != inst->x[i]) *changed = 1;
         if (CPG_NX) memcpy(inst->x, inst->xn, sizeof(double) * CPG_NX);
         if (CPG_NZ) memcpy(inst->z, inst->zn, sizeof(double) * CPG_NZ);
-        inst->k = (long long)floor((inst->t - inst->t0) / CPG_DT + 0.5) + 1;
-        inst->next_event = inst->t0 + (double)inst->k * CPG_DT;
+        if (inst->interface == CPG_ME) { /* CS: k counts the internal steps done, unchanged by an event */
+            inst->k = (long long)floor((inst->t - inst->t0) / CPG_DT + 0.5) + 1;
+            inst->next_event = inst->t0 + (double)inst->k * CPG_DT;
+        }
         cpg_invalidate(inst);
-        cpg_logf(inst, CPG_OK, "logEvents", "sampled update at t=%.9g%s; next at t=%.9g", inst->t,
-                 *changed ? " (continuous states reset)" : "", inst->next_event);
+        if (inst->interface == CPG_ME && !CPG_CLOCKED)
+            cpg_logf(inst, CPG_OK, "logEvents", "sampled update at t=%.9g%s; next at t=%.9g", inst->t,
+                     *changed ? " (continuous states reset)" : "", inst->next_event);
+        else
+            cpg_logf(inst, CPG_OK, "logEvents", "sampled update at t=%.9g%s (tick of the sample clock)", inst->t,
+                     *changed ? " (continuous states reset)" : "");
     }
     *next_defined = !CPG_CLOCKED;
     *next_time = CPG_CLOCKED ? 0.0 : inst->next_event;

@@ -1,5 +1,6 @@
-/* cpgsim FMI 3.0 layer (Model Exchange and Co-Simulation without event mode) around the generated model
- * functions. See cpgsim_core.h for the semantics. All messages go through the importer's log callback. */
+/* cpgsim FMI 3.0 layer (Model Exchange, and Co-Simulation: with event mode when exported with clocks,
+ * CPG_CLOCKED) around the generated model functions. See cpgsim_core.h for the semantics. All messages go
+ * through the importer's log callback. */
 #include "fmi3Functions.h"
 #include "cpgsim_model.h" /* generated: the model's tables, and CPG_CORE_HEADER: the core it runs on */
 #include CPG_CORE_HEADER
@@ -8,6 +9,7 @@ typedef struct {
     cpg_instance core; /* first member */
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback logMessage;
+    int event_mode_used; /* CS: instantiated with eventModeUsed (only an FMU exported with clocks accepts it) */
 } Fmi3Instance;
 
 static void fmi3_log(cpg_instance *c, int status, const char *category, const char *message) {
@@ -110,16 +112,24 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
+    fmi3Instance instance;
     (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
-    if (eventModeUsed) {
+    if (eventModeUsed && !CPG_CLOCKED) {
         if (logMessage)
             logMessage(instanceEnvironment, fmi3Error, "logStatusError",
                        "fmi3InstantiateCoSimulation: event mode is not supported (hasEventMode=false)");
         return NULL;
     }
-    return instantiate(CPG_CS, instanceName, instantiationToken, resourcePath, loggingOn, instanceEnvironment,
-                       logMessage);
+    instance = instantiate(CPG_CS, instanceName, instantiationToken, resourcePath, loggingOn, instanceEnvironment,
+                           logMessage);
+    if (instance && eventModeUsed) {
+        ((Fmi3Instance *)instance)->event_mode_used = 1;
+#if CPG_CLOCKED /* the sampled update on the clock, doStep integrating only (a core without clocks has no event_mode) */
+        INST->event_mode = 1;
+#endif
+    }
+    return instance;
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -153,14 +163,22 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
     if (!allowed(instance, PH(PH_INIT), "fmi3ExitInitializationMode")) return fmi3Error;
-    INST->phase = INST->interface == CPG_CS ? PH_STEP : PH_EVENT;
+    /* CS with eventModeUsed: event mode first, as Model Exchange (FMI 3.0, fmi3ExitInitializationMode) */
+    INST->phase = INST->interface == CPG_CS && !((Fmi3Instance *)instance)->event_mode_used ? PH_STEP : PH_EVENT;
     cpg_invalidate(INST);
     return fmi3OK;
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
-    if (!allowed(instance, PH(PH_EVENT) | PH(PH_CONT), "fmi3EnterEventMode")) return fmi3Error;
-    if (INST->interface == CPG_CS) return (fmi3Status)CPG_FAIL(INST, "fmi3EnterEventMode: no event mode in CS");
+    if (instance && INST->interface == CPG_CS) {
+        if (!((Fmi3Instance *)instance)->event_mode_used)
+            return (fmi3Status)CPG_FAIL(INST, "fmi3EnterEventMode: the instance was not instantiated with "
+                                              "eventModeUsed (%s)", CPG_CLOCKED ? "hasEventMode=true" :
+                                              "and this FMU has no event mode: hasEventMode=false");
+        if (!allowed(instance, PH(PH_STEP), "fmi3EnterEventMode")) return fmi3Error;
+    } else if (!allowed(instance, PH(PH_EVENT) | PH(PH_CONT), "fmi3EnterEventMode")) {
+        return fmi3Error;
+    }
     INST->phase = PH_EVENT;
     return fmi3OK;
 }
@@ -515,6 +533,8 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
 
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
     if (!allowed(instance, PH(PH_EVENT), "fmi3EnterContinuousTimeMode")) return fmi3Error;
+    if (INST->interface == CPG_CS)
+        return (fmi3Status)CPG_FAIL(INST, "fmi3EnterContinuousTimeMode: Co-Simulation returns with fmi3EnterStepMode");
     INST->phase = PH_CONT;
     return fmi3OK;
 }
@@ -530,11 +550,13 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
     if (!allowed(instance, PH(PH_EVENT) | PH(PH_CONT), "fmi3SetTime")) return fmi3Error;
+    if (INST->interface == CPG_CS) return (fmi3Status)CPG_FAIL(INST, "fmi3SetTime: Model Exchange only");
     return (fmi3Status)cpg_set_time(INST, time);
 }
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 x[], size_t nx) {
     if (!allowed(instance, PH(PH_EVENT) | PH(PH_CONT), "fmi3SetContinuousStates")) return fmi3Error;
+    if (INST->interface == CPG_CS) return (fmi3Status)CPG_FAIL(INST, "fmi3SetContinuousStates: Model Exchange only");
     if (nx && !x) return (fmi3Status)CPG_FAIL(INST, "fmi3SetContinuousStates: NULL argument");
     return (fmi3Status)cpg_set_states(INST, x, nx);
 }
@@ -584,7 +606,11 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *n) {
 /* ---- Co-Simulation -------------------------------------------------------------------------------------- */
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
-    if (!allowed(instance, PH(PH_STEP), "fmi3EnterStepMode")) return fmi3Error;
+    /* from event mode (CS with eventModeUsed); in step mode already it does nothing */
+    if (!allowed(instance, PH(PH_STEP) | PH(PH_EVENT), "fmi3EnterStepMode")) return fmi3Error;
+    if (INST->interface != CPG_CS)
+        return (fmi3Status)CPG_FAIL(INST, "fmi3EnterStepMode: only for Co-Simulation (this is Model Exchange)");
+    INST->phase = PH_STEP;
     return fmi3OK;
 }
 
@@ -602,6 +628,8 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!allowed(instance, PH(PH_STEP), "fmi3DoStep")) return fmi3Error;
     rc = cpg_do_step(INST, currentCommunicationPoint, communicationStepSize);
+    /* No event of the FMU's own, with or without event mode: exported with clocks, the one discrete update is
+       on the input clock `sample`, which the importer ticks (it knows the interval); never an early return. */
     if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation) *terminateSimulation = fmi3False;
     if (earlyReturn) *earlyReturn = fmi3False;

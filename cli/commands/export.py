@@ -54,8 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--opt", choices=("auto", "0", "1", "2", "3"), default="auto",
                    help="C optimization level of the model code (default auto: 2, less for very large models)")
     p.add_argument("--clocks", action="store_true",
-                   help="FMI 3 Model Exchange: run the sampled blocks' discrete updates (the gait FSM ...) at the "
-                        "ticks of an input clock 'sample' of interval --dt instead of time events")
+                   help="FMI 3: run the sampled blocks' discrete updates (the gait FSM ...) at the ticks of an "
+                        "input clock 'sample' of interval --dt (Model Exchange: instead of time events; "
+                        "Co-Simulation: in event mode, hasEventMode=true)")
     add_set_argument(p)
 
 

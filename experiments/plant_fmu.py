@@ -32,7 +32,7 @@ import hashlib
 import shutil
 import tempfile
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ import numpy as np
 
 from cpgsim.fmus import trust
 from cpgsim.fmus.export import build
+from cpgsim.fmus.export.exporter import FmuFile
 from cpgsim.fmus.export.model_description import ExportError, Variable, Variables, model_description
 from cpgsim.robots.description import describe_hexapod
 from cpgsim.robots.ports import OUTPUT_PORTS
@@ -53,27 +54,13 @@ DT = 1e-3
 
 
 @dataclass
-class PlantFmu:
-    """What :func:`export_plant_fmu` wrote: the file, its variables, identifier and what was baked in."""
+class PlantFmu(FmuFile):
+    """What :func:`export_plant_fmu` wrote (an :class:`~cpgsim.fmus.export.exporter.FmuFile`): the scenario, its
+    default end time and the MuJoCo step baked in."""
 
-    path: Path
-    variables: Variables = field(repr=False)
-    model_identifier: str
-    guid: str
-    fmi: int
-    scenario: str
-    t_end: float
-    time_step: float
-
-    def __fspath__(self) -> str:
-        return str(self.path)
-
-    def vr(self, name: str) -> int:
-        """Value reference of the variable ``name``."""
-        for v in self.variables.items:
-            if v.name == name:
-                return v.vr
-        raise KeyError(name)
+    scenario: str = ""
+    t_end: float = 0.0
+    time_step: float = 0.0
 
 
 def export_plant_fmu(scenario: str | Path, path: str | Path, *, fmi: int = 2,

@@ -64,15 +64,14 @@ def _tool() -> str:
 
 
 @dataclass
-class ExportedFmu:
-    """What :func:`export_fmu` wrote: the file, its variables (names, value references), identifiers."""
+class FmuFile:
+    """An FMU cpgsim wrote: the file, its variables (names, value references), identifiers."""
 
     path: Path
     variables: Variables = field(repr=False)
     model_identifier: str
     guid: str
     fmi: int
-    kinds: tuple[str, ...]
 
     def __fspath__(self) -> str:
         return str(self.path)
@@ -83,6 +82,13 @@ class ExportedFmu:
             if v.name == name:
                 return v.vr
         raise KeyError(name)
+
+
+@dataclass
+class ExportedFmu(FmuFile):
+    """What :func:`export_fmu` wrote (an :class:`FmuFile`) and its interface kinds."""
+
+    kinds: tuple[str, ...] = ()
 
 
 def export_fmu(item: Graph | Block, path: str | Path, *, fmi: int = 2, kind: str = "both", dt: float = 1e-3,

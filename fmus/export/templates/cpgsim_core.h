@@ -184,12 +184,7 @@ static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_lo
     cpg_int a = 0, r = 0, iw = 0, w = 0, sa, sr, si, sw;
     size_t j, len = strlen(name);
     (void)resources;
-    inst->interface = interface;
-    inst->log = log;
-    inst->logging_on = logging_on;
-    inst->log_mask = LOG_WARNING | LOG_ERROR | (logging_on ? LOG_EVENTS : 0);
-    inst->calloc_fn = calloc_fn;
-    inst->free_fn = free_fn;
+    cpg_init_common(inst, interface, log, logging_on, calloc_fn, free_fn);
     for (j = 0; j < sizeof works / sizeof works[0]; ++j) {
         works[j](&sa, &sr, &si, &sw);
         if (sa > a) a = sa;

@@ -47,4 +47,15 @@ static const char *cpg_kind_name(char k) {
     return k == 'r' ? "Real/Float64" : k == 'i' ? "Integer/Int32" : k == 'b' ? "Boolean" : "?";
 }
 
+/* The common fields of a new instance (cpg_setup's first job in every core). */
+static void cpg_init_common(cpg_instance *inst, int interface, cpg_log_fn log, int logging_on,
+                            cpg_calloc_fn calloc_fn, cpg_free_fn free_fn) {
+    inst->interface = interface;
+    inst->log = log;
+    inst->logging_on = logging_on;
+    inst->log_mask = LOG_WARNING | LOG_ERROR | (logging_on ? LOG_EVENTS : 0);
+    inst->calloc_fn = calloc_fn;
+    inst->free_fn = free_fn;
+}
+
 #endif /* CPGSIM_FMI_LOG_H */

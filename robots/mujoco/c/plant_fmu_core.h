@@ -229,12 +229,7 @@ static int cpg_setup(cpg_instance *inst, const char *name, int interface, cpg_lo
                      cpg_calloc_fn calloc_fn, cpg_free_fn free_fn, const char *resources) {
     long long sa, sr, si, sw;
     size_t len = strlen(name);
-    inst->interface = interface;
-    inst->log = log;
-    inst->logging_on = logging_on;
-    inst->log_mask = LOG_WARNING | LOG_ERROR | (logging_on ? LOG_EVENTS : 0);
-    inst->calloc_fn = calloc_fn;
-    inst->free_fn = free_fn;
+    cpg_init_common(inst, interface, log, logging_on, calloc_fn, free_fn);
     if (!mju_user_warning) mju_user_warning = cpgsim_mj_no_log; /* no MUJOCO_LOG.TXT in the user's folder */
     if (!mju_user_error) mju_user_error = cpgsim_mj_error;
     CPG_FN_READOUT_WORK(&sa, &sr, &si, &sw);

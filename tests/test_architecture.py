@@ -243,6 +243,7 @@ def test_installed_packages_are_the_folders():
     assert listed == folders
 
 
+@pytest.mark.slow
 def test_no_module_imports_an_old_top_level_name():
     old = [f"{name} -> {dep}" for name, path in project_modules().items()
            for dep in _absolute_imports(path) if dep.split(".")[0] in PACKAGES]

@@ -41,6 +41,7 @@ def test_other_readers_get_the_types_units_and_values(tmp_path):
     assert back.unit("a.v[0]") == "m/s" and back.meta["scenario"] == "s"
 
 
+@pytest.mark.slow
 def test_pandas_and_polars_read_a_results_file_as_documented(tmp_path):
     """Found from outside: pd.read_feather("results.arrow") failed ("Not a Feather V1 or Arrow IPC file"): the
     file was an IPC stream. A finished file is an Arrow IPC file: the readers people use open it by name, with

@@ -32,6 +32,7 @@ def _y5_table(n: int, seed: int = 3) -> dict[str, np.ndarray]:
             "z1.omega": rng.uniform(0.3, 0.5, n) * math.pi, "z2.b": rng.uniform(2.0, 6.0, n)}
 
 
+@pytest.mark.slow
 def test_batch_equals_separate_simulator_runs_bit_for_bit():
     """Every recorded column of every variant equals a separate native Simulator run exactly: the same
     CasADi-generated step compiled with the same flags, the same parameter vector, the same sampling
@@ -180,6 +181,7 @@ def _free_input_graph() -> Graph:
     (lambda: simulate_batch(single_vdp(), None, 1.0, record=["nothing*"]), r"match no signal"),
     (lambda: simulate_batch(single_vdp(), None, 1.0, every=2, threads=0), r"threads must be a positive integer"),
 ])
+@pytest.mark.slow
 def test_bad_input_is_one_clear_model_error(call, pattern):
     with pytest.raises(ModelError, match=pattern) as err:
         call()
@@ -191,6 +193,7 @@ def test_out_of_range_row_is_a_parameter_error_naming_the_value():
         simulate_batch(single_vdp(), [{"z.b": 4.0}, {"z.b": 0.0}], 1.0, reduce="amplitude")
 
 
+@pytest.mark.slow
 def test_recorded_arrays_beyond_half_the_memory_are_refused_before_running():
     with pytest.raises(ModelError, match=r"recording 1000000 variants x 1000001 samples x 2 signals \(.* GiB\)"):
         simulate_batch(single_vdp(), {"z.eps": np.full(1_000_000, 0.1)}, 1000.0, every=1)
@@ -206,6 +209,7 @@ def test_unused_parameter_is_noted_and_progress_is_reported():
     assert res["z.x:final"][0] == res["z.x:final"][1]
 
 
+@pytest.mark.slow
 def test_sweep_uses_the_batch_transients_as_guesses():
     """``cpgsim verify --sweep``: the batch's amplitude and period over the last cycles equal the shooting
     orbit's (1e-6: 400 s of transient leave ~1e-8, 1 ms sampling ~2e-7) and the verdict is unchanged."""

@@ -45,6 +45,7 @@ def y5(_t: float, s: np.ndarray, params: np.ndarray) -> np.ndarray:
     return d
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None, reason="no C compiler")
 def test_c_reference_matches_solve_ivp(tmp_path):
     """RK4 at 1 ms for 1 s against solve_ivp (RK45, rtol 1e-10, atol 1e-12) at every step.

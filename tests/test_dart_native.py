@@ -23,6 +23,7 @@ def _walk(robot: DartHexapod, steps: int) -> np.ndarray:
     return np.array(rows)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("settle", [0.0, 0.1])
 def test_c_step_equals_python_step(settle):
     slow = DartHexapod(settle=settle, native=False)

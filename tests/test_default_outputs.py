@@ -26,6 +26,7 @@ def test_simulate_without_o_writes_under_runs_and_says_so(graph, name, tmp_path,
     assert "--force" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_verify_without_o_writes_under_runs(tmp_path, monkeypatch, capsys):
     from cpgsim.cli.main import main
 

@@ -31,6 +31,7 @@ NEEDS_MUJOCO = {"07_step_in_two_engines.py", "08_step_position_map.py"}
 ARGS = {"08_step_position_map.py": ["--positions", "0.355,0.41", "--configs", "dart,mujoco"]}  # 2 of its 21
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in EXAMPLES])
 def test_example_runs(name, tmp_path):
     if name in NEEDS_MUJOCO:
@@ -78,6 +79,7 @@ def check_printed_claims(name: str, out: str) -> None:
         assert abs(amp - 3 * x) < 2e-6  # printed to 6 decimals
 
 
+@pytest.mark.slow
 def test_own_graph_and_own_scenario_from_the_command_line(tmp_path):
     proc = _run([sys.executable, "-m", "cpgsim.cli", "simulate", f"{ROOT}/examples/hopf_block.py:build",
                  "--t-end", "2", "--set", "osc.mu=0.25", "-o", "hopf.csv"], tmp_path)

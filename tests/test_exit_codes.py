@@ -45,6 +45,7 @@ def wait_for_rows(path: Path, proc: subprocess.Popen, rows: int = 50, limit: flo
     pytest.fail(f"no rows in {path} within {limit} s")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code, word", [
     pytest.param(signal.SIGTERM, 143, "terminated (SIGTERM)", marks=pytest.mark.slow),  # the same path as SIGINT
     (signal.SIGINT, 130, "interrupted")])

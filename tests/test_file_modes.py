@@ -29,6 +29,7 @@ def _mode(path: Path) -> int:
     return stat.S_IMODE(os.stat(path).st_mode)
 
 
+@pytest.mark.slow
 def test_an_fmu_has_the_umask_mode_from_the_api_and_from_the_cli(tmp_path, monkeypatch):
     from cpgsim.fmus.export.exporter import export_fmu
 
@@ -43,6 +44,7 @@ def test_an_fmu_has_the_umask_mode_from_the_api_and_from_the_cli(tmp_path, monke
     assert _mode(api) == _mode(tmp_path / "cli.fmu") == 0o666 & ~umask
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".csv", ".arrow"])
 def test_results_and_their_metadata_have_the_umask_mode(tmp_path, umask, suffix):
     out = tmp_path / f"r{suffix}"

@@ -101,6 +101,7 @@ def _run(fmu, mode, isolate=False, t_end=1.0, dt=0.1):
     return simulate(FmuBlock("d", fmu, mode=mode, isolate=isolate), t_end=t_end, dt=dt)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("isolate", [False, True])
 def test_an_early_return_is_continued_from_last_successful_time(decay, isolate):
     """The FMU stops once at 0.35 (in the step 0.3 -> 0.4): the importer goes on from 0.35 with the rest of the
@@ -211,6 +212,7 @@ EVENT_MD = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+@pytest.mark.slow
 def test_an_early_return_in_event_mode_handles_the_event_where_the_fmu_stopped(tmp_path):
     """A clocked CS FMU (eventModeUsed) stops at 0.35 inside the step 0.3 -> 0.4 with eventHandlingNeeded: the
     event is iterated at 0.35, then the step goes on from there to 0.4; the 0.25 s clock ticks as before."""

@@ -11,6 +11,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("harness", "fmus", "verify", "robots")
 LIMIT = 100
@@ -33,6 +35,7 @@ def function_lengths() -> dict[str, int]:
     return out
 
 
+@pytest.mark.slow
 def test_no_function_is_over_100_lines() -> None:
     lengths = function_lengths()
     assert len(lengths) > 500  # the walk found the packages
@@ -41,6 +44,7 @@ def test_no_function_is_over_100_lines() -> None:
                       + ", ".join(f"{k} {n}" for k, n in sorted(over.items())))
 
 
+@pytest.mark.slow
 def test_the_allow_list_only_shrinks() -> None:
     lengths = function_lengths()
     stale = {k: lengths.get(k) for k in ALLOWED if lengths.get(k, 0) <= LIMIT}

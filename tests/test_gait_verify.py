@@ -82,6 +82,7 @@ def ball_map(e: float, c: float, t_max: float = 10.0) -> tuple[StrideMap, Simula
     return StrideMap(sim, Section("ball.v", 0.0, -1, min_time=0.05), t_max=t_max), sim
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("e, c", [(0.6, 2.0), (0.3, 3.0)])
 def test_bouncing_ball_apex_map_multiplier_is_the_restitution(e, c):
     smap, sim = ball_map(e, c)
@@ -110,6 +111,7 @@ def test_ball_save_restore_is_bit_identical():
     assert np.array_equal(a.data, b.data) and np.array_equal(a.data, straight.data)
 
 
+@pytest.mark.slow
 def test_a_block_that_cannot_save_its_state_is_named():
     from cpgsim.components.core import CoSimBlock
     from cpgsim.harness.errors import SimulationError
@@ -153,6 +155,7 @@ def flat_loop():
     return setup, sim
 
 
+@pytest.mark.slow
 def test_hexapod_save_run_restore_run_is_bit_identical(flat_loop):
     setup, sim = flat_loop
     straight = sim.run(2.5)

@@ -63,6 +63,7 @@ def run(graph: Graph, grouping: str, t_end: float = 2.0, **inputs):
     return sim.run(t_end, inputs=inputs or None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [lambda: networks(12), mixed_graph], ids=["networks", "mixed"])
 def test_grouped_equals_flat_bit_for_bit(make):
     inputs = {"lead": lambda t: 0.5 + 0.5 * np.cos(t)} if make is mixed_graph else {}
@@ -72,6 +73,7 @@ def test_grouped_equals_flat_bit_for_bit(make):
     assert np.array_equal(a.data, b.data)
 
 
+@pytest.mark.slow
 def test_grouped_casadi_functions_equal_flat():
     """The CasADi form (MX maps, used by the VM backend and the horizon's last row) matches the flat one."""
     flat, kinds = compile_graph(mixed_graph(), grouping="flat"), compile_graph(mixed_graph(), grouping="kinds")
@@ -86,6 +88,7 @@ def test_grouped_casadi_functions_equal_flat():
             assert np.array_equal(np.asarray(va), np.asarray(vb)), name
 
 
+@pytest.mark.slow
 def test_one_schedule_in_both_forms_gives_the_flat_numbers():
     """One compiler: the grouped schedule (nested-graph kinds, whose equations are the straight-line form of
     one instance's own schedule) evaluated in straight-line form is the flat compile bit for bit, and so is
@@ -119,6 +122,7 @@ def test_kinds_found():
     assert sums == [6, 6]  # signs (1, 1) and (1, -1): two kinds
 
 
+@pytest.mark.slow
 def test_six_leg_controller_grouped_equals_flat():
     """The Yu controller: discrete states (FSM), state resets, vectors, six identical legs."""
     from cpgsim.components.yu.leg import hexapod_controller
@@ -140,6 +144,7 @@ def test_six_leg_controller_grouped_equals_flat():
             assert np.array_equal(got, want)
 
 
+@pytest.mark.slow
 def test_code_size_does_not_grow_with_instances():
     def code(n: int) -> str:
         src = compile_graph(networks(n), grouping="kinds").c_step_source()
@@ -372,6 +377,7 @@ def test_every_operation_written_into_the_loop_gives_casadis_numbers():
     assert_native_steps_equal_flat(model, flat, [written, called], 500)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("substeps", [1, 3])
 def test_members_on_their_own_run_their_whole_step_in_blocks_with_the_same_numbers(substeps):
     """An array of networks (no inputs, nothing sampled: each member's step is its own) runs each block of

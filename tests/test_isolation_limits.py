@@ -95,6 +95,7 @@ def _wait_for(path: Path, seconds: float) -> str:
     raise AssertionError(f"{path} was not written within {seconds} s")
 
 
+@pytest.mark.slow
 def test_a_process_that_left_the_group_with_setsid_ends_with_the_run(tmp_path, monkeypatch):
     pidfile = tmp_path / "pid"
     monkeypatch.setenv("CPGSIM_TEST_PIDFILE", str(pidfile))
@@ -105,6 +106,7 @@ def test_a_process_that_left_the_group_with_setsid_ends_with_the_run(tmp_path, m
     assert _gone([child, escaped], 10) == [], "a process the FMU started (setsid) outlived the run"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("round_", [0, *(pytest.param(r, marks=pytest.mark.slow) for r in (1, 2))])
 def test_sigkill_of_cpgsim_ends_the_isolated_child_and_what_it_started(tmp_path, monkeypatch, round_):
     """cpgsim killed by SIGKILL (no handler runs) while the isolated FMU hangs in doStep after starting a
@@ -145,6 +147,7 @@ def test_an_fmu_printing_megabytes_is_capped_and_counted(tmp_path):
     assert os.path.exists(tmp_path / "o.csv")
 
 
+@pytest.mark.slow
 def test_an_in_process_crash_leaves_an_extraction_folder_that_the_next_run_removes(tmp_path):
     c_fmu(tmp_path / "segv.fmu", "SEGV", "DOSTEP")
     c_fmu(tmp_path / "good.fmu")

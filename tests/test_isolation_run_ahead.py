@@ -82,6 +82,7 @@ def test_packed_values_keep_their_bits_dtypes_and_shapes():
     ("SEGV", FmuCrashedError, "crashed (signal SIGSEGV) during step at t=0.05 s"),
     ("SLEEP", FmuTimeoutError, "step at t=0.05 s took longer than 1 s (--fmu-timeout)"),
 ])
+@pytest.mark.slow
 def test_a_crash_or_hang_while_running_ahead_is_reported_at_its_step(fmus, tmp_path, hostile, error, message):
     """The hostile C FMUs turn hostile at the doStep from t = 0.05 s; stepped at 0.01 s without inputs, the
     child computes the steps from 0 to 0.04 and their outputs are taken, then the step at 0.05 fails as it
@@ -101,6 +102,7 @@ def test_a_crash_or_hang_while_running_ahead_is_reported_at_its_step(fmus, tmp_p
         assert_gone(rt)
 
 
+@pytest.mark.slow
 def test_a_step_off_the_grid_is_refused_and_an_early_end_is_clean(fmus, tmp_path):
     rt = IsolatedRuntime(runtime(fmus["good"], tmp_path).args, run_ahead=8)
     try:
@@ -119,6 +121,7 @@ def test_a_step_off_the_grid_is_refused_and_an_early_end_is_clean(fmus, tmp_path
     assert_gone(rt)
 
 
+@pytest.mark.slow
 def test_inputs_or_an_irregular_first_step_mean_one_round_trip_per_step(fmus, tmp_path):
     rt = IsolatedRuntime(runtime(fmus["good"], tmp_path).args, run_ahead=8)
     try:
@@ -144,6 +147,7 @@ def same_rows(block_args: dict, counted: list, **run) -> tuple[np.ndarray, int, 
     return out[True].data, requests, steps
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmi, kind", [(2, "cs"), (3, "cs"), (2, "me")])
 def test_a_stop_request_while_running_ahead_gives_the_rows_of_the_run_in_process(stop_fmus, counted, fmu_tmp,
                                                                                   fmi, kind):
@@ -154,6 +158,7 @@ def test_a_stop_request_while_running_ahead_gives_the_rows_of_the_run_in_process
     assert requests <= 7 if isolation.RUN_AHEAD == 32 else requests < 20
 
 
+@pytest.mark.slow
 def test_an_me_fmu_with_events_gives_the_rows_of_the_run_in_process(c_fmus, counted, fmu_tmp):
     _, requests, steps = same_rows(dict(name="ball", path=c_fmus["ball"], solver="cvode", rtol=1e-10, atol=1e-10),
                                    counted, t_end=hybrid.T_END, dt=0.01)
@@ -161,6 +166,7 @@ def test_an_me_fmu_with_events_gives_the_rows_of_the_run_in_process(c_fmus, coun
     assert requests <= 3 + 370 // (isolation.RUN_AHEAD // 2), requests  # ready, setup, ahead..., not one per step
 
 
+@pytest.mark.slow
 def test_an_fmu_with_inputs_does_not_run_ahead(fmus, counted, fmu_tmp):
     blk = FmuBlock("plant", fmus["good"], isolate=True)
     assert blk.info.inputs
@@ -168,6 +174,7 @@ def test_an_fmu_with_inputs_does_not_run_ahead(fmus, counted, fmu_tmp):
     assert counted[-1][2] == 0
 
 
+@pytest.mark.slow
 def test_a_stop_seen_by_the_parent_drains_the_skipped_steps(fmus, tmp_path, monkeypatch):
     """After a stop request read from the steps run ahead, outputs are asked for again: the skipped replies
     the child still owes are read first, so the answer is the outputs', not a stale step's."""

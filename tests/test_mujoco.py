@@ -219,6 +219,7 @@ def test_native_step_equals_python_step():
 
 
 
+@pytest.mark.slow
 def test_mjcf_terrain_of_every_feature_has_the_terrains_heights():
     """Steps, ditches, gaps, stairs and blocks: a ray cast down in MuJoCo meets the ground at height_at."""
     feats = {

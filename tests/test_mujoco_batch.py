@@ -26,6 +26,7 @@ def _run(scenario: str, sets: dict, seed: int, t_end: float):
                                                                                                  progress=False)
 
 
+@pytest.mark.slow
 def test_batch_results_are_bit_identical_to_single_runs():
     cases = [("flat", MJ, 0), ("flat", {**MJ, "robot.friction": 0.3}, 1), ("flat", {**MJ, "robot.kp": 80.0}, 2)]
     alone = [_run(*c, 0.6) for c in cases]
@@ -40,6 +41,7 @@ def test_batch_results_are_bit_identical_to_single_runs():
     assert not np.array_equal(alone[0].data, alone[2].data)
 
 
+@pytest.mark.slow
 def test_a_diverging_trial_stops_only_itself(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo's default warning handler would write MUJOCO_LOG.TXT here
     good = _run("flat", MJ, 0, 0.5)
@@ -68,6 +70,7 @@ def test_a_job_that_raises_is_returned_and_ctrl_c_is_raised_again():
         run_batch([lambda: 1, interrupted], threads=2)
 
 
+@pytest.mark.slow
 def test_sweep_batch_names_the_failed_trial(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
     from cpgsim.experiments.sweep import run_sweep
@@ -103,6 +106,7 @@ def test_batch_of_different_controllers_equals_single_runs():
         assert np.array_equal(a.data, b.data)
 
 
+@pytest.mark.slow
 def test_bench_with_set_engine_runs_a_batch_and_names_the_crashed_cell(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MUJOCO_LOG.TXT
     from cpgsim.experiments.bench import run_bench

@@ -41,6 +41,7 @@ def needs_populate(monkeypatch):
         pytest.skip("this kernel has no MADV_POPULATE_WRITE (before Linux 5.14): the loop faults pages in")
 
 
+@pytest.mark.slow
 def test_the_windows_ahead_of_the_writer_are_mapped_and_nothing_further(needs_populate, monkeypatch):
     monkeypatch.setattr(prefault, "WINDOW_BYTES", 32 << 20)  # smaller windows than the default: a small table
     rows, cols = 8000, 9000  # 576 MB; a row is 72 kB, about 18 pages
@@ -58,6 +59,7 @@ def test_the_windows_ahead_of_the_writer_are_mapped_and_nothing_further(needs_po
     assert resident(table, 3 * w + 1) < 0.01  # nothing beyond: a long horizon is not committed up front
 
 
+@pytest.mark.slow
 def test_a_run_with_a_large_table_gives_the_same_numbers_with_and_without_it(needs_populate, monkeypatch):
     """The horizon runs a window per C call when a table is mapped ahead: the same rows bit for bit as one
     call for the whole horizon (``Simulator(prefault=False)``); the results say which ran."""

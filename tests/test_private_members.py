@@ -10,6 +10,8 @@ import ast
 from collections import defaultdict
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("components", "harness", "fmus", "robots", "verify", "experiments", "cli", "benchmarks", "examples")
 
@@ -52,6 +54,7 @@ def _violations(files: list[Path]) -> list[str]:
             for file, line, name, text in reads if name not in defined[file.parent] and name not in THIRD_PARTY]
 
 
+@pytest.mark.slow
 def test_no_module_reads_another_packages_private_members():
     files = [f for folder in FOLDERS for f in (ROOT / folder).rglob("*.py")]
     assert len(files) > 100

@@ -152,6 +152,7 @@ def _contains(printed: tuple[Decimal, Decimal], lo: float, hi: float) -> bool:
     return printed[0] <= Decimal(lo) and Decimal(hi) <= printed[1]
 
 
+@pytest.mark.slow
 def test_not_proved_names_the_knob(vdp_proof) -> None:
     """At 64 bits and order 8 the classical cycle (proved at the defaults) is not proved: the reason says
     that more bits or a higher order may succeed."""
@@ -176,6 +177,7 @@ def test_the_proof_states_the_tape_doubles() -> None:
     assert Decimal(0.37) in got and Decimal("0.37") not in got
 
 
+@pytest.mark.slow
 def test_proof_output_states_what_was_proved(vdp_proof) -> None:
     from cpgsim.cli.commands.verify import _proof_text
 
@@ -198,6 +200,7 @@ def test_interval_text_rounds_outward() -> None:
     assert lo <= Decimal(-1.344e-4) and Decimal(2.5e-7) <= hi
 
 
+@pytest.mark.slow
 def test_every_printed_interval_contains_the_json_one(vdp_proof) -> None:
     from cpgsim.cli.commands.verify import _proof_text
 
@@ -215,6 +218,7 @@ def test_every_printed_interval_contains_the_json_one(vdp_proof) -> None:
 
 # -- proofs ----------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_classical_van_der_pol_period_is_enclosed(vdp_proof) -> None:
     _, _, res = vdp_proof
     assert res.proved and res.stable, res.reason
@@ -228,6 +232,7 @@ def test_classical_van_der_pol_period_is_enclosed(vdp_proof) -> None:
     assert d["section"]["state"] == "z.x" and d["section"]["level"] == 0.0
 
 
+@pytest.mark.slow
 def test_numeric_multipliers_lie_in_the_proved_enclosures(vdp_proof) -> None:
     _, rep, res = vdp_proof
     num = rep.cycle.nontrivial
@@ -486,6 +491,7 @@ def test_damped_linear_oscillator_gets_a_verdict_not_an_internal_error(tmp_path,
         assert err.strip().splitlines()[-1].startswith("not proved: no periodic orbit")
 
 
+@pytest.mark.slow
 def test_linear_centre_and_free_particle_get_verdicts(tmp_path, capsys) -> None:
     """x'' + 1.69 x = 0 (a centre: a family of orbits, none isolated) and x'' = 0 (every state an
     equilibrium, a structurally singular Jacobian): exit 1 with a verdict, never an internal error."""
@@ -499,6 +505,7 @@ def test_linear_centre_and_free_particle_get_verdicts(tmp_path, capsys) -> None:
     assert "internal error" not in err and "no stable cycle" in out.splitlines()[0]
 
 
+@pytest.mark.slow
 def test_cli_exit_codes_not_proved_and_bad_input(tmp_path, capsys) -> None:
     """Exit 1: nothing to prove (the damped oscillator converges to the origin); exit 2: bad input."""
     o = str(tmp_path / "o")

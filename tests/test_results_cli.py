@@ -98,6 +98,7 @@ def test_cli_graph_writes_svg(tmp_path):
     (["simulate", "network", "-o", "x.txt"], "must end in .arrow, .csv or .npz"),
     (["graph", "missing_file.py:build"], "does not exist"),
 ])
+@pytest.mark.slow
 def test_cli_bad_input_is_one_line_exit_2(argv, fragment, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "cpgsim.cli.main", *argv], capture_output=True, text=True,
                           cwd=tmp_path, env={"PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1]),

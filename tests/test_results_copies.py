@@ -47,6 +47,7 @@ def flat_run(tmp_path_factory):
     return out / "results.arrow"
 
 
+@pytest.mark.slow
 def test_a_real_run_stores_its_copies_once_and_loads_them_back_bit_for_bit(flat_run, tmp_path):
     res = Results.load(flat_run)
     meta = json.loads(pa.ipc.open_file(pa.OSFile(str(flat_run))).schema.metadata[b"cpgsim"])
@@ -62,6 +63,7 @@ def test_a_real_run_stores_its_copies_once_and_loads_them_back_bit_for_bit(flat_
     assert plain.data.tobytes() == res.data.tobytes() and plain.time.tobytes() == res.time.tobytes()
 
 
+@pytest.mark.slow
 def test_a_10s_flat_run_grows_at_most_the_bytes_per_simulated_second_of_docs_performance(flat_run):
     res = Results.load(flat_run)
     per_second = flat_run.stat().st_size / (res.time[-1] - res.time[0])
@@ -70,6 +72,7 @@ def test_a_10s_flat_run_grows_at_most_the_bytes_per_simulated_second_of_docs_per
     assert REACHED_BYTES_PER_SIMULATED_SECOND > TARGET_BYTES_PER_SIMULATED_SECOND
 
 
+@pytest.mark.slow
 def test_pandas_polars_and_pyarrow_with_the_documented_snippet_get_what_results_load_gets(flat_run):
     res = Results.load(flat_run)
     table = _snippet(flat_run)

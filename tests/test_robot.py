@@ -132,6 +132,7 @@ def test_body_frame_foot_positions_match_standing_posture():
 
 # -- (b), (e) standing --------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("geometry", [YU_SIM, YU_PROTOTYPE], ids=lambda g: g.name)
 def test_stands_on_flat_ground(geometry):
     robot = DartHexapod(geometry=geometry)
@@ -162,6 +163,7 @@ def test_macro_step_multiple_of_world_step():
         robot.do_step(1.0, 0.001)
 
 
+@pytest.mark.slow
 def test_fell_when_servos_too_weak():
     robot = DartHexapod(kp=0.01, kd=0.01)
     _stand(robot, 1.0)
@@ -171,6 +173,7 @@ def test_fell_when_servos_too_weak():
 
 # -- (c) contact sensing over a ditch ------------------------------------------------------------
 
+@pytest.mark.slow
 def test_foot_over_ditch_reads_zero():
     # leg 3 (R1) stands at (x, y) = (0.245, 0.1): a 40 mm deep ditch across the right side under it
     terrain = tr.ditches([(0.04, 0.06, 0.07)], side="right")

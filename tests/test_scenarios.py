@@ -22,6 +22,7 @@ from cpgsim.robots import terrain as tr
 BUILTIN = ["ditches", "flat", "fukuhara-amputation", "fukuhara-gaits", "fukuhara-gap", "prototype-step", "step"]
 
 
+@pytest.mark.slow
 def test_every_builtin_scenario_is_a_file_that_builds_and_round_trips():
     assert builtin_names() == BUILTIN
     for name in BUILTIN:

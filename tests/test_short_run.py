@@ -63,6 +63,7 @@ def test_the_readout_library_is_made_once_per_function():
         pytest.skip("no C compiler")
 
 
+@pytest.mark.slow
 def test_a_run_summary_reports_its_parts(tmp_path):
     from cpgsim.experiments.runner import run_scenario
 

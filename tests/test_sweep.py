@@ -81,6 +81,7 @@ def test_run_trial_records_a_failing_scenario(tmp_path):
     assert rec["status"] == "failed" and "no_such_option" in rec["error"]
 
 
+@pytest.mark.slow
 def test_vary_groups_share_seeds(tmp_path):
     doc = run_sweep("fukuhara-gaits", 2, 3, tmp_path, sets={"setting": 1.0}, vary=parse_vary("rule2=1,0"),
                     serial=True, progress=False, trial_fn=_flaky_trial)
@@ -201,6 +202,7 @@ def _same_every_seed(scenario, seed, sets, out_dir, t_end=None, plots=False):
                         "stalled": False, "distance_m": 0.09, "max_tilt_deg": 1.5}}
 
 
+@pytest.mark.slow
 def test_identical_replicates_are_marked_and_failures_explained(tmp_path):
     """Found from outside: 2 trials at 0.05 m gave identical outcomes and were reported as 0/2 (Wilson
     0-66 %) with no reason. Now: marked `=`, counted as one experiment in a note, reasons listed."""
@@ -213,6 +215,7 @@ def test_identical_replicates_are_marked_and_failures_explained(tmp_path):
     assert "0/2 = successful" in lines and "not successful: min_distance_m (2)" in lines
 
 
+@pytest.mark.slow
 def test_distinct_outcomes_are_not_marked(tmp_path):
     def varied(scenario, seed, sets, out_dir, t_end=None, plots=False):
         rec = _same_every_seed(scenario, seed, sets, out_dir)

@@ -149,6 +149,7 @@ def test_the_locked_orbit_is_the_lock_a_forward_run_settles_on(eps, b, k):
     assert fol[1] == pytest.approx(o.y2_switch, abs=1e-5 * amp)
 
 
+@pytest.mark.slow
 def test_no_locked_orbit_is_one_line():
     """eps = 1, k = 0.1: a forward run keeps drifting (the slow test below shows it), so the solver refuses."""
     with pytest.raises(ParameterError, match="do not lock") as info:

@@ -128,6 +128,7 @@ def column_runs(columns: np.ndarray) -> list[tuple[slice, slice]]:
 def run_fused(runner: FusedLoop, plan: Any, rec: Any, times: np.ndarray, n: int, progress_bar: Any,
               on_diverged, chunk: int = CHUNK) -> int:
     """Macro steps ``0 .. n-1`` through ``runner`` in chunks; returns ``n`` (the next row for the master)."""
+    chunk = getattr(runner, "chunk", chunk)  # the loop's own (a MuJoCo batch's trials: BATCH_CHUNK)
     slices = runner.output_slices
     y_runs = column_runs(plan.yj)
     k = 0

@@ -36,12 +36,19 @@ from cpgsim.robots.mujoco.native import BATCH, library
 WAIT_S = 0.002
 """How long a round waits for trials that have not handed in their chunk yet (busy in Python)."""
 
+BATCH_CHUNK = 500
+"""Macro steps per chunk of a trial in a batch (a trial alone: ``harness/cosim/fused.py:CHUNK``, 100). Between
+two rounds every trial records its chunk and hands in the next under the one GIL while the C threads wait;
+5x longer chunks make those hand-overs 5x fewer (the numbers do not depend on the chunk: the C loop keeps its
+state between chunks)."""
+
 
 class Batch:
     """The chunks of the trials' fused loops, run together (see the module docstring)."""
 
     def __init__(self, threads: int | None = None) -> None:
         self.threads = max(1, int(threads)) if threads else available_threads()
+        self.chunk = BATCH_CHUNK
         self._lib = library()
         self._cv = threading.Condition()
         self._pending: list[list[Any]] = []  # [loop, done flag, rows, status]
@@ -117,13 +124,14 @@ def run_batch(jobs: Sequence[Callable[[], Any]], threads: int | None = None, con
     """Run ``jobs`` (whole trials) on Python threads, their MuJoCo fused loops advanced together
     (:class:`Batch`, ``threads`` C threads); returns ``[(result, exception), ...]`` in the order of ``jobs``.
 
-    ``concurrency``: trials alive at once (default ``2 * threads + 1``: enough to keep the C threads busy
-    while some trials are in Python). ``on_done(i, result, exc)`` is called on this thread as each trial
-    ends (a progress bar). A trial that raises stops only itself: its exception is returned.
+    ``concurrency``: trials alive at once (default ``2 * threads + 2``: enough to keep the C threads busy
+    while some trials are in Python, and a whole number of chunks per C thread when all are in C).
+    ``on_done(i, result, exc)`` is called on this thread as each trial ends (a progress bar). A trial that
+    raises stops only itself: its exception is returned.
     """
     batch = Batch(threads)
     n = len(jobs)
-    limit = max(1, int(concurrency)) if concurrency else 2 * batch.threads + 1
+    limit = max(1, int(concurrency)) if concurrency else 2 * batch.threads + 2
     results: list[tuple[Any, BaseException | None]] = [(None, None)] * n
     finished: list[int] = []
     threads_alive: dict[int, threading.Thread] = {}

@@ -152,7 +152,8 @@ class FusedLoop(FusedLoopBase):
 
     def __init__(self, plant, native: NativeMujocoStep, request: FusedRequest, u_idx: np.ndarray,
                  o_idx: np.ndarray, qt_idx: np.ndarray) -> None:
-        super().__init__(plant, request, u_idx, o_idx, qt_idx)
+        batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco.batch
+        super().__init__(plant, request, u_idx, o_idx, qt_idx, **({"chunk": batch.chunk} if batch else {}))
         self.native = native
         b = plant.buffers
         feval, fctx = plant.compiled_readout.c_entry()  # the readout compiled on the plant's buffers
@@ -167,7 +168,7 @@ class FusedLoop(FusedLoopBase):
                       b.vel.ctypes.data_as(dp), b.contact.ctypes.data_as(dp),
                       b.out.ctypes.data_as(dp), b.out.size, q_i, len(request.yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
-        self.batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco.batch
+        self.batch = batch
         self.trial = None
         if self.batch is not None:
             self.trial = lib.cpgsim_mj_trial_new(*self._head)

@@ -39,6 +39,17 @@ the first; a discrete state, so the filter does not depend on the step size); ``
 passes the force through unchanged. It models a filtered force sensor (the prototype's "filter-like
 threshold", Yu Sec. 6.2) for docs/fidelity.md open item 2. ``force_f`` outputs the filtered force.
 
+Sensing delay (a study option, off by default): ``delay_f`` (s, 0 to 50 ms) makes Y8 read the toe force
+of ``k = round(delay_f / dt)`` samples ago, ``dt`` the time since the last sample (the macro step): a
+delay line of ``DELAY_SAMPLES`` = 50 past samples and the current one held as the discrete state
+``force_hist`` (newest first; before the first sample the force is taken to have been the first
+sample's), ``dt`` as the discrete state ``h_f`` (the signals read after the update at the same time
+see the same delay). The delayed force then goes through the low-pass (``tau_f``), so ``force_f`` is
+the force as Y8 reads it; Y9 and support keep the raw force. ``delay_f = 0`` (default) passes the
+force through unchanged; a ``delay_f`` above 50 ms is refused (ParameterError), and at a macro step
+below 1 ms ``k`` is cut to 50 samples. A pure transport delay of the sensor, for docs/fidelity.md
+open item 2 beside ``tau_f``.
+
 Parameters: ``Fcx``, ``Fcy``, ``Fcz`` (N, >= 0; Yu simulation 10, 10, 2 N, prototype 30 N),
 ``debounce`` (s, >= 0), ``support_ratio`` (>= 0). ``lambda_td`` and ``support`` start at 1 (standing),
 ``lambda_ob`` at 0.
@@ -52,6 +63,8 @@ import casadi as ca
 
 from cpgsim.components.core import Block, Equations, Symbols
 
+DELAY_SAMPLES = 50  # the delay line's length: 50 ms at 1 ms sampling
+
 
 def debounced(flag, t_agree, raw, t, debounce):
     """Persistence filter: ``(flag+, t_agree+)`` after a sample of ``raw`` at time ``t``."""
@@ -60,6 +73,29 @@ def debounced(flag, t_agree, raw, t, debounce):
     new_flag = ca.if_else(switch, raw, flag)
     new_t = ca.if_else(ca.logic_or(agree, switch), t, t_agree)
     return new_flag, new_t
+
+
+def delay_line(f, line, h_last, t_last, t, delay):
+    """Pure delay: ``(f_delayed, line+, h+)`` for the force ``f`` sampled at ``t`` (see the module docstring).
+
+    ``line`` holds the force at the last ``DELAY_SAMPLES + 1`` samples (3 each, newest first), ``t_last``
+    the time of the newest (< 0: none yet, the history is then taken to be ``f``), ``h_last`` the sampling
+    interval before it (0: unknown). A new sample (``t > t_last``) is pushed in front; evaluated again at
+    ``t = t_last`` (the signals after the update) the line is left as it is, so the result is the same.
+    The delay in samples is ``k = round(delay / h)``, at most ``DELAY_SAMPLES``; ``k = 0`` returns ``f``.
+    """
+    n = 3 * DELAY_SAMPLES
+    first = t_last < 0
+    new = t > t_last + 1e-12
+    h = ca.if_else(ca.logic_and(new, ca.logic_not(first)), t - t_last, h_last)
+    prev = ca.if_else(first, ca.repmat(f, DELAY_SAMPLES + 1, 1), line)
+    line = ca.if_else(new, ca.vertcat(f, prev[:n]), line)  # line[0:3] is f at t
+    k = ca.if_else(ca.logic_and(delay > 0, h > 0),
+                   ca.fmin(ca.floor(delay / ca.fmax(h, 1e-12) + 0.5), DELAY_SAMPLES), 0)
+    out = f
+    for i in range(1, DELAY_SAMPLES + 1):
+        out = ca.if_else(k == i, line[3 * i:3 * (i + 1)], out)
+    return out, line, h
 
 
 class YuSensoryNeurons(Block):
@@ -75,6 +111,11 @@ class YuSensoryNeurons(Block):
         self.add_parameter("tau_f", 0.0, "s", (0, math.inf), "low-pass time constant on the toe force (0: off)")
         self.add_discrete_state("force_f", (0.0, 0.0, 0.0), "N", "low-passed toe force (tau_f > 0)")
         self.add_discrete_state("t_f", -1.0, "s", "time of the last filter sample (< 0: none yet)")
+        self.add_parameter("delay_f", 0.0, "s", (0, DELAY_SAMPLES * 1e-3),
+                           f"pure delay on the toe force Y8 reads (0: off; at most {DELAY_SAMPLES} samples)")
+        self.add_discrete_state("force_hist", (0.0,) * (3 * (DELAY_SAMPLES + 1)), "N",
+                                f"toe force at the last {DELAY_SAMPLES + 1} samples, newest first (delay_f > 0)")
+        self.add_discrete_state("h_f", 0.0, "s", "sampling interval before the last sample (0: not known yet)")
         self.add_input("toe_force", 3, "N", description="ground force on the foot (Fx lateral, Fy forward, Fz up)")
         self.add_discrete_state("lambda_ob", 0.0, description="debounced obstacle flag")
         self.add_discrete_state("lambda_td", 1.0, description="debounced touchdown flag")
@@ -88,14 +129,16 @@ class YuSensoryNeurons(Block):
         self.add_output("raw_td", unit="1", description="Y9 without debounce")
         self.add_output("support", unit="1", description="foothold-like contact (Fz > Fcz, within 45 deg), debounced")
         self.add_output("raw_sup", unit="1", description="support without debounce")
-        self.add_output("force_f", 3, "N", description="toe force as the thresholds read it (low-passed if tau_f > 0)")
+        self.add_output("force_f", 3, "N",
+                        description="toe force as Y8 reads it (delayed if delay_f > 0, low-passed if tau_f > 0)")
 
     def define(self, v: Symbols) -> Equations:
         f_in, p, z = v.u["toe_force"], v.p, v.z
+        f_d, hist, h = delay_line(f_in, z["force_hist"], z["h_f"], z["t_f"], v.t, p["delay_f"])
         on = p["tau_f"] > 0
         a = ca.if_else(ca.logic_and(on, z["t_f"] >= 0),
                        1 - ca.exp(-(v.t - z["t_f"]) / ca.fmax(p["tau_f"], 1e-12)), 1)  # first sample: F_f = F
-        f = ca.if_else(on, z["force_f"] + a * (f_in - z["force_f"]), f_in)
+        f = ca.if_else(on, z["force_f"] + a * (f_d - z["force_f"]), f_d)
         raw_ob = ca.if_else(ca.logic_or(ca.fabs(f[0]) > p["Fcx"], ca.fabs(f[1]) > p["Fcy"]), 1, 0)
         raw_td = ca.if_else(ca.fabs(f_in[2]) > p["Fcz"], 1, 0)
         ob, t_ob = debounced(z["lambda_ob"], z["t_ob"], raw_ob, v.t, p["debounce"])
@@ -107,6 +150,6 @@ class YuSensoryNeurons(Block):
         return Equations(
             outputs={"lambda_ob": z["lambda_ob"], "lambda_td": z["lambda_td"], "raw_ob": raw_ob, "raw_td": raw_td,
                      "support": z["support"], "raw_sup": raw_sup, "force_f": f},
-            updates={"force_f": f, "t_f": v.t, "lambda_ob": ob, "t_ob": t_ob, "lambda_td": td, "t_td": t_td,
-                     "support": sup, "t_sup": t_sup},
+            updates={"force_f": f, "force_hist": hist, "h_f": h, "t_f": v.t, "lambda_ob": ob, "t_ob": t_ob,
+                     "lambda_td": td, "t_td": t_td, "support": sup, "t_sup": t_sup},
         )

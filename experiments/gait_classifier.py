@@ -156,6 +156,20 @@ def lift_offs(stance: np.ndarray) -> np.ndarray:
     return np.flatnonzero((s[:-1] == 1) & (s[1:] == 0)) + 1
 
 
+def debounced_window(time: np.ndarray, stance: np.ndarray, legs: Sequence[int], t_start: float,
+                     min_bout: float) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray]]:
+    """The analysis window ``t >= t_start`` of a stance pattern (time x 6 booleans): ``(keep, t, {leg:
+    pattern})``, each leg's pattern debounced (:func:`debounce`, bouts under ``min_bout`` s merged) as every
+    reading of a gait here takes it."""
+    time = np.asarray(time, dtype=float)
+    keep = time >= t_start
+    t = time[keep]
+    dt = float(np.median(np.diff(t))) if len(t) > 2 else 1.0
+    min_len = max(1, int(round(min_bout / dt)))
+    stance = np.asarray(stance)
+    return keep, t, {i: debounce(stance[keep, i], min_len) for i in legs}
+
+
 def _circ_dist(a: float, b: float) -> float:
     d = (a - b) % 1.0
     return min(d, 1.0 - d)
@@ -171,15 +185,11 @@ def classify(time: np.ndarray, stance: np.ndarray, t_start: float = 0.0, legs: l
     """
     time = np.asarray(time, dtype=float)
     legs = list(range(6)) if legs is None else sorted(legs)
-    keep = time >= t_start
-    t = time[keep]
     ref = legs[0]
     rule = RULE_TEXT.format(fz=fz_contact, mb=min_bout, t0=t_start, ref=LEG_NAMES[ref], tol=tolerance)
+    _, t, pattern = debounced_window(time, stance, legs, t_start, min_bout)
     if len(t) < 3:
         return GaitReport("other", "window is empty", t_start, float(time[-1]), rule=rule)
-    dt = float(np.median(np.diff(t)))
-    min_len = max(1, int(round(min_bout / dt)))
-    pattern = {i: debounce(np.asarray(stance)[keep, i], min_len) for i in legs}
     duties = {LEG_NAMES[i]: float(pattern[i].mean()) for i in legs}
     duty = float(np.mean(list(duties.values())))
     report = GaitReport("other", "", t_start, float(t[-1]), duty_factor=duty, duty_factors=duties,
@@ -260,12 +270,7 @@ def lead_lag(time: np.ndarray, stance: np.ndarray, hind: int, front: int, t_star
     ``t_start``, debounced as :func:`classify` does (bouts under ``min_bout`` s merged). A front leg that lifts
     off again within the same hind cycle (a re-lift after rule 3 set it down) counts once: its first lift-off.
     ``mean`` is NaN (and ``hind_leads`` False) without a hind cycle holding a front lift-off."""
-    time = np.asarray(time, dtype=float)
-    keep = time >= t_start
-    t = time[keep]
-    dt = float(np.median(np.diff(t))) if len(t) > 2 else 1.0
-    min_len = max(1, int(round(min_bout / dt)))
-    pattern = {i: debounce(np.asarray(stance)[keep, i], min_len) for i in (hind, front)}
+    _, t, pattern = debounced_window(time, stance, (hind, front), t_start, min_bout)
     hind_lo, front_lo = t[lift_offs(pattern[hind])], t[lift_offs(pattern[front])]
     phases = []
     for a, b in zip(hind_lo[:-1], hind_lo[1:], strict=True):

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from cpgsim.experiments.gait_classifier import debounce, lift_offs
+from cpgsim.experiments.gait_classifier import debounced_window, lift_offs
 
 
 @dataclass
@@ -37,13 +37,10 @@ def stance_kinematics(time: np.ndarray, stance: np.ndarray, body: np.ndarray, fe
                       t_start: float = 0.0, min_bout: float = 0.15) -> StanceKinematics:
     """``stance`` time x 6 booleans, ``body`` time x 3 (m), ``feet`` time x 18 (world, leg-major), forward = +y;
     only ``t >= t_start``, bouts under ``min_bout`` s merged (as the gait classifier does)."""
-    time = np.asarray(time, dtype=float)
-    keep = time >= t_start
-    t, body, feet = time[keep], np.asarray(body)[keep], np.asarray(feet)[keep].reshape(-1, 6, 3)
-    min_len = max(1, int(round(min_bout / float(np.median(np.diff(t))))))
+    keep, t, pattern = debounced_window(time, stance, range(6), t_start, min_bout)
+    body, feet = np.asarray(body)[keep], np.asarray(feet)[keep].reshape(-1, 6, 3)
     periods, stances, sweeps, slips, duty = [], [], [], [], []
-    for i in range(6):
-        s = debounce(np.asarray(stance)[keep, i], min_len)
+    for i, s in pattern.items():
         duty.append(s.mean())
         lo = lift_offs(s)
         periods += list(np.diff(t[lo]))

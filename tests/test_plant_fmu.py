@@ -47,16 +47,15 @@ class Driver:
         self.md = read_model_description(fmu.path)
         self.dir = extract(fmu.path)
         self.log = [] if logged is None else logged
-        kw = {"logger": self._logger if fmu.fmi == 2 else self._logger3}
-        self.inst = instantiate_fmu(self.dir, self.md, fmi_type="CoSimulation", debug_logging=False, **kw)
+        self.inst = instantiate_fmu(self.dir, self.md, fmi_type="CoSimulation", debug_logging=False,
+                                    logger=self._logger)
         self.vr_in = [fmu.vr(f"q_target[{i}]") for i in range(18)]
         self.outputs = [v.name for v in self.md.modelVariables if v.causality == "output" and v.type != "Boolean"]
         self.vr_out = [fmu.vr(n) for n in self.outputs]
 
-    def _logger(self, env, name, status, category, message) -> None:
-        self.log.append(message.decode() if isinstance(message, bytes) else str(message))
-
-    def _logger3(self, env, status, category, message) -> None:
+    def _logger(self, *args) -> None:
+        """fmpy's logger for FMI 2 (env, name, status, category, message) and 3 (no name): the message is last."""
+        message = args[-1]
         self.log.append(message.decode() if isinstance(message, bytes) else str(message))
 
     def get(self, vrs):

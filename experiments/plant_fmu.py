@@ -97,6 +97,9 @@ def export_setup_plant(setup, path: str | Path, *, fmi: int = 2, name: str | Non
     if plant.values["velocity_ff"]:
         raise ExportError(f"scenario {label}: the plant FMU does not feed the target velocity forward "
                           "(robot.velocity_ff = true)")
+    if plant.ankle is not None:
+        raise ExportError(f"scenario {label}: the plant FMU has rigid feet; a compliant ankle ([robot.ankle]) "
+                          "is not exported")
     identifier = build.model_identifier(name or f"hexapod_{label}")
     with tempfile.TemporaryDirectory(prefix="cpgsim-plant-fmu-") as tmp:
         staging = Path(tmp) / "fmu"

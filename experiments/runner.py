@@ -55,6 +55,13 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
         raise better from None
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
     setup.graph.blocks[setup.robot].native = scenario.doc["robot"]["native"]  # read at setup
+    ankle = scenario.doc["robot"].get("ankle") or {}
+    if ankle:
+        if set(ankle) != {"stiffness", "damping"}:
+            raise ScenarioError(f"robot.ankle needs both stiffness (N/m) and damping (N*s/m), got "
+                                f"{', '.join(sorted(ankle))} ({scenario.source})")
+        setup.graph.blocks[setup.robot].ankle = dict(ankle)  # read at setup
+        setup.info["ankle"] = dict(ankle)
     if scenario.doc["disturbance"]:
         from cpgsim.robots.disturbance import as_pushes
 

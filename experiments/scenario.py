@@ -127,6 +127,12 @@ MUJOCO_SCHEMA: dict[str, Field] = {  # the fields of cpgsim.robots.mujoco.mjcf.C
 }
 """``[robot.mujoco]``: MuJoCo's contact model for a ``robot.engine = "mujoco"`` run (docs/engines.md)."""
 
+ANKLE_SCHEMA: dict[str, Field] = {  # cpgsim.robots.description.AnkleSpring, which checks the values
+    "stiffness": Field(float, **POSITIVE, doc="N/m, the ankle spring along the tibia (Yu 2019, Sec. 6.2.1)"),
+    "damping": Field(float, **POSITIVE, doc="N*s/m, the ankle damper beside it"),
+}
+"""``[robot.ankle]``: a compliant ankle on every leg, in either engine (docs/fidelity.md, open item 2)."""
+
 SCHEMA: dict[str, Any] = {
     "name": Field(str, doc="scenario name"),
     "description": Field(str, "", doc="one line"),
@@ -144,6 +150,7 @@ SCHEMA: dict[str, Any] = {
         "friction": Field(float, **POSITIVE, doc="Coulomb friction of the robot's shapes"),
         "velocity_ff": Field(bool, doc="servo velocity feed-forward"),
         "mujoco": MUJOCO_SCHEMA,
+        "ankle": ANKLE_SCHEMA,
     },
     "controller": {
         "kind": Field(str, "yu", choices=CONTROLLER_KINDS),

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import LEG_NAMES, RobotGeometry, leg_fk, leg_ik
 
 GRAVITY = 9.81
@@ -115,12 +116,36 @@ class ShapeSpec:
 
 
 @dataclass(frozen=True)
+class AnkleSpring:
+    """A passive compliant ankle: the foot on a slide joint along the tibia, held by a linear spring-damper.
+
+    Yu 2019, Sec. 6.2.1 (the prototype, Fig. 16): "a gauged linear spring is also installed inside the ankle
+    housing to connect the force sensor", between the toe and the shank. Here the foot sphere is its own body
+    (mass ``geometry.leg.foot_mass``) on a slide joint along the tibia's axis at the tibia's end; the joint's
+    coordinate ``s`` (m, > 0 extends the leg) feels ``-stiffness s - damping ds/dt``, rest length 0. Both
+    engines integrate it (DART's joint spring and damper, MuJoCo's joint ``stiffness`` and ``damping``). The
+    toe force the plant reports is still the ground's force on the foot sphere, so a sensor behind the spring
+    reads it filtered by the foot's small mass (the prototype's sensor sits behind its spring too)."""
+
+    stiffness: float
+    damping: float
+
+    def __post_init__(self) -> None:
+        for name in ("stiffness", "damping"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value <= 0:
+                raise ParameterError(f"ankle.{name} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
 class LinkSpec:
     """One rigid link and the joint that carries it.
 
-    ``parent`` None: the body, on a free joint. Otherwise a revolute ``joint`` about ``axis``, whose frame
-    sits at ``origin`` in the parent's frame, turned by pi about ``z`` when ``turned`` (the left legs'
-    alpha joints); the link frame is the joint frame."""
+    ``parent`` None: the body, on a free joint. Otherwise a ``joint`` of ``kind`` ``"hinge"`` (revolute, about
+    ``axis``) or ``"slide"`` (prismatic, along ``axis``, with the spring-damper ``spring``), whose frame sits
+    at ``origin`` in the parent's frame, turned by pi about ``z`` when ``turned`` (the left legs' alpha
+    joints); the link frame is the joint frame."""
 
     name: str
     parent: str | None
@@ -129,6 +154,8 @@ class LinkSpec:
     origin: tuple[float, float, float]
     turned: bool
     shapes: tuple[ShapeSpec, ...]
+    kind: str = "hinge"
+    spring: AnkleSpring | None = None
 
     def mass_properties(self) -> BodyMass:
         """Mass, centre of mass and inertia about it, from the shapes' closed forms."""
@@ -169,8 +196,13 @@ class HexapodDescription:
         return float(sum(s.mass for s in self.shapes()))
 
 
-def describe_hexapod(geometry: RobotGeometry, links: LinkSizes | None = None) -> HexapodDescription:
-    """The link tree of ``geometry`` (body at the origin, all joints at 0)."""
+def describe_hexapod(geometry: RobotGeometry, links: LinkSizes | None = None,
+                     ankle: AnkleSpring | None = None) -> HexapodDescription:
+    """The link tree of ``geometry`` (body at the origin, all joints at 0).
+
+    With ``ankle``, each foot sphere is a link of its own (``{leg}_foot`` on the slide joint ``{leg}_ankle``,
+    :class:`AnkleSpring`) instead of a shape of the tibia; the six foot links come after every leg's three
+    links, so an engine that numbers joints in build order (DART) has the 18 servoed joints first."""
     leg = geometry.leg
     links = links or LinkSizes.for_geometry(geometry)
     body = LinkSpec("body", None, None, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), False, (
@@ -193,9 +225,23 @@ def describe_hexapod(geometry: RobotGeometry, links: LinkSizes | None = None) ->
                             False, (
             ShapeSpec(f"{name}_tibia_box", "box", (shank_len, links.tibia_width, links.tibia_width),
                       (shank_len / 2, 0.0, 0.0), leg.shank_mass, "shank", i, color),
-            ShapeSpec(f"{name}_foot", "sphere", (leg.foot_radius,), (leg.shank, 0.0, 0.0), leg.foot_mass, "foot", i,
-                      FOOT_COLOR))))
+            *(() if ankle else (_foot_shape(geometry, i, (leg.shank, 0.0, 0.0)),)))))
+    if ankle is not None:
+        if not leg.foot_mass > 0:
+            raise ParameterError("a compliant ankle needs a foot of positive mass (geometry.leg.foot_mass)")
+        for i in range(len(geometry.mounts)):
+            name = LEG_NAMES[i]
+            out.append(LinkSpec(f"{name}_foot", f"{name}_tibia", f"{name}_ankle", (1.0, 0.0, 0.0),
+                                (leg.shank, 0.0, 0.0), False, (_foot_shape(geometry, i, (0.0, 0.0, 0.0)),),
+                                kind="slide", spring=ankle))
     return HexapodDescription(geometry, tuple(out))
+
+
+def _foot_shape(geometry: RobotGeometry, leg_index: int, offset: tuple[float, float, float]) -> ShapeSpec:
+    """The foot sphere of a leg, at ``offset`` in the link that carries it."""
+    leg = geometry.leg
+    return ShapeSpec(f"{LEG_NAMES[leg_index]}_foot", "sphere", (leg.foot_radius,), offset, leg.foot_mass, "foot",
+                     leg_index, FOOT_COLOR)
 
 
 # -- mass properties ---------------------------------------------------------------------------------

@@ -42,10 +42,10 @@ import numpy as np
 from cpgsim.components.core import CoSimBlock, ModelError, ParameterError
 from cpgsim.components.geometry import RobotGeometry
 from cpgsim.harness.native import NativeFunction, NativeUnavailable
-from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, FALL_TILT_DEG, fallen, tilt_angle
+from cpgsim.robots.description import CONTACT_BODY, CONTACT_LINK, FALL_TILT_DEG, AnkleSpring, fallen, tilt_angle
 from cpgsim.robots.disturbance import Push, active_pushes, as_pushes
 from cpgsim.robots.ports import PORT_SLICES, READOUT_SIZE, declare_plant
-from cpgsim.robots.readout import readout_function
+from cpgsim.robots.readout import StateLayout, readout_function
 from cpgsim.robots.terrain import Terrain, flat
 
 
@@ -83,7 +83,10 @@ class HexapodPlant(CoSimBlock, ABC):
       ``start_s``, ``duration_s``, ``force_N`` in the world frame, ``point_m`` in the body frame), applied
       at every engine step they cover;
     - ``amputated``: leg indices whose links touch nothing (Fukuhara 2022, Sec. 3.2: they keep their mass
-      and are held folded by the controller).
+      and are held folded by the controller);
+    - ``ankle``: a compliant ankle on every leg (:class:`~cpgsim.robots.description.AnkleSpring`, or a mapping
+      with ``stiffness`` N/m and ``damping`` N s/m; Yu 2019's prototype, Sec. 6.2.1), read at set-up;
+      default None, the foot rigid on the tibia.
 
     Parameters: ``kp`` (N m/rad), ``kd`` (N m s/rad), ``friction`` (Coulomb coefficient of the robot's
     shapes; the ground has its terrain's), ``velocity_ff`` (0/1).
@@ -100,7 +103,7 @@ class HexapodPlant(CoSimBlock, ABC):
     def __init__(self, name: str, geometry: RobotGeometry, terrain: Terrain | None, q0: Sequence[float] | None,
                  body_height: float | None, sense_shank: bool, settle: float,
                  disturbances: Sequence[Push | Mapping] | None, amputated: Sequence[int],
-                 **params: float) -> None:
+                 ankle: AnkleSpring | Mapping | None = None, **params: float) -> None:
         from cpgsim.robots.description import standing_posture
 
         self.name = name
@@ -124,6 +127,7 @@ class HexapodPlant(CoSimBlock, ABC):
             raise ParameterError(f"amputated must be leg indices 0-5, got {amputated!r}") from None
         if any(not 0 <= i < 6 for i in self.amputated):
             raise ParameterError(f"amputated legs must be leg indices 0-5, got {self.amputated}")
+        self.ankle = ankle
         self._q_target = q0_arr.copy()
         self._resume = None
         self.last_snapshot = None
@@ -309,15 +313,38 @@ class HexapodPlant(CoSimBlock, ABC):
         """The pushes (:mod:`cpgsim.robots.disturbance`) an engine step starting at ``t`` feels."""
         return active_pushes(self.pushes, t, self.time_step) if self.pushes else []
 
+    @property
+    def ankle(self) -> AnkleSpring | None:
+        """The compliant ankle of every leg (None: rigid feet); set it before :meth:`setup`."""
+        return self._ankle
+
+    @ankle.setter
+    def ankle(self, value: AnkleSpring | Mapping | None) -> None:
+        if value is None or isinstance(value, AnkleSpring):
+            self._ankle = value
+        elif isinstance(value, Mapping):
+            unknown = set(value) - {"stiffness", "damping"}
+            if unknown or set(value) != {"stiffness", "damping"}:
+                raise ParameterError(f"{self.name}: ankle needs exactly stiffness (N/m) and damping (N s/m), "
+                                     f"got {', '.join(sorted(value)) or 'nothing'}")
+            self._ankle = AnkleSpring(**value)
+        else:
+            raise ParameterError(f"{self.name}: ankle must be an AnkleSpring or a mapping, got {type(value).__name__}")
+
+    def state_layout(self) -> StateLayout:
+        """Where the 18 joints (and the ankles' slides) sit in the engine's ``pos``/``vel`` (set-up plant)."""
+        return StateLayout.rigid(self.READOUT_ROOT)
+
     # -- readout and outputs ----------------------------------------------------------------------
     def _bind_readout(self) -> None:
         """The compiled sensor readout (:mod:`cpgsim.robots.readout`) on fresh :class:`PlantBuffers`."""
-        b = self.buffers = PlantBuffers(np.zeros(self.POS_SIZE), np.zeros(24))
+        layout = self.state_layout()
+        b = self.buffers = PlantBuffers(np.zeros(layout.pos_size), np.zeros(layout.vel_size))
         self._force_world, self._link_contact, self._contact = b.force_world, b.link_contact, b.contact
         self._pos, self._vel, self._readout_out = b.pos, b.vel, b.out
         self._force_list = [0.0] * 18  # read_contacts' sums, packed into force_world at once
         self._force_bytes = memoryview(b.force_world).cast("B")
-        fn = readout_for(self.geometry, self.READOUT_ROOT)
+        fn = readout_for(self.geometry, self.READOUT_ROOT, layout)
         try:
             self.readout = NativeFunction(fn, [b.pos, b.vel, b.force_world, b.contact], [b.out])
         except NativeUnavailable:  # no C compiler: CasADi's VM evaluates the same function (slower)
@@ -430,15 +457,16 @@ class HexapodPlant(CoSimBlock, ABC):
         return self.compiled_readout is None or bool(self.values["velocity_ff"]) or bool(self.pushes)
 
 
-def readout_for(geometry: RobotGeometry, root: str):
-    """The readout function of a geometry and root-joint layout (built once per process)."""
-    key = (repr(geometry), root)
+def readout_for(geometry: RobotGeometry, root: str, layout: StateLayout | None = None):
+    """The readout function of a geometry, root-joint coordinates and state layout (built once per process)."""
+    layout = layout or StateLayout.rigid(root)
+    key = (repr(geometry), root, layout)
     fn = _READOUTS.get(key)
     if fn is None:
-        fn = _READOUTS[key] = readout_function(geometry, root=root)
+        fn = _READOUTS[key] = readout_function(geometry, root=root, layout=layout)
     return fn
 
 
-_READOUTS: dict[tuple[str, str], object] = {}
+_READOUTS: dict[tuple[str, str, StateLayout], object] = {}
 _ZEROS18 = [0.0] * 18
 _PACK18 = struct.Struct("18d").pack_into

@@ -15,13 +15,13 @@ leg 5 (``JOINT_DOFS``).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import dartpy as dart
 import numpy as np
 
 from cpgsim.components.geometry import RobotGeometry
-from cpgsim.robots.description import LinkSizes, ShapeSpec, combine, describe_hexapod
+from cpgsim.robots.description import AnkleSpring, LinkSizes, ShapeSpec, combine, describe_hexapod
 
 FREE_DOFS = 6
 JOINT_DOFS = slice(FREE_DOFS, FREE_DOFS + 18)
@@ -39,7 +39,8 @@ class HexapodModel:
     joints: list[dart.dynamics.RevoluteJoint]  # 18, leg-major (alpha, beta, gamma)
     tibias: list[dart.dynamics.BodyNode]  # 6, the bodies carrying the feet
     feet: list[dart.dynamics.ShapeNode]  # 6 sphere shape nodes
-    link_bodies: list[list[dart.dynamics.BodyNode]]  # per leg: coxa, femur, tibia
+    link_bodies: list[list[dart.dynamics.BodyNode]]  # per leg: coxa, femur, tibia (and foot, with an ankle)
+    ankles: list[dart.dynamics.PrismaticJoint] = field(default_factory=list)  # 6 with a compliant ankle, dofs 24-29
 
     def set_body_pose(self, position: Sequence[float], rotation: np.ndarray | None = None) -> None:
         """Place the body frame at ``position`` (world, m) with rotation matrix ``rotation``."""
@@ -49,7 +50,7 @@ class HexapodModel:
         if rotation is not None:
             T.set_rotation(np.asarray(rotation, dtype=float))
         self.skeleton.setPositions(np.r_[dart.dynamics.FreeJoint.convertToPositions(T),
-                                         self.skeleton.getPositions()[JOINT_DOFS]])
+                                         self.skeleton.getPositions()[FREE_DOFS:]])
 
     def set_joint_angles(self, q: Sequence[float]) -> None:
         """Set the 18 leg joint angles (rad, leg-major)."""
@@ -91,23 +92,39 @@ def _add_shape(body: dart.dynamics.BodyNode, shape: dart.dynamics.Shape, spec: S
 
 
 def build_hexapod(geometry: RobotGeometry, friction: float = 1.0,
-                  links: LinkSizes | None = None) -> HexapodModel:
+                  links: LinkSizes | None = None, ankle: AnkleSpring | None = None) -> HexapodModel:
     """Build the hexapod skeleton for ``geometry`` (body at the world origin, all joints at 0).
+
+    ``ankle``: a compliant ankle per leg (:class:`~cpgsim.robots.description.AnkleSpring`): the foot on a
+    prismatic joint; its dofs are 24-29, after the 18 servoed joints. The joints carry no DART spring or
+    damper: DART evaluates those implicitly with the velocity predicted before the contact impulse, which
+    biases the static balance of a light foot pressed on the ground (measured: with the ankle's damping at 5,
+    20, 80 N s/m the standing robot's slide came to rest at 1.9, 2.7, 5.3 mm against the 1.21 mm its axial load
+    gives, and MuJoCo gives). :class:`~cpgsim.robots.dart.plant.DartHexapod` applies ``-k s - c ds/dt`` as
+    joint forces before each world step instead.
 
     ``friction`` is the Coulomb coefficient put on every shape of the robot (DART combines two
     touching shapes' coefficients by taking the smaller one). Returns a :class:`HexapodModel`; its
     ``skeleton`` is what goes into a ``dart.simulation.World``.
     """
-    description = describe_hexapod(geometry, links)
+    description = describe_hexapod(geometry, links, ankle)
     skel = dart.dynamics.Skeleton(geometry.name)
     nodes: dict[str, dart.dynamics.BodyNode] = {}
     joints: list[dart.dynamics.RevoluteJoint] = []
+    ankles: list[dart.dynamics.PrismaticJoint] = []
     feet: list[dart.dynamics.ShapeNode] = []
     root_joint = None
     for link in description.links:
         if link.parent is None:
             root_joint, node = skel.createFreeJointAndBodyNodePair()
             root_joint.setName("root")
+        elif link.kind == "slide":
+            props = dart.dynamics.PrismaticJointProperties()
+            props.mName = link.joint
+            props.mAxis = np.array(link.axis)
+            props.mT_ParentBodyToJoint = _translation(link.origin)
+            joint, node = skel.createPrismaticJointAndBodyNodePair(nodes[link.parent], props)
+            ankles.append(joint)  # no DART joint spring: the plant applies the spring-damper (see build_hexapod)
         else:
             props = dart.dynamics.RevoluteJointProperties()
             props.mName = link.joint
@@ -126,7 +143,8 @@ def build_hexapod(geometry: RobotGeometry, friction: float = 1.0,
             parts.append((spec.mass, np.asarray(spec.offset, dtype=float), shape.computeInertia(spec.mass)))
         mass, com, inertia = combine(parts)
         node.setInertia(dart.dynamics.Inertia(mass, com, inertia))
-    link_bodies = [[nodes[f"{leg}_{part}"] for part in ("coxa", "femur", "tibia")]
+    parts = ("coxa", "femur", "tibia", "foot") if ankle is not None else ("coxa", "femur", "tibia")
+    link_bodies = [[nodes[f"{leg}_{part}"] for part in parts]
                    for leg in (link.name[:2] for link in description.links if link.name.endswith("_coxa"))]
     return HexapodModel(skel, geometry, nodes["body"], root_joint, joints, [b[2] for b in link_bodies], feet,
-                        link_bodies)
+                        link_bodies, ankles)

@@ -54,9 +54,10 @@ from cpgsim.harness.native import NativeUnavailable
 from cpgsim.robots.dart import native as dart_native
 from cpgsim.robots.dart.ground import add_terrain
 from cpgsim.robots.dart.model import HexapodModel, build_hexapod
-from cpgsim.robots.description import CONTACT_OTHER, GRAVITY, describe_hexapod
+from cpgsim.robots.description import CONTACT_OTHER, GRAVITY, AnkleSpring, describe_hexapod
 from cpgsim.robots.disturbance import Push
 from cpgsim.robots.plant_base import HexapodPlant
+from cpgsim.robots.readout import StateLayout
 from cpgsim.robots.terrain import Terrain
 
 _free_to_transform = dart.dynamics.FreeJoint.convertToTransform
@@ -94,7 +95,7 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
                  q0: Sequence[float] | None = None, body_height: float | None = None, detector: str = "dart",
                  time_step: float = 1e-3, sense_shank: bool = True, settle: float = 0.0,
                  disturbances: Sequence[Push | Mapping] | None = None, amputated: Sequence[int] = (),
-                 native: bool = True, **params: float) -> None:
+                 native: bool = True, ankle: AnkleSpring | Mapping | None = None, **params: float) -> None:
         if detector not in DETECTORS:
             raise ParameterError(f"unknown collision detector {detector!r} (known: {', '.join(DETECTORS)})")
         if not (math.isfinite(time_step) and time_step > 0):
@@ -106,11 +107,17 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         self.model: HexapodModel | None = None
         self.native_step: dart_native.NativeDartStep | None = None
         super().__init__(name, geometry, terrain, q0, body_height, sense_shank, settle, disturbances, amputated,
-                         **params)
+                         ankle=ankle, **params)
 
     @property
     def is_set_up(self) -> bool:
         return self.world is not None
+
+    def state_layout(self) -> StateLayout:
+        """DART's generalized coordinates: the free joint's six, the 18 joints, then the six ankle slides."""
+        if self.ankle is None:
+            return StateLayout.rigid(self.READOUT_ROOT)
+        return StateLayout(30, 30, tuple(range(6, 24)), tuple(range(6, 24)), tuple(range(24, 30)))
 
     # -- parameters -------------------------------------------------------------------------------
     def set(self, **values: float) -> DartHexapod:
@@ -142,7 +149,9 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         world.setDeactivationOptions(opts)
         self._terrain_skel = add_terrain(world, self.terrain)
 
-        model = build_hexapod(self.geometry, friction=v["friction"])
+        if self.ankle is not None:
+            check_explicit_ankle(self.ankle, self.geometry.leg.foot_mass, self.time_step)
+        model = build_hexapod(self.geometry, friction=v["friction"], ankle=self.ankle)
         model.set_joint_angles(self.q0)
         model.set_body_pose([0.0, 0.0, 0.0])
         z = self.body_height if self.body_height is not None else self._touching_height(model.foot_positions())
@@ -159,7 +168,8 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         # a shape we keep alive, so id() of collisionObject.getShape() is a cheap, stable key.
         self._shapes = []  # keep the wrappers alive so id() stays valid
         self._shape_leg: dict[int, int] = {}
-        codes = {spec.name: spec.contact_code(self.sense_shank) for spec in describe_hexapod(self.geometry).shapes()}
+        codes = {spec.name: spec.contact_code(self.sense_shank)
+                 for spec in describe_hexapod(self.geometry, ankle=self.ankle).shapes()}
         for i, foot in enumerate(model.feet):
             self._register(foot.getShape(), i)
         for bodies in model.link_bodies:
@@ -245,7 +255,7 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     def _bind_native(self) -> None:
         """The C step (:mod:`cpgsim.robots.dart.native`) on this plant's world and buffers, when it works."""
         self.native_step = None
-        if not self.native:
+        if not self.native or self.ankle is not None:  # the C step applies no ankle forces: Python steps them
             return
         readout = self.compiled_readout.c_entry() if self.compiled_readout is not None else None
         try:
@@ -332,6 +342,9 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     def _world_step(self, pushes: Sequence[Push]) -> None:
         """``setForces`` (``world.step()`` clears them, and the external forces too), the pushes as external
         forces on the body, ``world.step()``."""
+        if self.ankle is not None:  # the compliant ankles' spring-damper, explicit (robots.dart.model.build_hexapod)
+            k, c = self.ankle.stiffness, self.ankle.damping
+            self._forces[24:30] = -k * self._skel.getPositions()[24:30] - c * self._skel.getVelocities()[24:30]
         self._skel.setForces(self._forces)
         for push in pushes:
             self.model.body.addExtForce(np.asarray(push.force_N), np.asarray(push.point_m), False, True)
@@ -345,7 +358,7 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         target -- one ``setForces`` call instead of 18 ``setRestPosition`` calls.
         """
         v = self.values
-        legs = self._forces[6:]
+        legs = self._forces[6:24]  # the 18 servoed joints (a compliant ankle's slides follow them)
         np.multiply(q_target, v["kp"], out=legs)
         if velocity is not None:
             legs += v["kd"] * velocity
@@ -450,3 +463,16 @@ class PlantSnapshot:
         vel = self.velocities + tau * (other.velocities - self.velocities)
         return dataclasses.replace(other, positions=pos, velocities=vel)
 
+
+def check_explicit_ankle(ankle: AnkleSpring, foot_mass: float, h: float) -> None:
+    """Refuse an ankle the DART plant's explicit spring-damper cannot step stably at ``h``: the free foot
+    (mass ``foot_mass`` on its slide) under ``x'' = -(k x + c x') / m`` integrated as DART does (velocity first,
+    then position, the force from the step's start) grows unless the step's amplification matrix has spectral
+    radius below 1."""
+    k, c, m = ankle.stiffness, ankle.damping, foot_mass
+    a = np.array([[1.0 - h * h * k / m, h * (1.0 - h * c / m)], [-h * k / m, 1.0 - h * c / m]])
+    radius = float(max(abs(np.linalg.eigvals(a))))
+    if not radius < 1.0:
+        raise ParameterError(f"ankle stiffness {k:g} N/m, damping {c:g} N*s/m on a {m:g} kg foot is unstable in "
+                             f"DART's {h * 1e3:g} ms step (explicit spring-damper, amplification {radius:.3f}): use "
+                             f"a softer or less damped ankle, a smaller robot.time_step, or robot.engine = mujoco")

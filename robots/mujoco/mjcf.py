@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from cpgsim.components.core import ParameterError
 from cpgsim.components.geometry import LEG_NAMES, RobotGeometry
-from cpgsim.robots.description import GRAVITY, BodyMass, LinkSizes, LinkSpec, describe_hexapod
+from cpgsim.robots.description import GRAVITY, AnkleSpring, BodyMass, LinkSizes, LinkSpec, describe_hexapod
 from cpgsim.robots.terrain import Terrain
 
 CONES = ("pyramidal", "elliptic")
@@ -168,8 +168,13 @@ def _link_lines(link: LinkSpec, children: dict[str, list[LinkSpec]], rgeom: str,
         lines = [f'{pad}<body name="{link.name}" pos="0 0 0">', f'{pad}  <freejoint name="root"/>']
     else:
         quat = ' quat="0 0 0 1"' if link.turned else (' quat="1 0 0 0"' if link.joint.endswith("_alpha") else "")
-        lines = [f'{pad}<body name="{link.name}" pos="{_v(link.origin)}"{quat}>',
-                 f'{pad}  <joint name="{link.joint}" type="hinge" axis="{_axis(link.axis)}"/>']
+        lines = [f'{pad}<body name="{link.name}" pos="{_v(link.origin)}"{quat}>']
+        if link.kind == "slide":  # the compliant ankle (AnkleSpring): a joint spring-damper, rest length 0
+            lines.append(f'{pad}  <joint name="{link.joint}" type="slide" axis="{_axis(link.axis)}" '
+                         f'stiffness="{link.spring.stiffness:.17g}" damping="{link.spring.damping:.17g}" '
+                         f'springref="0"/>')
+        else:
+            lines.append(f'{pad}  <joint name="{link.joint}" type="hinge" axis="{_axis(link.axis)}"/>')
     lines.append(f'{pad}  {_inertial(link.mass_properties())}')
     for spec in link.shapes:
         if spec.kind == "sphere":
@@ -192,14 +197,17 @@ def _axis(axis: tuple[float, float, float]) -> str:
 
 
 def mjcf(geometry: RobotGeometry, terrain: Terrain, friction: float = 1.0,
-         contact: ContactModel | None = None, links: LinkSizes | None = None) -> str:
+         contact: ContactModel | None = None, links: LinkSizes | None = None,
+         ankle: AnkleSpring | None = None) -> str:
     """The MJCF document of the hexapod on ``terrain`` (body at the world origin, joints at 0).
 
     Actuators ``{leg}_{joint}_servo`` (one per hinge, leg-major) are ``general`` with unit gain and zero
-    bias; the plant writes the servo gains into ``actuator_gainprm``/``actuator_biasprm``.
+    bias; the plant writes the servo gains into ``actuator_gainprm``/``actuator_biasprm``. ``ankle``: each
+    foot on a sprung slide joint ``{leg}_ankle`` (:class:`~cpgsim.robots.description.AnkleSpring`), after the
+    leg's three hinges in ``qpos``.
     """
     contact = contact or ContactModel()
-    description = describe_hexapod(geometry, links)
+    description = describe_hexapod(geometry, links, ankle)
     geom_common = geom_contact(contact)
     rgeom = f'{ROBOT_COLLISION} friction="{friction:.17g} 0 0" {geom_common}'
     lines = [

@@ -31,13 +31,14 @@ import mujoco
 import numpy as np
 
 from cpgsim.components.core import ModelError, ParameterError
-from cpgsim.components.geometry import YU_SIM, RobotGeometry
+from cpgsim.components.geometry import LEG_NAMES, YU_SIM, RobotGeometry
 from cpgsim.harness.cosim.contracts import FusedLoopBlock, FusedRequest, ResumableBlock
 from cpgsim.harness.native import NativeUnavailable
-from cpgsim.robots.description import CONTACT_OTHER, describe_hexapod, foot_positions_body
+from cpgsim.robots.description import CONTACT_OTHER, JOINT_NAMES, AnkleSpring, describe_hexapod, foot_positions_body
 from cpgsim.robots.disturbance import Push
 from cpgsim.robots.mujoco.mjcf import ContactModel, mjcf
 from cpgsim.robots.plant_base import HexapodPlant
+from cpgsim.robots.readout import StateLayout
 from cpgsim.robots.terrain import Terrain
 
 
@@ -60,7 +61,7 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
                  q0: Sequence[float] | None = None, body_height: float | None = None,
                  contact: ContactModel | None = None, time_step: float | None = None, sense_shank: bool = True,
                  settle: float = 0.0, native: bool = True, disturbances: Sequence[Push | Mapping] | None = None,
-                 amputated: Sequence[int] = (), **params: float) -> None:
+                 amputated: Sequence[int] = (), ankle: AnkleSpring | Mapping | None = None, **params: float) -> None:
         contact = contact or ContactModel()
         if time_step is not None:
             if not (math.isfinite(time_step) and time_step > 0):
@@ -73,7 +74,7 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
         super().__init__(name, geometry, terrain, q0, body_height, sense_shank, settle, disturbances, amputated,
-                         **params)
+                         ankle=ankle, **params)
 
     @property
     def is_set_up(self) -> bool:
@@ -98,14 +99,16 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     # -- lifecycle --------------------------------------------------------------------------------
     def xml(self) -> str:
         """The MJCF of this plant (robot at the world origin, joints at 0)."""
-        return mjcf(self.geometry, self.terrain, friction=self.values["friction"], contact=self.contact)
+        return mjcf(self.geometry, self.terrain, friction=self.values["friction"], contact=self.contact,
+                    ankle=self.ankle)
 
     def setup(self, t0: float) -> None:
         """Build the model, place the robot (lowest foot touching the ground), set the servos; clock at ``t0``."""
         self.terminate()
         model = mujoco.MjModel.from_xml_string(self.xml())
+        shapes = describe_hexapod(self.geometry, ankle=self.ankle).shapes()
         for i in self.amputated:  # an amputated leg keeps its links and mass but touches nothing
-            for spec in describe_hexapod(self.geometry).shapes():
+            for spec in shapes:
                 if spec.leg != i:
                     continue
                 gid = model.geom(spec.name).id
@@ -119,7 +122,7 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
         self._apply_gains()
 
         self._geom_code = np.full(model.ngeom, CONTACT_OTHER, dtype=np.int64)
-        for spec in describe_hexapod(self.geometry).shapes():
+        for spec in shapes:
             self._geom_code[model.geom(spec.name).id] = spec.contact_code(self.sense_shank)
         self._geom_codes = self._geom_code.tolist()  # Python ints: the per-contact lookups of _robot_contacts
         self._reset_readings()
@@ -147,10 +150,22 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     def initial_qpos(self) -> np.ndarray:
         """Where :meth:`setup` places the robot (MuJoCo's ``qpos``, 25 values): the body at the world origin's
         ``x, y``, at ``body_height`` (default: the lowest foot touching the ground), level, facing ``+y``
-        (quaternion ``1, 0, 0, 0``), the joints at ``q0``."""
+        (quaternion ``1, 0, 0, 0``), the joints at ``q0`` (a compliant ankle's slide after each leg's three, at
+        its rest length 0: 31 values)."""
         z = self.body_height if self.body_height is not None else self._touching_height(
             foot_positions_body(self.geometry, self.q0))
-        return np.concatenate(([0.0, 0.0, z, 1.0, 0.0, 0.0, 0.0], self.q0))
+        joints = self.q0 if self.ankle is None else np.hstack([self.q0.reshape(6, 3), np.zeros((6, 1))]).ravel()
+        return np.concatenate(([0.0, 0.0, z, 1.0, 0.0, 0.0, 0.0], joints))
+
+    def state_layout(self) -> StateLayout:
+        """MuJoCo's ``qpos``/``qvel`` as the compiled model numbers them (joint addresses by name)."""
+        if self.ankle is None:
+            return StateLayout.rigid(self.READOUT_ROOT)
+        m = self.model
+        names = [f"{leg}_{j}" for leg in LEG_NAMES for j in JOINT_NAMES]
+        return StateLayout(int(m.nq), int(m.nv), tuple(int(m.joint(n).qposadr[0]) for n in names),
+                           tuple(int(m.joint(n).dofadr[0]) for n in names),
+                           tuple(int(m.joint(f"{leg}_ankle").qposadr[0]) for leg in LEG_NAMES))
 
     def terminate(self) -> None:
         """Keep the final state (:attr:`last_snapshot`), then drop the model."""

@@ -3,10 +3,10 @@
 The law ``tau = -kp (q - q_target) - kd qd`` holds a loaded joint at rest ``Q / kp`` off its target, where ``Q``
 is the generalized force the load exerts (virtual work: the ground force at the foot and the links' weights
 through the leg's kinematics); the damping plays no part at rest. MuJoCo's servo (``general`` actuator, bias
-``-kp q - (kd + h kp) qd``) meets that. DART's servo is its implicit joint spring and damper, which DART
-evaluates with the velocity predicted before the contact impulse: at rest under contact the sag grows with
-``kd`` and shrinks with the world step (the mechanism docs/contact_mechanism.md measures behind the engines'
-different touchdown angles). These tests pin both facts, so the docs go stale loudly if either changes.
+``-kp q - (kd + h kp) qd``) meets that. DART's servo is its implicit joint spring and damper: at rest under
+contact its sag grows with ``kd`` and shrinks with the world step (consistent with the implicit terms acting on
+the velocity predicted before the contact impulse; the mechanism docs/contact_mechanism.md measures behind the
+engines' different touchdown angles). These tests pin both facts, so the docs go stale loudly if either changes.
 """
 
 from __future__ import annotations

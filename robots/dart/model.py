@@ -97,10 +97,10 @@ def build_hexapod(geometry: RobotGeometry, friction: float = 1.0,
 
     ``ankle``: a compliant ankle per leg (:class:`~cpgsim.robots.description.AnkleSpring`): the foot on a
     prismatic joint; its dofs are 24-29, after the 18 servoed joints. The joints carry no DART spring or
-    damper: DART evaluates those implicitly with the velocity predicted before the contact impulse, which
-    biases the static balance of a light foot pressed on the ground (measured: with the ankle's damping at 5,
-    20, 80 N s/m the standing robot's slide came to rest at 1.9, 2.7, 5.3 mm against the 1.21 mm its axial load
-    gives, and MuJoCo gives). :class:`~cpgsim.robots.dart.plant.DartHexapod` applies ``-k s - c ds/dt`` as
+    damper: DART's implicit joint spring-damper biases the static balance of a light foot pressed on the
+    ground (as if it acted on the velocity predicted before the contact impulse; measured: with the ankle's
+    damping at 5, 20, 80 N s/m the standing robot's slide came to rest at 1.9, 2.7, 5.3 mm against the 1.3 mm
+    its axial load gives). :class:`~cpgsim.robots.dart.plant.DartHexapod` applies ``-k s - c ds/dt`` as
     joint forces before each world step instead.
 
     ``friction`` is the Coulomb coefficient put on every shape of the robot (DART combines two

@@ -55,6 +55,7 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
         raise better from None
     setup.info.setdefault("seed", int(scenario.doc["seed"]))
     setup.graph.blocks[setup.robot].native = scenario.doc["robot"]["native"]  # read at setup
+    _apply_dart_options(scenario, setup)
     ankle = scenario.doc["robot"].get("ankle") or {}
     if ankle:
         if set(ankle) != {"stiffness", "damping"}:
@@ -69,6 +70,28 @@ def build_scenario(name: str | Path | Scenario, sets: Mapping[str, Any] | None =
         setup.graph.blocks[setup.robot].set_disturbances(pushes)
         setup.info["disturbances"] = [p.as_dict() for p in pushes]
     return setup
+
+
+def _apply_dart_options(scenario: Scenario, setup: RunSetup) -> None:
+    """``[robot.dart]`` onto the DART plant (read at its set-up); on another engine the table is an error, not
+    ignored (its settings would silently do nothing)."""
+    table = scenario.doc["robot"].get("dart") or {}
+    if not table:
+        return
+    plant = setup.graph.blocks[setup.robot]
+    if getattr(plant, "engine", None) != "dart":
+        raise ScenarioError(f"robot.dart sets DART's numerics ({', '.join(table)}), but the scenario runs on "
+                            f"robot.engine = {getattr(plant, 'engine', '?')!r}: set robot.engine = \"dart\" or "
+                            f"remove [robot.dart] ({scenario.source})")
+    if "time_step" in table:
+        steps = 1e-3 / table["time_step"]
+        if abs(steps - round(steps)) > 1e-9 * steps:
+            raise ScenarioError(f"robot.dart.time_step = {table['time_step']:g} s does not divide the 1 ms control "
+                                f"step ({scenario.source})")
+        plant.time_step = float(table["time_step"])
+    if "detector" in table:
+        plant.detector = str(table["detector"])
+    setup.info["dart"] = dict(table)
 
 
 def fell_from(res: Results, robot: str,

@@ -127,6 +127,13 @@ MUJOCO_SCHEMA: dict[str, Field] = {  # the fields of cpgsim.robots.mujoco.mjcf.C
 }
 """``[robot.mujoco]``: MuJoCo's contact model for a ``robot.engine = "mujoco"`` run (docs/engines.md)."""
 
+DART_SCHEMA: dict[str, Field] = {  # the DART plant's own constructor options (cpgsim.robots.dart.plant.DartHexapod)
+    "time_step": Field(float, **POSITIVE, doc="s, DART's world step (the 1 ms control step a multiple of it; "
+                                              "below 1 ms the plant steps in Python)"),
+    "detector": Field(str, choices=("dart", "fcl", "bullet", "ode"), doc="DART's collision detector"),
+}
+"""``[robot.dart]``: DART's numerics for a ``robot.engine = "dart"`` run (docs/engines.md, the convergence study)."""
+
 ANKLE_SCHEMA: dict[str, Field] = {  # cpgsim.robots.description.AnkleSpring, which checks the values
     "stiffness": Field(float, **POSITIVE, doc="N/m, the ankle spring along the tibia (Yu 2019, Sec. 6.2.1)"),
     "damping": Field(float, **POSITIVE, doc="N*s/m, the ankle damper beside it"),
@@ -150,6 +157,7 @@ SCHEMA: dict[str, Any] = {
         "friction": Field(float, **POSITIVE, doc="Coulomb friction of the robot's shapes"),
         "velocity_ff": Field(bool, doc="servo velocity feed-forward"),
         "mujoco": MUJOCO_SCHEMA,
+        "dart": DART_SCHEMA,
         "ankle": ANKLE_SCHEMA,
     },
     "controller": {

@@ -9,8 +9,9 @@ or-ed over them, the pushes each step covers, the settle phase), the servo law, 
 indices. An engine's plant supplies the rest (the engine contract, docs/architecture.md):
 
 - ``setup(t0)``: build the engine's model of the robot on the terrain, place it, set the
-  servos; fill the buffers' ``pos``/``vel`` layout (``POS_SIZE``; ``READOUT_ROOT`` names the root joint's
-  coordinates); then :meth:`HexapodPlant._settle` and the first outputs;
+  servos; fill the buffers' ``pos``/``vel`` as :meth:`HexapodPlant.state_layout` says (``READOUT_ROOT`` names
+  the root joint's coordinates; override ``state_layout`` when the joints are not the rigid robot's); then
+  :meth:`HexapodPlant._settle` and the first outputs;
 - ``_apply_servo(q_target, velocity)``: the servo law's targets onto the engine's actuators;
 - ``_world_step(pushes)``: one engine step with the servo inputs held and the pushes on the body;
 - ``_robot_contacts()``, ``_contact_force(contact)``: the last engine step's contacts that touch the robot
@@ -93,7 +94,6 @@ class HexapodPlant(CoSimBlock, ABC):
     """
 
     engine: ClassVar[str]
-    POS_SIZE: ClassVar[int]
     READOUT_ROOT: ClassVar[str]
 
     time_step: float

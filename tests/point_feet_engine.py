@@ -39,7 +39,6 @@ class PointFeetHexapod(HexapodPlant):
     """The hexapod as a translating point mass on six spring-damper feet with ideal servos."""
 
     engine = "point-feet"
-    POS_SIZE = 24
     READOUT_ROOT = "rotvec"  # rotation vector (always 0 here), translation, the 18 joints
 
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,

@@ -88,7 +88,6 @@ class DartHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     """
 
     engine = "dart"
-    POS_SIZE = 24
     READOUT_ROOT = "rotvec"
 
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,

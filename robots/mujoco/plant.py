@@ -54,7 +54,6 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
     """
 
     engine = "mujoco"
-    POS_SIZE = 25
     READOUT_ROOT = "quat"
 
     def __init__(self, name: str = "robot", geometry: RobotGeometry = YU_SIM, terrain: Terrain | None = None,

@@ -31,6 +31,20 @@ def test_the_tetrapod_setting_converges_to_one_pattern_in_both_engines():
     assert _circular(coarse["R1"], lags["dart"]["R1"]) > max(gaps.values())
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("engine", ["dart", "mujoco"])
+def test_the_wave_setting_is_a_wave_in_each_engine_at_its_default(engine):
+    """Setting 3 (omega_st = pi/15) converged in both engines (all nine runs waves, lags within 0.02 cycle): each
+    engine at its 1 ms default labels it a wave, with the wave's ipsilateral lags (L1 -> L2 -> L3 a sixth of a
+    cycle apart: L2 at 5/6, L3 at 4/6 of L1's cycle, within 0.05) and Fukuhara's duty factor 5/6 within 0.05."""
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    row = gait_run(3, engine, 1e-3, 0.005 if engine == "mujoco" else None)
+    assert row["gait"] == "wave"
+    assert _circular(row["lags"]["L2"], 5 / 6) < 0.05 and _circular(row["lags"]["L3"], 4 / 6) < 0.05
+    assert abs(row["duty"] - 5 / 6) < 0.05
+
+
 PEAK_SPREAD_N = {"dart": {4: (30.45, 31.53), 5: (16.71, 22.52), 6: (13.77, 21.34)},
                  "mujoco": {4: (15.71, 15.97), 5: (10.55, 13.30), 6: (11.27, 12.44)}}
 """The collision peaks (N) of each right leg's elevator over the plant steps 1 / 0.5 / 0.25 ms (MuJoCo with its

@@ -18,7 +18,7 @@ each returning one row per run (a dict, printed as a JSON line):
   outcomes.
 
 Run ``python -m cpgsim.experiments.convergence [--claim gaits|elevator|amputation] [--settings 1 2] [--t-end 30]``
-(``--plot PNG`` draws the elevator rows, ``--from-json FILE`` reads rows printed before); the tables are in
+(``--plot PNG`` draws the gait or elevator rows, ``--from-json FILE`` reads rows printed before); the tables are in
 docs/engines.md.
 """
 
@@ -284,6 +284,76 @@ def plot_elevator(rows: list[dict[str, Any]], path: str) -> None:
     plt.close(fig)
 
 
+def plot_gaits(rows: list[dict[str, Any]], path: str) -> None:
+    """Fukuhara's speed settings against the plant's step, one column per setting: each leg's lift-off lag in
+    L1's cycle (top; DART solid, MuJoCo with its 5 ms contact dashed, with 2 ms dotted; a lag is drawn within
+    half a cycle of that leg's circular mean, so 0.95 and 0.05 sit side by side) and the deviation from the
+    template of the paper's gait with the classifier's 1/12 tolerance (bottom; setting 3: the tetrapod's, since
+    the rows carry no wave deviation and every run there is a wave)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.ticker import NullFormatter
+
+    from cpgsim.experiments.gait_classifier import TOLERANCE
+
+    settings = sorted({r["setting"] for r in rows})
+    legs = ("L2", "L3", "R1", "R2", "R3")
+    styles = [("dart", None, "-", "DART"), ("mujoco", 5.0, "--", "MuJoCo, contact 5 ms"),
+              ("mujoco", 2.0, ":", "MuJoCo, contact 2 ms")]
+    paper = {1: ("tripod", "tripod_dev"), 2: ("tetrapod", "tetrapod_dev")}
+    fig, axes = plt.subplots(2, len(settings), figsize=(4.6 * len(settings), 7.2), squeeze=False,
+                             gridspec_kw={"height_ratios": [2, 1]})
+    for col, setting in enumerate(settings):
+        mine = [r for r in rows if r["setting"] == setting]
+        top, bottom = axes[0][col], axes[1][col]
+        for k, leg in enumerate(legs):
+            def known(r: dict[str, Any], leg: str = leg) -> bool:  # a leg without a lag: None, or NaN in JSON
+                v = r["lags"].get(leg)
+                return v is not None and bool(np.isfinite(v))
+
+            values = np.array([r["lags"][leg] for r in mine if known(r)], dtype=float)
+            centre = float(np.angle(np.exp(2j * np.pi * values).mean()) / (2 * np.pi)) % 1.0
+            for engine, solref, ls, _label in styles:
+                run = sorted((r for r in mine if r["engine"] == engine and r["solref_ms"] == solref and known(r)),
+                             key=lambda r: r["step_ms"])
+                lag = [centre + ((r["lags"][leg] - centre + 0.5) % 1.0) - 0.5 for r in run]
+                top.plot([r["step_ms"] for r in run], lag, ls, marker="o", ms=4, color=f"C{k}",
+                         label=f"{leg}" if engine == "dart" else None)
+        labels = sorted({r["gait"] for r in mine})
+        top.set_title(f"setting {setting}: labels {', '.join(labels)}")
+        top.set_ylabel("lift-off lag in L1's cycle")
+        if setting not in paper:  # the rows carry the tripod and tetrapod deviations only
+            bottom.text(0.5, 0.5, f"{len(mine)} runs, labelled {', '.join(labels)}\n(no deviation from the "
+                        "paper's template in the rows)", ha="center", va="center", transform=bottom.transAxes)
+            bottom.set_yticks([])
+        name, key = paper.get(setting, ("", ""))
+        for engine, solref, ls, label in styles if key else ():
+            run = sorted((r for r in mine if r["engine"] == engine and r["solref_ms"] == solref
+                          and r.get(key) is not None), key=lambda r: r["step_ms"])
+            bottom.plot([r["step_ms"] for r in run], [r[key] for r in run], ls, marker="o", ms=4, color="k",
+                        label=label)
+        if key:
+            bottom.axhline(TOLERANCE, color="r", lw=1, label="classifier tolerance 1/12")
+            bottom.set_ylabel(f"deviation from {name}")
+            bottom.set_ylim(0, max(0.16, max((r.get(key) or 0) for r in mine) * 1.1))
+        for ax in (top, bottom):
+            ax.set_xscale("log")
+            ax.set_xticks([0.25, 0.5, 1.0], ["0.25", "0.5", "1"])
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_xlim(0.2, 1.25)
+            ax.grid(alpha=0.3)
+        bottom.set_xlabel("plant step (ms)")
+    axes[0][0].legend(title="leg (line style: engine)", fontsize=8, loc="best")
+    axes[1][0].legend(fontsize=7, loc="upper right", handlelength=3.5)
+    fig.suptitle("Fukuhara's speed settings against the plant's numerics (controller at 1 kHz, seed 0)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--claim", choices=("gaits", "elevator", "amputation"), default="gaits")
@@ -291,17 +361,26 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--engines", nargs="+", choices=("dart", "mujoco"), default=["dart", "mujoco"])
     ap.add_argument("--t-end", type=float, default=None, help="s (default: the scenario's)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="amputation: the legs' initial phases")
-    ap.add_argument("--plot", default=None, help="elevator: draw the rows into this PNG")
-    ap.add_argument("--from-json", default=None, help="elevator: read the rows from this file (JSON lines)")
+    ap.add_argument("--plot", default=None, help="gaits, elevator: draw the rows into this PNG")
+    ap.add_argument("--from-json", default=None, help="gaits, elevator: read the rows from this file (JSON lines)")
     args = ap.parse_args(argv)
+    if args.claim == "gaits" and args.from_json:
+        with open(args.from_json) as f:
+            rows = [r for r in map(json.loads, filter(str.strip, f)) if r.get("claim", "gaits") == "gaits"]
+        plot_gaits(rows, args.plot or "gait_convergence.png")
+        return
     if args.claim == "gaits":
+        rows = []
         for setting in args.settings:
             for engine in args.engines:
                 for step in STEPS:
                     for solref in (SOLREFS if engine == "mujoco" else (None,)):
                         if solref is not None and solref < 2 * step:
                             continue
-                        print(json.dumps(gait_run(setting, engine, step, solref, args.t_end)), flush=True)
+                        rows.append(gait_run(setting, engine, step, solref, args.t_end))
+                        print(json.dumps({"claim": "gaits", **rows[-1]}), flush=True)
+        if args.plot:
+            plot_gaits(rows, args.plot)
         return
     if args.from_json:
         with open(args.from_json) as f:
@@ -315,7 +394,7 @@ def main(argv: list[str] | None = None) -> None:
                 print(json.dumps(rows[-1]), flush=True)
     if args.plot:
         if args.claim != "elevator":
-            sys.exit("--plot draws the elevator rows only")
+            sys.exit("--plot draws the gait and elevator rows only")
         plot_elevator(rows, args.plot)
 
 

@@ -33,6 +33,7 @@ from cpgsim.harness.compile import CompiledModel, compile_graph
 from cpgsim.harness.cosim.contracts import ResumableBlock
 from cpgsim.harness.cosim.master import run_master
 from cpgsim.harness.errors import CoSimulationError, SimulationDiverged, SimulationError
+from cpgsim.harness.gc_freeze import frozen_heap
 from cpgsim.harness.results import Results
 from cpgsim.harness.steps import MAX_STEPS, chunk_length, horizon_steps, rows_per_second  # noqa: F401 (MAX_STEPS, horizon_steps: public names here too)
 
@@ -176,7 +177,8 @@ class Simulator:
             rec.flush_rows = rows_per_second(m.dt)
         self.timing = rec.timing
         try:
-            return self._record_run(rec, times, x, z, p, u_free, picks, progress, resume)
+            with frozen_heap():  # the set-up's objects are not rescanned by every full collection of the run
+                return self._record_run(rec, times, x, z, p, u_free, picks, progress, resume)
         finally:
             rec.prefetch.close()  # the prefault thread is done with the table before anyone can free it
 

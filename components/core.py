@@ -14,11 +14,12 @@ Semantics of one sampled (macro) step ``[t_k, t_k + dt]`` (the papers' 1 kHz con
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import casadi as ca
 import numpy as np
@@ -102,8 +103,11 @@ class Port:
         object.__setattr__(self, "shape", _as_shape(self.shape))
         object.__setattr__(self, "unit", normalize_unit(self.unit))
 
-    @property
+    @functools.cached_property
     def size(self) -> int:
+        """Number of scalars, ``math.prod(shape)``: computed once per port (a port is frozen, its shape fixed in
+        ``__post_init__``), since compiling a model of thousands of blocks reads it tens of thousands of times.
+        Not a field: equality, hashing and ``repr`` are the declared fields' alone."""
         return math.prod(self.shape)
 
     def default_values(self) -> np.ndarray | None:
@@ -173,6 +177,7 @@ class Parameter:
     description: str = ""
     strict: bool = False
     kind: Kind = "real"
+    size: ClassVar[int] = 1  # a parameter is one scalar (its slot in the parameter vector)
 
     def __post_init__(self) -> None:
         check_name(self.name, "parameter")

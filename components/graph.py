@@ -247,13 +247,28 @@ class Graph(_Declared):
             else:
                 flat.blocks[path] = blk
         # local aliases: resolve references into sub-graphs to leaf ports
+        blocks, edges, plain = self.blocks, flat.raw_edges, flat.plain_wires
         for dst, src in self.connections.items():
-            flat.raw_edges.append((_leaf(self, dst, prefix, "in"), _leaf(self, src, prefix, "out")))
+            (db, dport), (sb, sport) = (dst.block, dst.port), (src.block, src.port)
+            dblk, sblk = blocks[db], blocks[sb]
+            if isinstance(dblk, Graph) or isinstance(sblk, Graph):  # an end inside a sub-graph: an alias
+                edges.append((_leaf(self, dst, prefix, "in"), _leaf(self, src, prefix, "out")))
+                continue
+            d = f"{prefix}{db}.{dport}"
+            s = f"{prefix}{sb}.{sport}"
+            edges.append((d, s))
+            # the ports FlatGraph.port(d) and .port(s) name (outputs first, as _Declared.port looks them up)
+            sp = sblk.outputs.get(sport) or sblk.port(sport)
+            dp = dblk.outputs.get(dport) or dblk.inputs.get(dport) or dblk.port(dport)
+            if sp.unit == dp.unit and sp.shape == dp.shape and sp.kind == dp.kind:
+                plain[d] = s
         for dst, src in self.clock_connections.items():
             flat.clock_edges.append((f"{prefix}{src}", f"{prefix}{dst}"))
-        flat.aliases_in.update({f"{prefix}{n}": [_leaf(self, r, prefix, "in") for r in refs]
-                                for n, refs in self.input_map.items()})
-        flat.aliases_out.update({f"{prefix}{n}": _leaf(self, r, prefix, "out") for n, r in self.output_map.items()})
+        if self.input_map:
+            flat.aliases_in.update({f"{prefix}{n}": [_leaf(self, r, prefix, "in") for r in refs]
+                                    for n, refs in self.input_map.items()})
+        for n, r in self.output_map.items():
+            flat.aliases_out[f"{prefix}{n}"] = _leaf(self, r, prefix, "out")
         if prefix == "":
             flat.inputs = dict(self.inputs)
             flat.outputs = dict(self.outputs)
@@ -310,6 +325,9 @@ class FlatGraph:
         self.output_sources: dict[str, str] = {}
         # leaf input -> (source, its unit, the input's unit, conversion block path) for converted wires
         self.conversions: dict[str, tuple[str, str, str, str]] = {}
+        # leaf input -> leaf output of a wire between two leaf blocks of one graph whose ports have the same unit,
+        # shape and kind, found while flattening: _insert_conversions need not look these ports up again
+        self.plain_wires: dict[str, str] = {}
         self.clock_edges: list[tuple[str, str]] = []  # (output clock, input clock) of FMU blocks, by leaf path
         self.clock_order: list[str] = []  # co-simulation blocks with clock sources before their destinations
 
@@ -335,10 +353,14 @@ class FlatGraph:
         return out
 
     def resolve(self) -> None:
+        sources = self.sources
         for dst, src in self.raw_edges:
-            s = self.resolve_out(src)
-            for d in self._resolve_in(dst):
-                self.sources[d] = s
+            s = self.resolve_out(src) if src.startswith("@") else src
+            if dst.startswith("@"):
+                for d in self._resolve_in(dst):
+                    sources[d] = s
+            else:  # a leaf port (most wires): itself
+                sources[dst] = s
         for name in self.inputs:
             for d in self._resolve_in("@" + name):
                 self.sources[d] = "$" + name
@@ -386,9 +408,21 @@ class FlatGraph:
         compiler, the co-simulation master and the verifier all see ordinary blocks."""
         from cpgsim.components.basic import UnitConversion
 
+        blocks, plain = self.blocks, self.plain_wires
         for dst, src in list(self.sources.items()):
-            sport = self.inputs[src[1:]] if src.startswith("$") else self.port(src)
-            dport = self.port(dst)
+            if plain.get(dst) == src:  # checked while flattening: the same unit, shape and kind (the identity)
+                continue
+            if src.startswith("$"):
+                sport = self.inputs[src[1:]]
+            else:  # self.port(src), inlined: thousands of wires
+                path, name = src.rsplit(".", 1)
+                blk = blocks[path]
+                sport = blk.outputs.get(name) or blk.port(name)
+            path, name = dst.rsplit(".", 1)
+            blk = blocks[path]
+            dport = blk.outputs.get(name) or blk.inputs.get(name) or blk.port(name)
+            if sport.unit == dport.unit and sport.shape == dport.shape and sport.kind == dport.kind:
+                continue  # what check_compatible finds for most wires (the identity), without its call
             conv = check_compatible(sport, dport, src.lstrip("$"), dst)
             if conv.identity:
                 continue
@@ -405,8 +439,10 @@ class FlatGraph:
     def check_connected(self) -> None:
         for path, blk in self.blocks.items():
             for port in blk.inputs.values():
+                if port.default is not None:
+                    continue
                 key = f"{path}.{port.name}"
-                if key not in self.sources and port.default is None:
+                if key not in self.sources:
                     raise UnconnectedInputError(
                         f"input {key} is not connected (and has no default); "
                         f"connect it or expose it as a graph input")

@@ -107,6 +107,13 @@ def write_entry(path: Path, payload: bytes) -> None:
 
 def read_entry(path: Path) -> bytes | None:
     """The payload stored under ``path``, or None (missing; reported once when it fails its check)."""
+    found = read_entry_digest(path)
+    return None if found is None else found[0]
+
+
+def read_entry_digest(path: Path) -> tuple[bytes, bytes] | None:
+    """:func:`read_entry` with the payload's SHA-256 (hex, as checked): a caller that keeps what it made of a
+    payload by digest need not hash a large entry a second time."""
     if not os.path.lexists(path):
         return None
     reason = _entry_reason(path)
@@ -118,8 +125,9 @@ def read_entry(path: Path) -> bytes | None:
         head, sep, payload = raw.partition(b"\n")
         if reason is None and not head.startswith(HEADER):
             return None  # written before entries carried digests: a plain miss
-        if reason is None and sep and hashlib.sha256(payload).hexdigest().encode() == head[len(HEADER):]:
-            return payload  # (an entry cut before its header line's end is not one, whatever its digest)
+        digest = hashlib.sha256(payload).hexdigest().encode()
+        if reason is None and sep and digest == head[len(HEADER):]:
+            return payload, digest  # (an entry cut before its header line's end is not one, whatever its digest)
         reason = reason or "its content does not match its digest"
     warn_once(f"cache entry {path} not used: {reason}; rebuilding it")
     return None

@@ -24,6 +24,7 @@ import inspect
 import json
 import sys
 from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any
 
 import casadi as ca
@@ -54,6 +55,15 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatur
 
     ``signatures``: each equation block's :func:`cpgsim.harness.compiler.kinds.leaf_signature` by path; ``code_files``
     are the compiler's own sources.
+
+    The blocks are hashed as their paths, each one's signature number and the distinct signatures, each
+    written once (by its first block, in block order), not one signature per block: a graph of thousands of
+    identical blocks has a handful of signatures, and writing each again was a fifth of a cached start. This
+    is exact because equal signatures mean equal equations, which the compiler relies on too (it derives one
+    kind's equations per distinct signature, :func:`~cpgsim.harness.compiler.kinds.find_kinds` keys them by
+    equality). The only values a signature holds that compare equal but print differently are input defaults
+    ``0.0``/``-0.0`` and, on integer ports, ``1``/``1.0``; both fold to the same constant in CasADi
+    (``tests/test_cache_key.py`` checks it).
     """
     h = hashlib.sha256()
 
@@ -62,20 +72,28 @@ def model_key(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatur
         h.update(b"\0")
 
     put(FORMAT, ca.__version__, repr(float(dt)), int(substeps), grouping, [memo.file_digest(f) for f in code_files])
-    classes: set[type] = set()
+    distinct: dict[tuple, int] = {}  # signature -> its number, in first-use order
+    by_id: dict[int, int] = {}  # id(signature) -> its number: equal signatures are mostly one object
+    rows: list[Any] = []  # per block: its signature's number, or a co-simulation block's ports
     for path, blk in flat.blocks.items():
-        cls = type(blk)
-        classes.add(cls)
-        if path in signatures:
-            put(path, signatures[path])
+        sig = signatures.get(path)
+        if sig is not None:
+            number = by_id.get(id(sig))
+            if number is None:
+                number = by_id[id(sig)] = distinct.setdefault(sig, len(distinct))
+            rows.append(number)
         else:  # a co-simulation block: only its ports shape the compiled part
-            put(path, "cosim", tuple((k, p.size, p.unit, p.kind) for k, p in blk.inputs.items()),
-                tuple((k, p.size, p.unit, p.kind) for k, p in blk.outputs.items()),
-                tuple(sorted((k, tuple(sorted(v))) for k, v in getattr(blk, "feedthrough", {}).items())))
-    put(sorted(flat.sources.items()))
+            rows.append(("cosim", tuple((k, p.size, p.unit, p.kind) for k, p in blk.inputs.items()),
+                         tuple((k, p.size, p.unit, p.kind) for k, p in blk.outputs.items()),
+                         tuple(sorted((k, tuple(sorted(v))) for k, v in getattr(blk, "feedthrough", {}).items()))))
+    put(list(flat.blocks))
+    put(rows)
+    put(list(distinct))
+    wired = sorted(flat.sources)  # the wiring, by input (sorting the names alone is the cheaper sort)
+    put(wired, list(map(flat.sources.__getitem__, wired)))
     put(sorted(flat.output_sources.items()))
     put(tuple((k, p.size, p.unit, p.kind, p.description) for k, p in flat.inputs.items()))
-    for cls in sorted(classes, key=lambda c: (c.__module__, c.__qualname__)):
+    for cls in sorted(set(map(type, flat.blocks.values())), key=lambda c: (c.__module__, c.__qualname__)):
         put(cls.__module__, cls.__qualname__, _class_source(cls))
     return h.hexdigest()[:32]
 
@@ -91,15 +109,18 @@ _LOADED: dict[str, tuple[bytes, dict[str, Any]]] = {}
 
 
 def load(key: str) -> dict[str, Any] | None:
-    """The cached entry for ``key`` (functions deserialized), or None."""
+    """The cached entry for ``key`` (functions deserialized), or None. Its ``feed`` (block -> output -> the
+    inputs it reads directly) is read-only (mappings of tuples, made once per entry and process):
+    :attr:`cpgsim.harness.compile.CompiledModel.feed` makes a model's own sets from it on first use, which a
+    run never needs (thousands of blocks' sets were a tenth of a cached start)."""
     if not memo.caching_enabled():
         return None
     path = memo.cache_root() / "models" / f"{key}.json"
     try:
-        stored = private_store.read_entry(path)
-        if stored is None:
+        found = private_store.read_entry_digest(path)
+        if found is None:
             return None
-        digest = hashlib.sha256(stored).digest()
+        stored, digest = found  # the digest read_entry checked the payload against
         known = _LOADED.get(key)
         if known is not None and known[0] == digest:  # read and checked again above; deserialized once
             entry = dict(known[1])
@@ -109,11 +130,13 @@ def load(key: str) -> dict[str, Any] | None:
             if entry.get("format") != FORMAT:
                 return None
             entry["functions"] = {k: ca.Function.deserialize(v) for k, v in entry["functions"].items()}
+            entry["feed"] = MappingProxyType({p: MappingProxyType({o: tuple(ins) for o, ins in d.items()})
+                                              for p, d in entry["feed"].items()})  # read-only, shared by loads
             _LOADED[key] = (digest, dict(entry))
             while len(_LOADED) > LOADED_ENTRIES:
                 _LOADED.pop(next(iter(_LOADED)))
         entry["functions"] = dict(entry["functions"])
-        entry["feed"] = {p: {o: set(ins) for o, ins in d.items()} for p, d in entry["feed"].items()}
+        entry["feed"] = MappingProxyType(entry["feed"])  # this load's own (read-only) view
         return entry
     except Exception:  # noqa: BLE001 -- a damaged entry is recompiled and overwritten
         return None

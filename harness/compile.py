@@ -25,6 +25,7 @@ feed equation blocks; ``p`` every parameter, so exported FMUs keep them tunable.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -90,6 +91,11 @@ class CompiledModel:
             self._wiring = None
         return self._schedule
 
+    def _feed_from_entry(self, stored: Mapping[str, Mapping[str, Sequence[str]]]) -> None:
+        """Make :attr:`feed` from a cache entry's (read-only) feed when it is first read: thousands of blocks'
+        sets that a run never reads were a tenth of a cached start."""
+        self.__dict__["_feed"], self.__dict__["_stored_feed"] = None, stored
+
     @property
     def has_discrete(self) -> bool:
         return self.dstates.size > 0
@@ -114,6 +120,23 @@ class CompiledModel:
             blk = self.flat.blocks[block_path]
             p[slot.start] = blk.parameters[pname].validate(value, owner=block_path)
         return p
+
+
+def _get_feed(model: CompiledModel) -> dict[str, dict[str, set[str]]]:
+    if model.__dict__.get("_feed") is None:
+        stored = model.__dict__.get("_stored_feed") or {}
+        model.__dict__["_feed"] = {p: dict(zip(d, map(set, d.values()), strict=True)) for p, d in stored.items()}
+        model.__dict__["_stored_feed"] = None
+    return model.__dict__["_feed"]
+
+
+def _set_feed(model: CompiledModel, value: dict[str, dict[str, set[str]]]) -> None:
+    model.__dict__["_feed"], model.__dict__["_stored_feed"] = value, None
+
+
+# ``feed`` stays a dataclass field (an argument, compared and shown like the others), read and set through this
+# property, so a cached model makes it on first use (CompiledModel._feed_from_entry)
+CompiledModel.feed = property(_get_feed, _set_feed, doc="Block -> output -> the inputs it reads directly.")  # type: ignore[assignment]
 
 
 GROUPED_MIN_BLOCKS = 64
@@ -142,14 +165,14 @@ def compile_graph(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     graph = as_graph(item)
     flat = graph.flatten()
     grouping = _resolve_grouping(flat, grouping)
-    signatures = kinds.leaf_signatures(flat)  # for the cache key, and the kinds reuse them
+    w = Wiring(flat, dt, int(substeps), signer=kinds.Signatures(flat))  # signatures: the cache key's, the kinds'
     if not (cache and memo.caching_enabled()):
-        return _build(flat, dt, int(substeps), grouping, signatures)
-    key = model_cache.model_key(flat, dt, int(substeps), grouping, signatures, list(compiler_sources()))
+        return _build(w, grouping)
+    key = model_cache.model_key(flat, dt, int(substeps), grouping, w.signatures, list(compiler_sources()))
     entry = model_cache.load(key)
     if entry is not None:
-        return _from_cache(Wiring(flat, dt, int(substeps), signatures), entry)
-    model = _build(flat, dt, int(substeps), grouping, signatures)
+        return _from_cache(w, entry)
+    model = _build(w, grouping)
     model.compile_cache = "miss"
     fns = {name: getattr(model, name) for name in ("ode", "signals", "discrete", "step")}
     model_cache.store(key, fns, model.c_step_source(), model.feed, model.grouping)
@@ -170,7 +193,7 @@ def model_key(item: Graph | Block, dt: float = 1e-3, substeps: int = 1,
     (:func:`cpgsim.harness.cache.model_key` over the computed :func:`compiler_sources`)."""
     flat = as_graph(item).flatten()
     return model_cache.model_key(flat, dt, int(check_substeps(substeps)), _resolve_grouping(flat, grouping),
-                           kinds.leaf_signatures(flat), list(compiler_sources()))
+                                 kinds.leaf_signatures(flat), list(compiler_sources()))
 
 
 def compiler_sources() -> tuple[str, ...]:
@@ -179,14 +202,13 @@ def compiler_sources() -> tuple[str, ...]:
     return module_closure(__file__)
 
 
-def _build(flat: FlatGraph, dt: float, substeps: int, grouping: str, signatures: dict[str, tuple]) -> CompiledModel:
-    """The schedule of ``flat`` (nested kinds when grouping is ``"kinds"``) and its CasADi form."""
-    w = Wiring(flat, dt, substeps, signatures)
+def _build(w: Wiring, grouping: str) -> CompiledModel:
+    """The schedule of ``w`` (nested kinds when grouping is ``"kinds"``) and its CasADi form."""
     grouped = grouping == "kinds"
     s = build_schedule(w, nested=grouped)
     w.feed = s.leaf_feed
     emit = casadi_form.mapped_functions if grouped else casadi_form.straight_line_functions
-    model = _model(w, emit(s, dt, substeps), w.cosim_feeds(), s)
+    model = _model(w, emit(s, w.dt, w.substeps), w.cosim_feeds(), s)
     model.grouped = grouped
     return model
 
@@ -204,8 +226,9 @@ def _model(w: Wiring, fns: dict[str, Any], cosim_feeds: dict[str, str], s: Sched
 
 def _from_cache(w: Wiring, entry: dict[str, Any]) -> CompiledModel:
     """The model from a cache entry: layouts and start values rebuilt, functions loaded."""
-    w.feed = entry["feed"]
+    w.feed = entry["feed"]  # read-only, as stored: what the loop check through co-simulation blocks reads
     model = _model(w, entry["functions"], w.cosim_feeds(), None)
+    model._feed_from_entry(entry["feed"])
     model._wiring = w
     model.grouped = entry["grouping"] == "kinds"
     model.compile_cache = "hit"

@@ -12,6 +12,7 @@ orders their evaluation.
 from __future__ import annotations
 
 import hashlib
+import operator
 import pickle
 import re
 from collections.abc import Callable, Sequence
@@ -90,28 +91,73 @@ class Kind:
 
 
 # -- leaf signatures ---------------------------------------------------------------------------------
+_SIZE = operator.attrgetter("size")
+_INPUT = operator.attrgetter("size", "kind", "default")
+
+
 def leaf_signature(blk: Block, connected: tuple[str, ...]) -> tuple:
     """What a block's equations can depend on besides its symbols: class, declarations, configuration.
 
     Two blocks with equal signatures have the same equations (``define`` sees only its symbols and
-    the block's attributes); unconnected inputs enter with their defaults (folded constants).
+    the block's attributes); unconnected inputs enter with their defaults (folded constants). The
+    declarations are the names of the states, discrete states, parameters, inputs and outputs, each table's
+    names followed by their sizes (inputs: size, kind and default); read with ``map`` rather than a loop per
+    item, since a model of thousands of blocks computes thousands of signatures on every compile.
     """
-    attrs = tuple(sorted((k, _attribute_value(v)) for k, v in vars(blk).items() if k not in _DECLARED))
-    if any(" at 0x" in r for _, r in attrs):  # an attribute without a value repr: never share
-        attrs += (("__id__", str(id(blk))),)
-    decl = (tuple((k, s.size) for k, s in blk.states.items()),
-            tuple((k, s.size) for k, s in blk.discrete_states.items()),
+    attrs = block_attributes(blk)
+    states, dstates, inputs, outputs = blk.states, blk.discrete_states, blk.inputs, blk.outputs
+    decl = (tuple(states), tuple(map(_SIZE, states.values())),
+            tuple(dstates), tuple(map(_SIZE, dstates.values())),
             tuple(blk.parameters),
-            tuple((k, p.size, p.kind, p.default)
-                  for k, p in blk.inputs.items()),
-            tuple((k, p.size) for k, p in blk.outputs.items()))
+            tuple(inputs), tuple(map(_INPUT, inputs.values())),
+            tuple(outputs), tuple(map(_SIZE, outputs.values())))
     return (f"{type(blk).__module__}.{type(blk).__qualname__}", attrs, decl, connected)
 
 
+def block_attributes(blk: Block) -> tuple:
+    """A block's attributes besides its declarations, as ``(name, value text)`` pairs sorted by name (the
+    configuration ``define`` may read); an attribute without a value repr adds the block's ``id``, so that
+    block shares no kind and no cache entry with another."""
+    own = vars(blk)
+    if own.keys() <= _DECLARED:  # most blocks: no attribute besides their declarations, no sort, no repr
+        return ()
+    attrs = tuple(sorted((k, _attribute_value(v)) for k, v in own.items() if k not in _DECLARED))
+    if any(" at 0x" in r for _, r in attrs):  # an attribute without a value repr: never share
+        attrs += (("__id__", str(id(blk))),)
+    return attrs
+
+
+class Signatures:
+    """:func:`leaf_signature` of the equation blocks of one flattened graph, block by block (``signer(path,
+    blk)``), with the inputs each block has wired read from the graph's sources once.
+
+    Equal signatures are one object (the first block's): the compiler and the cache key compare them by
+    equality only, and a model of thousands of identical blocks then keeps a handful of signatures alive, not
+    tens of thousands of tuples (each of which the garbage collector would traverse)."""
+
+    def __init__(self, flat: FlatGraph) -> None:
+        self.wired: dict[str, set[str]] = {}  # block path -> its wired inputs
+        for dst in flat.sources:
+            path, port = dst.rsplit(".", 1)
+            self.wired.setdefault(path, set()).add(port)
+        self.canonical: dict[tuple, tuple] = {}
+
+    def __call__(self, path: str, blk: Block) -> tuple:
+        ins = self.wired.get(path, _NONE)
+        sig = leaf_signature(blk, tuple([k for k in blk.inputs if k in ins]))
+        return self.canonical.setdefault(sig, sig)
+
+
+_NONE: frozenset[str] = frozenset()
+
+
 def leaf_signatures(flat: FlatGraph) -> dict[str, tuple]:
-    """:func:`leaf_signature` of every equation block of ``flat`` (the wired inputs are its last item)."""
-    return {path: leaf_signature(blk, tuple(k for k in blk.inputs if f"{path}.{k}" in flat.sources))
-            for path, blk in flat.equation_blocks().items()}
+    """:func:`leaf_signature` of every equation block of ``flat`` (the wired inputs are its last item; equal
+    ones are one object, see :class:`Signatures`). ``compile_graph`` has
+    :class:`~cpgsim.harness.compiler.wiring.Wiring` compute the same with a :class:`Signatures` in its pass over
+    the blocks."""
+    signer = Signatures(flat)
+    return {path: signer(path, blk) for path, blk in flat.blocks.items() if isinstance(blk, Block)}
 
 
 def _attribute_value(value: object) -> str:

@@ -145,7 +145,7 @@ _LEG_STATUS = ("swing", "active", "reflex", "gaveup", "landed", "mode", "n_ert",
 
 def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Sequence[float] = (-1.0, 0.0),
         clearance_elevator: float | None = None, eps: float = 0.1, b: float = 4.0,
-        omega: Sequence[float] = TABLE1_OMEGA, k: float = 0.1) -> Graph:
+        omega: Sequence[float] = TABLE1_OMEGA, k: float = 0.1, sensor_delay: bool = False) -> Graph:
     """Yu single-leg controller: network + sensory neurons + reflex logic + converter + FK.
 
     Inputs: ``toe_force`` (3, N; default 5 N per component: in contact, no obstacle),
@@ -153,13 +153,14 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
     ``x1, y1, x2, y2, x3, y3``, ``lambda_ob``, ``lambda_td``, ``swing``, ``active``, ``reflex``,
     ``gaveup``, ``landed``, ``mode`` and the event counters ``n_ert, n_srt, n_found, n_early, n_giveup``.
     The converter's coefficients come from ``geometry`` (see :mod:`cpgsim.components.yu.converter`).
+    ``sensor_delay``: build the sensors' delay line (``sensors.delay_f``; off: no such parameter, a cheaper step).
     """
     if not isinstance(geometry, RobotGeometry):
         raise ParameterError(f"geometry must be a RobotGeometry, got {type(geometry).__name__}")
     orbit = locked_orbit(eps, b, tuple(omega), k)
     g = Graph(name, "Yu single-leg controller (network, sensory neurons, reflexes, converter)")
     g.add(leg_network("network", leader_start, eps, b, omega, k, orbit))
-    g.add(YuSensoryNeurons("sensors"))
+    g.add(YuSensoryNeurons("sensors", delay_line=sensor_delay))
     g.add(YuReflexLogic("reflex", orbit=orbit, height=geometry.height, omega1=omega[0]))
     g.add(YuConverter("converter", geometry=geometry, orbit=orbit, clearance_elevator=clearance_elevator,
                       omega1=omega[0]))
@@ -194,19 +195,22 @@ def leg(name: str = "leg", geometry: RobotGeometry = YU_SIM, leader_start: Seque
 
 
 def hexapod_controller(name: str = "controller", geometry: RobotGeometry = YU_SIM, gait: int | str = 1,
-                       clearance_elevator: float | None = None, T_g: float = 5.0) -> Graph:
+                       clearance_elevator: float | None = None, T_g: float = 5.0,
+                       sensor_delay: bool = False) -> Graph:
     """Yu six-leg controller: six :func:`leg` graphs + :class:`~cpgsim.components.yu.fsm.YuGaitFSM`.
 
     Legs ``L1, L2, L3, R1, R2, R3`` (Yu 1-6); leaders start at ``[-1, 0]`` (legs 1, 3, 5) and
     ``[1, 0]`` (2, 4, 6), as in Yu 2019's simulation. ``gait`` (1 tripod, 2 tetrapod, 3 wave) and ``T_g`` set the
-    FSM's parameters (both stay tunable: ``fsm.gait``, ``fsm.T_g``). Ports: module docstring.
+    FSM's parameters (both stay tunable: ``fsm.gait``, ``fsm.T_g``); ``sensor_delay`` builds every leg's sensing
+    delay line (``*.sensors.delay_f``). Ports: module docstring.
     """
     gid = gait_id(gait)
     orbit = locked_orbit()
     g = Graph(name, "Yu hexapod controller: six single-leg controllers and the gait FSM")
     for i, lname in enumerate(LEG_NAMES):
         start = (-1.0, 0.0) if i % 2 == 0 else (1.0, 0.0)
-        g.add(leg(lname, geometry, leader_start=start, clearance_elevator=clearance_elevator))
+        g.add(leg(lname, geometry, leader_start=start, clearance_elevator=clearance_elevator,
+                  sensor_delay=sensor_delay))
     g.add(YuGaitFSM("fsm", gait=gid, T_g=T_g, T_net=2 * math.pi / TABLE1_OMEGA[0], T_half=orbit.half_period))
     g.add(Demux("toe_split", sizes=(3,) * 6, unit="N"))
     g.add(Demux("rate_split", sizes=(1,) * 6, unit="1"))

@@ -58,6 +58,8 @@ Parameters: ``Fcx``, ``Fcy``, ``Fcz`` (N, >= 0; Yu simulation 10, 10, 2 N, proto
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import casadi as ca
 
@@ -99,7 +101,17 @@ def delay_line(f, line, h_last, t_last, t, delay):
 
 
 class YuSensoryNeurons(Block):
-    """SN_ob and SN_td of Yu Fig. 5 (see the module docstring)."""
+    """SN_ob and SN_td of Yu Fig. 5 (see the module docstring).
+
+    ``delay_line``: build the sensing delay (the ``delay_f`` parameter and its ``DELAY_SAMPLES``-sample line of
+    discrete states). Off by default, and on when ``delay_f`` is given: the line is a select chain over 153
+    states per leg that doubled the six-leg controller's step (8.7 -> 16.4 us, docs/performance.md) even at
+    ``delay_f = 0``, so a block that is not asked for a delay does not carry it."""
+
+    def __init__(self, name: str, start: Mapping[str, Any] | None = None, delay_line: bool | None = None,
+                 **params: Any) -> None:
+        self._delay_line = ("delay_f" in params) if delay_line is None else bool(delay_line)
+        super().__init__(name, start, **params)
 
     def declare(self) -> None:
         self.add_parameter("Fcx", 10.0, "N", (0, math.inf), "lateral obstacle threshold (Y8)")
@@ -111,11 +123,12 @@ class YuSensoryNeurons(Block):
         self.add_parameter("tau_f", 0.0, "s", (0, math.inf), "low-pass time constant on the toe force (0: off)")
         self.add_discrete_state("force_f", (0.0, 0.0, 0.0), "N", "low-passed toe force (tau_f > 0)")
         self.add_discrete_state("t_f", -1.0, "s", "time of the last filter sample (< 0: none yet)")
-        self.add_parameter("delay_f", 0.0, "s", (0, DELAY_SAMPLES * 1e-3),
-                           f"pure delay on the toe force Y8 reads (0: off; at most {DELAY_SAMPLES} samples)")
-        self.add_discrete_state("force_hist", (0.0,) * (3 * (DELAY_SAMPLES + 1)), "N",
-                                f"toe force at the last {DELAY_SAMPLES + 1} samples, newest first (delay_f > 0)")
-        self.add_discrete_state("h_f", 0.0, "s", "sampling interval before the last sample (0: not known yet)")
+        if self._delay_line:
+            self.add_parameter("delay_f", 0.0, "s", (0, DELAY_SAMPLES * 1e-3),
+                               f"pure delay on the toe force Y8 reads (0: off; at most {DELAY_SAMPLES} samples)")
+            self.add_discrete_state("force_hist", (0.0,) * (3 * (DELAY_SAMPLES + 1)), "N",
+                                    f"toe force at the last {DELAY_SAMPLES + 1} samples, newest first (delay_f > 0)")
+            self.add_discrete_state("h_f", 0.0, "s", "sampling interval before the last sample (0: not known yet)")
         self.add_input("toe_force", 3, "N", description="ground force on the foot (Fx lateral, Fy forward, Fz up)")
         self.add_discrete_state("lambda_ob", 0.0, description="debounced obstacle flag")
         self.add_discrete_state("lambda_td", 1.0, description="debounced touchdown flag")
@@ -134,7 +147,11 @@ class YuSensoryNeurons(Block):
 
     def define(self, v: Symbols) -> Equations:
         f_in, p, z = v.u["toe_force"], v.p, v.z
-        f_d, hist, h = delay_line(f_in, z["force_hist"], z["h_f"], z["t_f"], v.t, p["delay_f"])
+        delay: dict = {}
+        f_d = f_in
+        if self._delay_line:
+            f_d, delay["force_hist"], delay["h_f"] = delay_line(f_in, z["force_hist"], z["h_f"], z["t_f"], v.t,
+                                                                p["delay_f"])
         on = p["tau_f"] > 0
         a = ca.if_else(ca.logic_and(on, z["t_f"] >= 0),
                        1 - ca.exp(-(v.t - z["t_f"]) / ca.fmax(p["tau_f"], 1e-12)), 1)  # first sample: F_f = F
@@ -150,6 +167,6 @@ class YuSensoryNeurons(Block):
         return Equations(
             outputs={"lambda_ob": z["lambda_ob"], "lambda_td": z["lambda_td"], "raw_ob": raw_ob, "raw_td": raw_td,
                      "support": z["support"], "raw_sup": raw_sup, "force_f": f},
-            updates={"force_f": f, "force_hist": hist, "h_f": h, "t_f": v.t, "lambda_ob": ob, "t_ob": t_ob,
+            updates={"force_f": f, **delay, "t_f": v.t, "lambda_ob": ob, "t_ob": t_ob,
                      "lambda_td": td, "t_td": t_td, "support": sup, "t_sup": t_sup},
         )

@@ -128,7 +128,9 @@ def closed_loop(geometry: RobotGeometry, terrain: tr.Terrain, thresholds: dict[s
     """Controller + plant graph; ``sets`` override parameters by path (``controller.*``, ``robot.*``);
     ``engine`` picks the plant (:mod:`cpgsim.robots.registry`; same ports in every engine), ``contact`` a
     MuJoCo :class:`~cpgsim.robots.mujoco.mjcf.ContactModel` (MuJoCo only; ``None``: its defaults)."""
-    ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator)
+    delay = any(path.rsplit(".", 1)[-1] == "delay_f" for path in sets)  # the sensors' delay line only if asked
+    ctrl = hexapod_controller(CONTROLLER, geometry=geometry, gait=gait, clearance_elevator=clearance_elevator,
+                              sensor_delay=delay)
     for key, value in thresholds.items():
         ctrl.set_param(f"*.sensors.{key}", value)
     robot = make_plant(engine, ROBOT, geometry=geometry, terrain=terrain, q0=initial_targets(ctrl), settle=0.2,

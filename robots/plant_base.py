@@ -157,10 +157,10 @@ class HexapodPlant(CoSimBlock, ABC):
         """Engine steps per macro step ``dt`` (a whole number, or an error naming the plant)."""
         n = self._steps_per.get(dt)
         if n is None:
-            h = self.time_step
-            n = int(round(dt / h))
-            if n < 1 or abs(n * h - dt) > 1e-9 * max(1.0, dt):
-                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step {h}")
+            n = engine_steps(dt, self.time_step)
+            if n is None:
+                raise ModelError(f"{self.name}: dt = {dt} is not a positive multiple of the world step "
+                                 f"{self.time_step}")
             self._steps_per[dt] = n
         return n
 
@@ -323,8 +323,7 @@ class HexapodPlant(CoSimBlock, ABC):
         if value is None or isinstance(value, AnkleSpring):
             self._ankle = value
         elif isinstance(value, Mapping):
-            unknown = set(value) - {"stiffness", "damping"}
-            if unknown or set(value) != {"stiffness", "damping"}:
+            if set(value) != {"stiffness", "damping"}:
                 raise ParameterError(f"{self.name}: ankle needs exactly stiffness (N/m) and damping (N s/m), "
                                      f"got {', '.join(sorted(value)) or 'nothing'}")
             self._ankle = AnkleSpring(**value)
@@ -455,6 +454,13 @@ class HexapodPlant(CoSimBlock, ABC):
         """What every engine's fused loop needs and this set-up lacks: a compiled readout, ``velocity_ff``
         off, no pushes."""
         return self.compiled_readout is None or bool(self.values["velocity_ff"]) or bool(self.pushes)
+
+
+def engine_steps(dt: float, h: float) -> int | None:
+    """Engine steps of ``h`` in a macro step ``dt``: a positive whole number, or None when ``h`` does not divide
+    ``dt`` (to a relative 1e-9). The one rule for :meth:`HexapodPlant.steps_for` and for a scenario's step."""
+    n = int(round(dt / h))
+    return n if n >= 1 and abs(n * h - dt) <= 1e-9 * max(1.0, dt) else None
 
 
 def readout_for(geometry: RobotGeometry, root: str, layout: StateLayout | None = None):

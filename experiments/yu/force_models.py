@@ -31,10 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from cpgsim.components.geometry import YU_SIM
+from cpgsim.experiments.yu.scenarios import YU_HIT_PEAKS_N
 
-PAPER_PEAKS_N = {"R1": 55.6, "R2": 62.4, "R3": 85.5}
-"""Yu 2019, Fig. 14c: the elevator contact forces of legs 4, 5, 6."""
 LEGS = ("R1", "R2", "R3")
+PAPER_PEAKS_N = {leg: YU_HIT_PEAKS_N[4 + k] for k, leg in enumerate(LEGS)}
+"""Yu 2019, Fig. 14c: the elevator contact forces of legs 4, 5, 6 (R1, R2, R3), by leg name."""
 STANCE_LOAD_N = 35.5 / 3
 """N: a tripod stance leg's share of the simulated robot's weight (3.62 kg)."""
 DEFLECTIONS_M = (0.001, 0.003, 0.010)

@@ -460,6 +460,12 @@ class CoSimBlock(_Declared):
 
     feedthrough: dict[str, set[str]]
 
+    float32_outputs: frozenset[str] = frozenset()
+    """Outputs whose values a results file (``results.arrow``) stores as float32 (docs/results.md, "float32
+    columns"): only where that loses nothing a result can rest on, i.e. values that are float32 already (an
+    FMI 3 Float32 output) or measurements whose own error is orders above float32's rounding (2^-24 of the
+    value; the robot plant's, tests/test_results_float32.py). The run's in-memory results keep float64."""
+
     def __init__(self, name: str, **params: Any) -> None:
         super().__init__(name)
         self.feedthrough = {}

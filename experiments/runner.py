@@ -104,14 +104,15 @@ def fell_from(res: Results, robot: str,
 def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
                  sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
                  step_thread: bool | None = None, save_results: bool = True, csv: bool = False,
-                 prefault: bool = True, **kw: Any) -> dict[str, Any]:
+                 prefault: bool = True, float32_results: bool = True, **kw: Any) -> dict[str, Any]:
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
     ``step_thread``: see :class:`~cpgsim.harness.simulate.Simulator`; ``save_results=False`` writes only the
     summary and the scenario (a benchmark of hundreds of trials). The results are streamed to
     ``results.arrow`` (Arrow IPC, :mod:`cpgsim.harness.results.arrow`); ``csv=True`` also writes
-    ``results.csv`` at the end."""
+    ``results.csv`` at the end; ``float32_results=False`` stores the robot's measurements as float64 too
+    (docs/results.md)."""
     build_wall0 = time.perf_counter()
     setup = build_scenario(name, sets, **kw)
     build_wall = time.perf_counter() - build_wall0
@@ -122,7 +123,8 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     if setup.scenario is not None:
         atomic_write(out / "scenario.toml", lambda f: f.write(setup.scenario.to_toml()), text=True)
     setup_wall0 = time.perf_counter()
-    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread, prefault=prefault).prepare()
+    sim = Simulator(setup.graph, dt=1e-3, record=setup.record, step_thread=step_thread, prefault=prefault,
+                    float32_results=float32_results).prepare()
     setup_wall = time.perf_counter() - setup_wall0
     error: SimulationError | None = None
     wall0 = time.perf_counter()

@@ -75,7 +75,10 @@ class Simulator:
     core the master needs (2.3x slower at load 4-5, 5-7x at load 7-15: ``benchmarks/bench_run.py``), so a
     default that must never be slower than one thread cannot turn it on. ``prefault``: map a large results
     table a window ahead of the loop on a thread (:mod:`cpgsim.harness.prefault`; ``--no-prefault``);
-    ``cache``: :func:`~cpgsim.harness.compile.compile_graph`'s. Each run's results metadata (and a robot
+    ``cache``: :func:`~cpgsim.harness.compile.compile_graph`'s. ``float32_results``: a streamed
+    ``results.arrow`` stores the co-simulation outputs a block marks ``float32_outputs`` (the robot's measured
+    signals) as float32 (docs/results.md); ``False`` keeps every column float64 (``cpgsim run --float64``).
+    Each run's results metadata (and a robot
     run's summary) record under ``"execution"`` which path ran: the step (C or CasADi), the fused loop, the
     step thread, prefault, whether the model came from the compile cache, and each co-simulation block's own
     (a plant's engine and whether its C step ran).
@@ -86,7 +89,7 @@ class Simulator:
                  order: Literal["jacobi", "gauss-seidel"] = "jacobi", jit: bool = False,
                  backend: Literal["auto", "native", "casadi"] = "auto", chunk: int = 5000,
                  step_thread: bool | None = None, grouping: Literal["auto", "flat", "kinds"] = "auto",
-                 prefault: bool = True, cache: bool = True) -> None:
+                 prefault: bool = True, cache: bool = True, float32_results: bool = True) -> None:
         if order not in ("jacobi", "gauss-seidel"):
             raise ModelError(f"co-simulation order must be 'jacobi' or 'gauss-seidel', got {order!r}")
         if isinstance(graph, Graph) and params:
@@ -97,6 +100,7 @@ class Simulator:
         self.model: CompiledModel = compile_graph(graph, dt, substeps, grouping, cache=cache)
         self.graph = graph  # what the graph owns lives as long as this simulator (an imported SSP's extracted FMUs)
         self.prefault = bool(prefault)
+        self.float32_results = bool(float32_results)
         if backend not in ("auto", "native", "casadi"):
             raise ModelError(f"backend must be 'auto', 'native' or 'casadi', got {backend!r}")
         self.order = order
@@ -170,6 +174,9 @@ class Simulator:
         integer_columns = self._integer_columns(columns)
         if integer_columns:  # the stream's sidecar says from the start which columns hold exact integers
             rec.meta["integer_columns"] = integer_columns
+        float32_columns = self._float32_columns(columns)
+        if float32_columns:  # ... and which a results.arrow stores as float32 (CoSimBlock.float32_outputs)
+            rec.meta["float32_columns"] = float32_columns
         if stream is not None:
             from cpgsim.harness.results import ResultsWriter
 
@@ -296,6 +303,18 @@ class Simulator:
                 key = f"{path}.{port}"
                 out.update({columns[j]: dtype for j, _ in port_columns(columns, key)})
         return out
+
+    def _float32_columns(self, columns: list[str]) -> list[str]:
+        """Recorded columns of co-simulation block outputs that a results file stores as float32
+        (:attr:`~cpgsim.components.core.CoSimBlock.float32_outputs`), in column order; none when the
+        simulator was made with ``float32_results=False``."""
+        if not self.float32_results:
+            return []
+        keep: set[int] = set()
+        for path, blk in self._cosim_blocks.items():
+            for port in blk.float32_outputs:
+                keep.update(j for j, _ in port_columns(columns, f"{path}.{port}"))
+        return [columns[j] for j in sorted(keep)]
 
     def _exact_free_inputs(self, inputs: Mapping[str, InputValue]) -> dict[str, np.ndarray]:
         """Free inputs whose constant value is an integer a float64 would round (an FMI 3 Int64/UInt64

@@ -49,6 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--step-thread", action="store_true", help="the controller's compiled step on a worker thread "
                    "(faster on an idle machine, slower on a loaded one; turns the fused C loop off)")
     p.add_argument("--no-prefault", action="store_true", help="do not map a large results table ahead of the loop")
+    p.add_argument("--float64", action="store_true", help="store every column of results.arrow as float64 (by "
+                   "default the robot's measurements are float32, docs/results.md)")
     p.add_argument("--csv", action="store_true", help="also write results.csv (the results are in results.arrow; "
                    "`cpgsim results DIR/results.arrow --csv` converts later)")
     p.add_argument("--list", action="store_true", help="list the built-in scenarios and exit")
@@ -78,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             summary = run_scenario(scenario, work, t_end=args.t_end, progress=not args.no_progress, csv=args.csv,
                                    plots=not args.no_plots, step_thread=args.step_thread,
-                                   prefault=not args.no_prefault)
+                                   prefault=not args.no_prefault, float32_results=not args.float64)
         except SimulationError as exc:
             if interruption(exc) is not None:
                 print(f"partial run kept in {work}/ (marked incomplete); {out} is unchanged")

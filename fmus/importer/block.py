@@ -215,6 +215,12 @@ class FmuBlock(CoSimBlock):
                 if p.element.type in ("Int64", "UInt64")}
 
     @property
+    def float32_outputs(self) -> frozenset[str]:
+        """Outputs of FMI 3 type Float32 (read with ``fmi3GetFloat32``): float32 values already, so a results
+        file stores them as float32 and loses nothing (docs/results.md)."""
+        return frozenset(n for n, p in self.info.outputs.items() if p.element.type == "Float32")
+
+    @property
     def fmi_version(self) -> int:
         return self.info.fmi_version
 

@@ -441,7 +441,8 @@ class ResultsWriter:
             from cpgsim.harness.results.arrow import ArrowStream
 
             self._arrow = ArrowStream(self.stream_path, self.columns, self.units,
-                                      self.meta.get("integer_columns", {}), csv_meta(self.meta))
+                                      self.meta.get("integer_columns", {}), csv_meta(self.meta),
+                                      self.meta.get("float32_columns", ()))
             if self.background:
                 self._background = BackgroundWriter(self._write_batch, self.stream_path.name)
         else:

@@ -4,9 +4,12 @@ after a kill.
 A finished run's file is an Arrow IPC *file* (what ``pandas.read_feather``, ``polars.read_ipc``,
 ``pyarrow.feather.read_table`` and ``pyarrow.ipc.open_file`` read; DuckDB and arrow-rs too): column ``time``
 (float64, s) and one column per recorded signal, float64, or int64/uint64 for FMI 3 Int64/UInt64 outputs
-(exact, no float column beside them). Each field carries its unit in its metadata (``unit``); the schema
-carries the run's metadata at the start of the run as JSON (``cpgsim``). Buffers are compressed with zstd,
-which Arrow readers decompress themselves.
+(exact, no float column beside them), or float32 for the outputs a co-simulation block marks
+``float32_outputs`` (values that are float32 already, or measurements whose own error is orders above
+float32's rounding: the robot plant's; listed under ``float32_columns`` in the metadata; a finite value
+beyond float32's range is an error, never an infinity). Each field carries its unit in its metadata
+(``unit``); the schema carries the run's metadata at the start of the run as JSON (``cpgsim``). Buffers are
+compressed with zstd, which Arrow readers decompress themselves.
 
 Streamed and readable after a kill: the IPC file format is the 8-byte magic ``ARROW1\\0\\0``, then an IPC
 stream (the schema, then record batches), then a footer written at the end. The writer appends one record
@@ -33,7 +36,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -53,16 +56,27 @@ def _pa():
     return pa
 
 
+def column_types(columns: Sequence[str], integer_columns: Mapping[str, str],
+                 float32_columns: Collection[str] = ()) -> list[str]:
+    """Each column's stored type: ``"int64"``/``"uint64"`` (``integer_columns``), ``"float32"``
+    (``float32_columns``, module docstring) or ``"float64"``."""
+    f32 = set(float32_columns)
+    return [integer_columns.get(name) or ("float32" if name in f32 else "float64") for name in columns]
+
+
 def schema(columns: Sequence[str], units: Sequence[str], integer_columns: Mapping[str, str],
-           meta: Mapping[str, Any], copies: Mapping[str, str] | None = None) -> Any:
-    """The Arrow schema of a results table: ``time`` then ``columns`` (typed by ``integer_columns``);
-    ``copies`` (copy -> source, module docstring) become nullable fields and the ``copies`` of the metadata."""
+           meta: Mapping[str, Any], copies: Mapping[str, str] | None = None,
+           float32_columns: Collection[str] = ()) -> Any:
+    """The Arrow schema of a results table: ``time`` then ``columns`` (typed by ``integer_columns`` and
+    ``float32_columns``); ``copies`` (copy -> source, module docstring) become nullable fields and the
+    ``copies`` of the metadata."""
     pa = _pa()
     copies = dict(copies or {})
     fields = [pa.field("time", pa.float64(), nullable=False, metadata={"unit": "s"})]
-    for name, unit in zip(columns, units, strict=True):
-        kind = integer_columns.get(name)
-        typ = pa.int64() if kind == "int64" else pa.uint64() if kind == "uint64" else pa.float64()
+    types = {"int64": pa.int64(), "uint64": pa.uint64(), "float32": pa.float32(), "float64": pa.float64()}
+    for name, unit, kind in zip(columns, units, column_types(columns, integer_columns, float32_columns),
+                                strict=True):
+        typ = types[kind]
         if name in copies:
             fields.append(pa.field(name, typ, nullable=True, metadata={"unit": unit, "copy_of": copies[name]}))
         else:
@@ -73,22 +87,39 @@ def schema(columns: Sequence[str], units: Sequence[str], integer_columns: Mappin
     return pa.schema(fields, metadata={"cpgsim": json.dumps(doc, default=str)})
 
 
-def find_copies(names: Sequence[str], columns: np.ndarray, integer_columns: Mapping[str, str]) -> dict[str, str]:
+def find_copies(names: Sequence[str], columns: np.ndarray, integer_columns: Mapping[str, str],
+                float32_columns: Collection[str] = ()) -> dict[str, str]:
     """The float columns of ``columns`` (one row per column: ``time`` then ``names``) that are a bit-for-bit
-    copy of an earlier float column: copy -> source (the first column holding those values)."""
+    copy of an earlier float column stored with the same type (a float64 column is never restored from a
+    float32 one): copy -> source (the first column holding those values)."""
     if columns.shape[1] == 0:
         return {}
-    first: dict[bytes, str] = {}
+    f32 = set(float32_columns)
+    first: dict[tuple[bool, bytes], str] = {}
     copies: dict[str, str] = {}
     for j, name in enumerate(names, start=1):
         if name in integer_columns:
             continue
-        key = columns[j].tobytes()
+        key = (name in f32, columns[j].tobytes())
         if key in first:
             copies[name] = first[key]
         else:
             first[key] = name
     return copies
+
+
+def _float32(columns: np.ndarray, j: int, field: Any, table: np.ndarray) -> np.ndarray:
+    """Column ``j`` rounded to float32 (module docstring); a finite value beyond float32's range is an error
+    naming the column and time, never an infinity written in its place."""
+    with np.errstate(over="ignore"):
+        values = columns[j].astype(np.float32)
+    bad = np.isinf(values) & np.isfinite(columns[j])
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ResultsError(f"results column {field.name!r} = {columns[j][k]:.6g} at t = {table[k, 0]:.6g} s is "
+                           f"beyond float32's range, the type this column is stored as (docs/results.md); run with "
+                           f"float32 results off (cpgsim run --float64) to keep such values")
+    return values
 
 
 MAGIC = b"ARROW1\0\0"
@@ -99,11 +130,13 @@ class ArrowStream:
     """Appends record batches to the Arrow IPC file ``path`` (schema written at once, the footer at :meth:`close`)."""
 
     def __init__(self, path: Path, columns: Sequence[str], units: Sequence[str],
-                 integer_columns: Mapping[str, str], meta: Mapping[str, Any]) -> None:
+                 integer_columns: Mapping[str, str], meta: Mapping[str, Any],
+                 float32_columns: Collection[str] = ()) -> None:
         pa = _pa()
         self.path = Path(path)
         self._names, self._units = list(columns), list(units)
         self._integer_columns, self._meta = dict(integer_columns), dict(meta)
+        self._float32 = [c for c in self._names if c in set(float32_columns)]
         self.copies: dict[str, str] = {}
         """copy -> source column, fixed by the first batch (module docstring)."""
         self._copy_index: dict[int, int] = {}  # the same as schema positions
@@ -120,12 +153,13 @@ class ArrowStream:
         """Write the schema, with the copies found in the first batch's ``columns`` (None: no batch)."""
         pa = _pa()
         if columns is not None and columns.shape[1] > 0:
-            self.copies = find_copies(self._names, columns, self._integer_columns)
+            self.copies = find_copies(self._names, columns, self._integer_columns, self._float32)
         index = {name: j for j, name in enumerate(self._names, start=1)}
         self._copy_index = {index[c]: index[s] for c, s in self.copies.items()}
         self._copy_arrays = (np.array(list(self._copy_index), dtype=np.intp),
                              np.array(list(self._copy_index.values()), dtype=np.intp))
-        self.schema = schema(self._names, self._units, self._integer_columns, self._meta, self.copies)
+        self.schema = schema(self._names, self._units, self._integer_columns, self._meta, self.copies,
+                             self._float32)
         options = pa.ipc.IpcWriteOptions(compression="zstd", use_threads=False)
         self._writer = pa.ipc.new_file(self._sink, self.schema, options=options)
 
@@ -163,7 +197,10 @@ class ArrowStream:
                 values = exact[j] if exact and j in exact else columns[j]
                 arrays.append(pa.array([int(v) for v in values], type=field.type))
             elif j in same:
-                arrays.append(nulls)  # still its source's values, bit for bit
+                arrays.append(nulls if field.type == pa.float64() else pa.nulls(n, field.type))  # its source's
+            elif field.type == pa.float32():
+                arrays.append(pa.Array.from_buffers(pa.float32(), n, [None, pa.py_buffer(_float32(columns, j, field,
+                                                                                               table))]))
             else:
                 # the column's bytes as the array's buffer (no copy; pa.array would go through its pandas
                 # compatibility layer, importing pandas on the first call, 0.3 s in the middle of a run)
@@ -193,9 +230,10 @@ def write_table(path: Path, time: np.ndarray, columns: Sequence[str], units: Seq
                 exact: Mapping[str, Mapping[str, Any]], meta: Mapping[str, Any],
                 rows_per_batch: int = 65536) -> dict[str, str]:
     """A whole table into ``path`` (the caller makes it atomic: ``path`` is a temporary file); returns its
-    copies (copy -> source, module docstring)."""
+    copies (copy -> source, module docstring). ``meta["float32_columns"]`` are stored as float32."""
     index = {c: j + 1 for j, c in enumerate(columns)}
-    stream = ArrowStream(path, columns, units, {c: d["dtype"] for c, d in exact.items() if c in index}, meta)
+    stream = ArrowStream(path, columns, units, {c: d["dtype"] for c, d in exact.items() if c in index}, meta,
+                         meta.get("float32_columns", ()))
     table = np.column_stack([time, data]) if data.size else np.asarray(time, dtype=float)[:, None]
     try:
         for start in range(0, max(1, len(table)), rows_per_batch):

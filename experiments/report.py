@@ -1,20 +1,23 @@
 """``report.html``: one self-contained page per robot run, made from its results files (``cpgsim report DIR``).
 
 The page opens offline as one file (plotly.js's partial bundle ``gl3d`` is inlined, gzipped, see
-:data:`PLOTLY_BUNDLE`; under 2 MB for a 10 s run): a 3D replay of the robot (body box and legs from
-the recorded joint angles and body pose, as in DART), the terrain's boxes, the toe forces as arrows and the
-reflex events as markers, with play / pause, speed buttons and a time slider; beside it the linked plots
-(gait diagram with the FSM holds and reflex events, CPG or joint states, vertical toe forces with their
-threshold, body pose), each with a time cursor that follows the replay (click a plot to jump there), and
-the run's summary. ``report.html#frame=K`` opens at frame ``K``; the page sets ``data-ready="1"`` on its
-``<body>`` once the viewer is drawn (the browser test waits for it).
+:data:`PLOTLY_BUNDLE`, and so is the page's data, :func:`page_data` reads it back; 0.9 MB for a 10 s run): a
+3D replay of the robot (body box and legs from the recorded joint angles and body pose, as in DART), the
+terrain's boxes, the toe forces as arrows and the reflex events as markers, with play / pause, speed buttons
+and a time slider; beside it the linked plots (gait diagram with the FSM holds and reflex events, CPG or joint
+states, vertical toe forces with their threshold, body pose), each with a time cursor that follows the replay
+(click a plot to jump there), and the run's summary. ``report.html#frame=K`` opens at frame ``K``; the page
+sets ``data-ready="1"`` on its ``<body>`` once the viewer is drawn (the browser test waits for it).
 """
 
 from __future__ import annotations
 
+import base64
+import gzip
 import html
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -326,17 +329,20 @@ PLOTLY_BUNDLE = Path(__file__).with_name("assets") / "plotly-gl3d.min.js.gz"
 the whole library inlined (``plotly.min.js``). The page decompresses it with the browser's
 ``DecompressionStream`` (Chromium 80, Firefox 113, Safari 16.4 on), so it still opens offline as one file."""
 
-# Runs the library (the gzipped partial bundle, when the page carries it), then the page's own script.
+# Runs the library (the gzipped partial bundle, when the page carries it), reads the page's gzipped data into
+# window.cpgsimData, then runs the page's own script.
 LOADER = """(async () => {
-  const gz = document.getElementById('plotly-gz');
-  const run = code => { const s = document.createElement('script'); s.textContent = code;
-                        document.head.appendChild(s); };
-  if (gz) {
-    const b = atob(gz.textContent.trim()), u = new Uint8Array(b.length);
+  const gunzip = async el => {
+    const b = atob(el.textContent.trim()), u = new Uint8Array(b.length);
     for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i);
     const stream = new Blob([u]).stream().pipeThrough(new DecompressionStream('gzip'));
-    run(await new Response(stream).text());
-  }
+    return await new Response(stream).text();
+  };
+  const run = code => { const s = document.createElement('script'); s.textContent = code;
+                        document.head.appendChild(s); };
+  const gz = document.getElementById('plotly-gz');
+  if (gz) run(await gunzip(gz));
+  window.cpgsimData = JSON.parse(await gunzip(document.getElementById('cpgsim-data-gz')));
   run(document.getElementById('cpgsim-main').textContent);
 })().catch(e => {
   document.body.insertAdjacentHTML('afterbegin', '<p style="color:#b00">this page could not start its plotting '
@@ -345,12 +351,25 @@ LOADER = """(async () => {
 });"""
 
 
+def _gzip64(text: str) -> str:
+    """``text`` gzipped, as base64: the page's data (the plots and the replay's frames: rounded numbers, 4-6x
+    smaller gzipped) decompressed by the page's loader as the plotting library is."""
+    return base64.b64encode(gzip.compress(text.encode(), compresslevel=9, mtime=0)).decode("ascii")
+
+
+def page_data(page: str) -> dict[str, Any]:
+    """The data a report page draws (``viewer``, ``plots``, ``times``, ...), read back from its text: what the
+    page's loader gives its script (for tests and tools that inspect a report)."""
+    blob = re.search(r'<script id="cpgsim-data-gz" type="application/octet-stream">([^<]*)</script>', page)
+    if blob is None:
+        raise ValueError("not a cpgsim report page (no cpgsim-data-gz block)")
+    return json.loads(gzip.decompress(base64.b64decode(blob.group(1))))
+
+
 def _plotly_tag() -> str:
     """The plotting library for the page's head: the gzipped partial bundle as base64 (see
     :data:`PLOTLY_BUNDLE`), or the whole library inlined when the bundle is not installed."""
     if PLOTLY_BUNDLE.exists():
-        import base64
-
         return ('<script id="plotly-gz" type="application/octet-stream">'
                 + base64.b64encode(PLOTLY_BUNDLE.read_bytes()).decode("ascii") + "</script>")
     from plotly.offline import get_plotlyjs
@@ -361,8 +380,7 @@ def _plotly_tag() -> str:
 def _page(name: str, summary: dict, viewer: dict, plots: dict, times: list[float], fps: int) -> str:
     viewer, plots = _json_safe(viewer), _json_safe(plots)
     data = json.dumps({"viewer": viewer, "plots": plots, "times": times, "fps": fps, "legs": list(LEG_NAMES),
-                       "viewerTraces": VIEWER_TRACES}, separators=(",", ":"),
-                      allow_nan=False, default=float).replace("</", "<\\/")
+                       "viewerTraces": VIEWER_TRACES}, separators=(",", ":"), allow_nan=False, default=float)
     verdict = "success" if summary.get("success") else "failed: " + ", ".join(summary.get("criteria_failed", []))
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>cpgsim run: {html.escape(name)}</title>
@@ -387,8 +405,9 @@ text-align: left; }}
 <input id="slider" type="range" min="0" value="0"><span id="clock">0.00 s</span></div>
 <div id="summary">{_summary_html(summary)}</div></div>
 <div id="right"><div id="plotbox"><div id="plots"></div><div id="cursor"></div></div></div></div>
+<script id="cpgsim-data-gz" type="application/octet-stream">{_gzip64(data)}</script>
 <script id="cpgsim-main" type="text/plain">
-const D = {data};
+const D = window.cpgsimData;
 const viewer = document.getElementById('viewer'), plots = document.getElementById('plots');
 const slider = document.getElementById('slider'), clock = document.getElementById('clock');
 const cursor = document.getElementById('cursor');

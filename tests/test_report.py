@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from cpgsim.cli.main import main
+from cpgsim.experiments.report import page_data
 from cpgsim.experiments.runner import run_scenario
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
@@ -38,8 +39,10 @@ def test_every_run_writes_a_self_contained_report(run_dir):
     page = (run_dir / "report.html").read_text()
     assert "report.html" in (run_dir / "summary.json").read_text()
     assert not re.search(r'<(script|link|img|iframe)[^>]+(src|href)="(https?:)?//', page)  # nothing fetched
-    assert re.search(r"Plotly\.newPlot\(viewer", page) and '"frames"' in page
-    assert page.count('"scatter3d"') >= 5  # body, legs left and right, force arrows, reflex events
+    data = page_data(page)  # the page's data, gzipped inside it
+    assert re.search(r"Plotly\.newPlot\(viewer", page) and data["viewer"]["frames"]
+    assert sum(tr["type"] == "scatter3d" for tr in data["viewer"]["data"]) >= 5  # body, legs left and right, force
+    # arrows, reflex events
 
 
 def test_the_report_of_a_short_run_is_under_2_mb(run_dir):
@@ -119,7 +122,7 @@ def test_replay_follows_the_wall_clock(run_dir, tmp_path):
     script = page[page.index("const D = "):]  # the page's own script (plotly's library comes before it)
     assert "requestAnimationFrame(tick)" in script and "setInterval" not in script
     # what is drawn is bounded whatever the run's length: at most 1,500 samples per plot trace
-    plots = json.loads(re.search(r"const D = (\{.*?\});\n", page).group(1))["plots"]
+    plots = page_data(page)["plots"]
     assert max(len(tr["x"]) for tr in plots["data"] if tr["type"] == "scatter") <= 1500
 
 
@@ -164,7 +167,7 @@ def test_nan_in_what_is_drawn_becomes_a_gap_not_an_error():
     plots = {"data": [{"x": [0.0, 1.0], "y": [float("nan"), np.float64("inf")]}], "layout": {}}
     assert _json_safe(plots)["data"][0]["y"] == [None, None]
     page = _page("amputated", {"success": True}, {"data": [], "layout": {}, "frames": []}, plots, [0.0], 20)
-    assert '"y":[null,null]' in page
+    assert page_data(page)["plots"]["data"][0]["y"] == [None, None]
 
 
 def test_the_gait_legend_names_only_the_styles_drawn():

@@ -181,3 +181,15 @@ def test_an_fmi3_float32_output_is_stored_as_float32_and_reads_back_exactly(tmp_
     back = Results.load(tmp_path / "r.arrow")
     assert back.data.tobytes() == res.data.tobytes()  # exact: the Float32 values were float32 already
     assert res["f.y32"][-1] == np.float32(0.6) != res["f.y64"][-1]
+
+
+@pytest.mark.slow  # a 10 s DART run with its report and pictures (about 10 s)
+def test_a_10s_run_folder_at_the_defaults_is_under_the_issues_5_mb(tmp_path):
+    from cpgsim.cli.main import main
+
+    out = tmp_path / "run"
+    assert main(["run", "flat", "--t-end", "10", "--no-progress", "-o", str(out)]) == 0
+    sizes = {f.name: f.stat().st_size for f in out.iterdir() if f.is_file()}
+    assert {"results.arrow", "report.html", "gait.png"} <= set(sizes)
+    assert sum(sizes.values()) <= 5_000_000, sizes  # issue 46 item 3: <= 5 MB for a 10 s run at the defaults
+    assert sizes["report.html"] <= 2_000_000, sizes

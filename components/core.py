@@ -315,6 +315,10 @@ class _Declared:
         """Set parameter values (validated against their bounds)."""
         for key, value in values.items():
             if key not in self.parameters:
+                absent = getattr(self, "absent_parameters", {})  # left out of how this block was built
+                if key in absent:
+                    raise ParameterError(f"block {self.name!r} has no parameter {key!r}: it exists only when "
+                                         f"{absent[key]}")
                 known = ", ".join(sorted(self.parameters)) or "none"
                 raise ParameterError(f"block {self.name!r} has no parameter {key!r}"
                                      f"{did_you_mean(key, self.parameters)} (parameters: {known})")

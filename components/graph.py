@@ -189,6 +189,9 @@ class Graph(_Declared):
         every block that has a parameter of a close name (``controller.*.Fcx`` for ``controller.Fcxx``)."""
         paths = self.parameter_paths()
         owner, _, pname = path.rpartition(".")
+        for bpath, why in self._absent_parameters().items():  # a parameter its block was built without
+            if fnmatch.fnmatchcase(bpath, path):
+                return f" ({bpath} exists only when {why})"
         siblings = [p.rpartition(".")[2] for p in paths if p.rpartition(".")[0] == owner]
         hint = did_you_mean(path, [f"{owner}.{s}" if owner else s for s in siblings])
         if hint:
@@ -198,6 +201,15 @@ class Graph(_Declared):
             return did_you_mean(path, paths)
         names = sorted({p.rpartition(".")[2] for p in inside})
         return did_you_mean(pname, names, prefix=f"{owner}.*." if owner else "*.")
+
+    def _absent_parameters(self) -> dict[str, str]:
+        """``block.param`` -> how to build the block with it, for the parameters blocks here were built without
+        (a block's ``absent_parameters``: an option left out of its equations, like the sensors' delay line)."""
+        out: dict[str, str] = {}
+        for bname, blk in self.blocks.items():
+            inner = blk._absent_parameters() if isinstance(blk, Graph) else getattr(blk, "absent_parameters", {})
+            out.update({f"{bname}.{p}": why for p, why in inner.items()})
+        return out
 
     def parameter_paths(self) -> list[str]:
         """All parameter paths ``block.param`` (nested graphs: ``sub.block.param``)."""

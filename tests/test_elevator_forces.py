@@ -98,3 +98,19 @@ def test_a_delay_beyond_the_line_is_refused():
         YuSensoryNeurons("s", delay_f=0.051)
     with pytest.raises(ParameterError, match="delay_f"):
         YuSensoryNeurons("s", delay_f=-0.001)
+
+
+def test_setting_the_delay_on_a_controller_built_without_it_says_how_to_build_it():
+    """The delay line is built only when asked for (docs/performance.md): a ``*.sensors.delay_f`` on a default
+    controller matches no parameter, and the error names the option that builds it."""
+    from cpgsim.components.yu.leg import hexapod_controller
+
+    with pytest.raises(ParameterError, match=r"no parameter matching '\*\.sensors\.delay_f' \(L1\.sensors\.delay_f "
+                                             r"exists only when .*hexapod_controller\(sensor_delay=True\)"):
+        hexapod_controller().set_param("*.sensors.delay_f", 0.01)
+    g = hexapod_controller(sensor_delay=True)
+    g.set_param("*.sensors.delay_f", 0.01)
+    assert g.find("R3.sensors").values["delay_f"] == 0.01
+    with pytest.raises(ParameterError, match=r"block 's' has no parameter 'delay_f': it exists only when .*"
+                                             r"YuSensoryNeurons\(delay_line=True\)"):
+        YuSensoryNeurons("s").set(delay_f=0.01)

@@ -113,6 +113,15 @@ class YuSensoryNeurons(Block):
         self._delay_line = ("delay_f" in params) if delay_line is None else bool(delay_line)
         super().__init__(name, start, **params)
 
+    @property
+    def absent_parameters(self) -> dict[str, str]:
+        """``delay_f`` when built without the delay line, and how to build it with one (the graph's error for
+        a ``*.sensors.delay_f`` that matches nothing says so)."""
+        if self._delay_line:
+            return {}
+        return {"delay_f": "the sensors are built with their delay line: YuSensoryNeurons(delay_line=True), "
+                           "hexapod_controller(sensor_delay=True), or a scenario that sets it"}
+
     def declare(self) -> None:
         self.add_parameter("Fcx", 10.0, "N", (0, math.inf), "lateral obstacle threshold (Y8)")
         self.add_parameter("Fcy", 10.0, "N", (0, math.inf), "forward obstacle threshold (Y8)")

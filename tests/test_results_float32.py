@@ -193,3 +193,35 @@ def test_a_10s_run_folder_at_the_defaults_is_under_the_issues_5_mb(tmp_path):
     assert {"results.arrow", "report.html", "gait.png"} <= set(sizes)
     assert sum(sizes.values()) <= 5_000_000, sizes  # issue 46 item 3: <= 5 MB for a 10 s run at the defaults
     assert sizes["report.html"] <= 2_000_000, sizes
+
+
+def test_a_run_whose_float32_output_leaves_float32s_range_stops_with_its_results_kept(tmp_path):
+    from cpgsim.components.core import CoSimBlock
+    from cpgsim.components.graph import Graph
+    from cpgsim.harness.simulate import Simulator
+
+    class Diverging(CoSimBlock):
+        float32_outputs = frozenset({"y"})
+
+        def declare(self) -> None:
+            self.add_output("y", 1, "m")
+
+        def setup(self, t0: float) -> None:
+            self.t = t0
+
+        def get_outputs(self) -> dict:
+            return {"y": np.array([1e39 if self.t > 1.5 else self.t])}
+
+        def set_inputs(self, values) -> None:
+            pass
+
+        def do_step(self, t: float, dt: float) -> None:
+            self.t = t + dt
+
+    g = Graph("g")
+    g.add(Diverging("b"))
+    with pytest.raises(ResultsError, match=r"'b\.y' = 1e\+39 at t = 1\.501 s is beyond float32's range"):
+        Simulator(g, dt=1e-3).run(3.0, stream=tmp_path / "r.arrow", progress=False)
+    kept = Results.load(tmp_path / "r.arrow")  # every whole second before it, marked incomplete
+    assert not kept.complete and "beyond float32's range" in kept.message
+    assert kept.time[-1] == pytest.approx(1.0) and kept["b.y"][-1] == pytest.approx(1.0)

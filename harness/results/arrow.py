@@ -118,7 +118,8 @@ def _float32(columns: np.ndarray, j: int, field: Any, table: np.ndarray) -> np.n
         k = int(np.argmax(bad))
         raise ResultsError(f"results column {field.name!r} = {columns[j][k]:.6g} at t = {table[k, 0]:.6g} s is "
                            f"beyond float32's range, the type this column is stored as (docs/results.md); run with "
-                           f"float32 results off (cpgsim run --float64) to keep such values")
+                           "float32 results off (cpgsim run --float64; Simulator(float32_results=False)) to keep "
+                           "such values")
     return values
 
 

@@ -36,7 +36,14 @@ from cpgsim.harness.cosim.fused import FusedLoopBase
 
 BATCH = threading.local()
 """``BATCH.current``: the :class:`cpgsim.robots.mujoco.batch.Batch` whose trial runs on this thread (None:
-a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_loop`` call per chunk)."""
+a :class:`FusedLoop` made here runs alone, one ``cpgsim_mj_trial_step`` call per chunk)."""
+
+CHUNK = 500
+"""Macro steps per C call of a loop alone (0.5 s simulated at 1 kHz, 15-40 ms of wall time; harness/cosim/fused.py's
+default is 100). The rows go straight into the recorder's table (:meth:`FusedLoop.bind_table`), so no chunk
+buffer has to stay small, and each hand-over to Python costs about 0.2 ms once the C loop has pushed the
+interpreter out of the caches (3-5 us when warm): 100 of them were 4 % of a 10 s run, 20 are under 1 %. The
+numbers do not depend on the chunk (the C loop keeps its state between calls)."""
 
 SOURCE = c_source(__package__, "c/mujoco_loop.c")
 """The macro step, the fused controller + plant loop and the batch trials, against ``mujoco.h``."""
@@ -49,11 +56,15 @@ _LOOP_ARGS = [_vp, _vp, _int, _ip, _dp, _dp, _vp, _vp, _int, _int, _dp, _dp, _in
 
 PROTOTYPES: Prototypes = {
     "cpgsim_mj_run": (_int, [_vp, _vp, _int, _ip, _dp, _dp, _dp, _int, _int, ctypes.c_double]),
+    "cpgsim_mj_settle": (None, [_vp, _vp, _int, _ip, _dp, _dp]),
     "cpgsim_mj_loop": (_int, _LOOP_ARGS),
     "cpgsim_mj_trial_new": (_vp, _LOOP_ARGS[:27]),
     "cpgsim_mj_trial_range": (None, [_vp, _int, _int, _dp]),
     "cpgsim_mj_trial_result": (_int, [_vp, _ip]),
     "cpgsim_mj_trial_free": (None, [_vp]),
+    "cpgsim_mj_trial_table": (None, [_vp, _dp, ctypes.c_longlong, _lp, _int, _lp, _lp]),
+    "cpgsim_mj_trial_step": (_int, [_vp, _int, _int, _dp, _ip, _ip]),
+    "cpgsim_mj_trial_finite": (_int, [_vp]),
     "cpgsim_mj_batch": (_int, [ctypes.POINTER(_vp), _int, _int]),
     "cpgsim_mj_quiet": (None, []),
 }
@@ -108,6 +119,10 @@ class NativeMujocoStep:
         self._push_args = (self._pushes.ctypes.data_as(dp), len(pushes), int(body))
         self._fn = self._lib.cpgsim_mj_run
 
+    def settle(self, n: int) -> None:
+        """``n`` times :meth:`run` ``(1)`` (no pushes) in one C call: ``force``/``flags`` hold the last step's."""
+        self._lib.cpgsim_mj_settle(*self._args, n, *self._ptrs)
+
     @property
     def library(self) -> ctypes.CDLL:
         """The compiled library (``cpgsim_mj_loop`` and the batch's trial functions)."""
@@ -140,7 +155,9 @@ def push_table(pushes) -> np.ndarray:
 
 
 class FusedLoop(FusedLoopBase):
-    """The controller's bound compiled step and the plant in one C loop (:func:`cpgsim_mj_loop`).
+    """The controller's bound compiled step and the plant in one C loop (``trial_loop`` in ``mujoco_loop.c``: the
+    loop's arguments kept in a C trial, ``cpgsim_mj_trial_step`` per chunk; ``cpgsim_mj_loop`` is the same loop
+    in one call).
 
     Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`; a
     :class:`~cpgsim.harness.cosim.fused.FusedLoopBase` (``run(k0, k1, times)`` returns ``(rows, status, Y, O)``; the
@@ -153,13 +170,12 @@ class FusedLoop(FusedLoopBase):
     def __init__(self, plant, native: NativeMujocoStep, request: FusedRequest, u_idx: np.ndarray,
                  o_idx: np.ndarray, qt_idx: np.ndarray) -> None:
         batch = getattr(BATCH, "current", None)  # set on a trial thread of cpgsim.robots.mujoco.batch
-        super().__init__(plant, request, u_idx, o_idx, qt_idx, **({"chunk": batch.chunk} if batch else {}))
+        super().__init__(plant, request, u_idx, o_idx, qt_idx, chunk=batch.chunk if batch else CHUNK)
         self.native = native
         b = plant.buffers
         feval, fctx = plant.compiled_readout.c_entry()  # the readout compiled on the plant's buffers
         dp = ctypes.POINTER(ctypes.c_double)
         lib = native.library
-        self._fn = lib.cpgsim_mj_loop
         u_i, o_i, q_i, y_i = self.index_pointers()
         self._head = (*native.model_data, plant.steps_for(request.dt), *native.sums,
                       ctypes.c_void_p(request.commit_fn), ctypes.c_void_p(request.ctx), request.nx, request.nz,
@@ -169,12 +185,30 @@ class FusedLoop(FusedLoopBase):
                       b.out.ctypes.data_as(dp), b.out.size, q_i, len(request.yi), y_i,
                       self.Y.ctypes.data_as(dp), self.O.ctypes.data_as(dp))
         self.batch = batch
-        self.trial = None
-        if self.batch is not None:
-            self.trial = lib.cpgsim_mj_trial_new(*self._head)
-            if not self.trial:
-                raise MemoryError("cpgsim_mj_trial_new: allocation failed")
-            self._free = lib.cpgsim_mj_trial_free
+        self.trial = lib.cpgsim_mj_trial_new(*self._head)  # the loop's arguments, kept in C between chunks
+        if not self.trial:
+            raise MemoryError("cpgsim_mj_trial_new: allocation failed")
+        self._free = lib.cpgsim_mj_trial_free
+        self._step = lib.cpgsim_mj_trial_step
+        self._finite = ctypes.c_int(0)
+        self._status_p, self._finite_p = ctypes.byref(self.status), ctypes.byref(self._finite)
+        self._table: tuple = ()
+
+    def bind_table(self, table: np.ndarray, ycols: np.ndarray, ocols: np.ndarray, osrc: np.ndarray) -> bool:
+        """Rows straight into the recorder's table (``cpgsim_mj_trial_table``): no ``Y``/``O`` copy per chunk, and
+        the C loop's finiteness of what it wrote (see :class:`~cpgsim.harness.cosim.fused.FusedLoopBase`)."""
+        if table.dtype != np.float64 or table.ndim != 2 or not table.flags.c_contiguous or not table.flags.writeable:
+            return False
+        ycols, ocols, osrc = (np.ascontiguousarray(a, dtype=np.int64) for a in (ycols, ocols, osrc))
+        if ycols.size != len(self.request.yi) or ocols.size != osrc.size:
+            return False
+        self._table = (table, ycols, ocols, osrc)  # kept alive while the C loop holds their addresses
+        lp = ctypes.POINTER(ctypes.c_longlong)
+        self.native.library.cpgsim_mj_trial_table(
+            self.trial, table.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), table.shape[1],
+            ycols.ctypes.data_as(lp), ocols.size, ocols.ctypes.data_as(lp), osrc.ctypes.data_as(lp))
+        self.Y, self.O = self.Y[:0], self.O[:0]  # no longer written: run() hands back empty blocks
+        return True
 
     def __del__(self) -> None:
         if getattr(self, "trial", None):
@@ -184,9 +218,11 @@ class FusedLoop(FusedLoopBase):
     def _run_chunk(self, k0: int, k1: int, times: np.ndarray, times_p) -> tuple[int, int]:
         if self.batch is not None:  # advanced with the other trials of the batch, in one C call
             rows, status = self.batch.advance(self, k0, k1, times_p, last=k1 >= len(times) - 1)
+            self.finite = bool(self.native.library.cpgsim_mj_trial_finite(self.trial))
         else:
-            rows = self._fn(*self._head, k0, k1, times_p, ctypes.byref(self.status))
+            rows = self._step(self.trial, k0, k1, times_p, self._status_p, self._finite_p)
             status = self.status.value
+            self.finite = bool(self._finite.value)
         stepped = rows - (1 if status == FusedStatus.CONTROLLER_DIVERGED else 0)
         if stepped > 0:
             self.plant.take_fused_steps(float(times[k0 + stepped]), np.array(self.plant.data.ctrl), False)

@@ -222,6 +222,24 @@ class MujocoHexapod(HexapodPlant, ResumableBlock, FusedLoopBlock):
             ctrl += v["kd"] / v["kp"] * velocity
         self.data.ctrl[:] = ctrl
 
+    def _settle(self, seconds: float) -> None:
+        """:meth:`HexapodPlant._settle` with the C step: once the servo law has nothing left to apply (its
+        :meth:`_update_servo` is then a no-op), the remaining settle steps in one C call, each step as
+        ``_native_steps(1)`` does it (the same ``mj_step``s and contact sums, the last step's readings), the
+        outputs read once at the end instead of after every step (they depend on the state only)."""
+        if self.native_step is None:
+            super()._settle(seconds)
+            return
+        steps, k = int(round(seconds / self.time_step)), 0
+        while k < steps and (self._target_changed or self._ff_active):
+            self._update_servo(self.time_step)
+            self._native_steps(1)
+            k += 1
+        if k < steps:
+            self.native_step.settle(steps - k)
+            self._take_c_readings()
+            self.update_outputs()
+
     def _native_steps(self, n: int, t: float | None = None) -> bool:
         """``n`` MuJoCo steps in C from ``t`` (the contact sums averaged there, the pushes applied there), then the
         outputs."""

@@ -15,6 +15,13 @@ int cpgsim_mj_run(const mjModel *m, mjData *d, int n, const int *codes, double *
   return substeps(m, d, n, codes, force, flags, (const cpgsim_push *)pushes, np, b, t);
 }
 
+/* n steps as n calls of cpgsim_mj_run(m, d, 1, codes, force, flags, NULL, 0, 0, 0.0): the settle phase
+   (no pushes), force and flags as the last step left them. */
+void cpgsim_mj_settle(const mjModel *m, mjData *d, int n, const int *codes, double *force, double *flags) {
+  int s;
+  for (s = 0; s < n; ++s) substeps(m, d, 1, codes, force, flags, 0, 0, 0, 0.0);
+}
+
 /* One trial of the closed loop: everything the loop reads and writes (the Python side owns the arrays). */
 typedef int (*commit_fn)(void *, double, int, int);
 typedef int (*eval_fn)(void *);
@@ -26,12 +33,17 @@ typedef struct {
   const long long *qt_idx; int npick; const long long *yi; double *Yrec, *Orec;
   int k0, k1; const double *times;
   int rows, status;
+  /* the recorder's table (NULL: rows go to Yrec/Orec): row k at table + k * stride, y[yi[i]] in column ycol[i],
+     O[osrc[j]] in column ocol[j]; finite: every value written in the chunk was finite */
+  double *table; long long stride; const long long *ycol; int noc; const long long *ocol, *osrc; int finite;
 } cpgsim_mj_trial;
 
 /* The closed loop of a compiled controller step and this plant for macro steps k0 .. k1-1, as the
    co-simulation master does them (Jacobi, no feedthrough): u <- plant outputs O; controller step at
    times[k] with commit (x, z move on when finite); record row k (Yrec: y[yi], Orec: O); ctrl <- y[qt];
-   n sub-steps of MuJoCo with the contact sums; O <- readout(qpos, qvel, force, body contact).
+   n sub-steps of MuJoCo with the contact sums; O <- readout(qpos, qvel, force, body contact). With a table
+   (cpgsim_mj_trial_table) row k goes straight into the recorder's table instead of Yrec/Orec, and t->finite
+   says whether every value written was finite (the recorder's NaN check then has nothing left to look at).
    Sets t->rows (the rows recorded) and t->status (harness/c/fused_status.h): DONE; CONTROLLER_DIVERGED
    (the plant was not stepped); EVALUATION_ERROR (the controller step failed: row not recorded; or the
    readout failed: row recorded); PLANT_DIVERGED: MuJoCo's state went non-finite or out of range in the
@@ -44,15 +56,23 @@ static void trial_loop(cpgsim_mj_trial *t) {
   commit_fn commit = (commit_fn)t->step_commit;
   eval_fn readout = (eval_fn)t->feval;
   const double *y = t->y, *O = t->O;
-  int k, i, rc, k0 = t->k0, nbad0;
+  int k, i, rc, k0 = t->k0, nbad0, finite = 1;
   t->status = CPGSIM_FUSED_DONE;
+  t->finite = 1;
   for (k = k0; k < t->k1; ++k) {
-    double *yr = t->Yrec + (long)(k - k0) * t->npick, *orow = t->Orec + (long)(k - k0) * t->nO;
     for (i = 0; i < t->nmap; ++i) t->u[t->u_idx[i]] = O[t->o_idx[i]];
     rc = commit(t->sctx, t->times[k], t->nx, t->nz);
-    if (rc == 2) { t->status = CPGSIM_FUSED_EVALUATION_ERROR; t->rows = k - k0; return; }
-    for (i = 0; i < t->npick; ++i) yr[i] = y[t->yi[i]];
-    for (i = 0; i < t->nO; ++i) orow[i] = O[i];
+    if (rc == 2) { t->status = CPGSIM_FUSED_EVALUATION_ERROR; t->rows = k - k0; t->finite = finite; return; }
+    if (t->table) {
+      double *row = t->table + (long long)k * t->stride, v;
+      for (i = 0; i < t->npick; ++i) { v = y[t->yi[i]]; row[t->ycol[i]] = v; finite &= v - v == 0.0; }
+      for (i = 0; i < t->noc; ++i) { v = O[t->osrc[i]]; row[t->ocol[i]] = v; finite &= v - v == 0.0; }
+      t->finite = finite;
+    } else {
+      double *yr = t->Yrec + (long)(k - k0) * t->npick, *orow = t->Orec + (long)(k - k0) * t->nO;
+      for (i = 0; i < t->npick; ++i) yr[i] = y[t->yi[i]];
+      for (i = 0; i < t->nO; ++i) orow[i] = O[i];
+    }
     if (rc == 1) { t->status = CPGSIM_FUSED_CONTROLLER_DIVERGED; t->rows = k - k0 + 1; return; }
     for (i = 0; i < m->nu; ++i) d->ctrl[i] = y[t->qt_idx[i]];
     nbad0 = bad_state_warnings(d);
@@ -104,6 +124,22 @@ int cpgsim_mj_trial_result(void *p, int *status) {
   return t->rows;
 }
 void cpgsim_mj_trial_free(void *p) { free(p); }
+/* Rows straight into the recorder's table from now on (see cpgsim_mj_trial); table NULL: back to Yrec/Orec. */
+void cpgsim_mj_trial_table(void *p, double *table, long long stride, const long long *ycol, int noc,
+                           const long long *ocol, const long long *osrc) {
+  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
+  t->table = table; t->stride = stride; t->ycol = ycol; t->noc = noc; t->ocol = ocol; t->osrc = osrc;
+}
+/* One trial's chunk on this thread: macro steps k0 .. k1-1; returns the rows, *status and *finite as set. */
+int cpgsim_mj_trial_step(void *p, int k0, int k1, const double *times, int *status, int *finite) {
+  cpgsim_mj_trial *t = (cpgsim_mj_trial *)p;
+  t->k0 = k0; t->k1 = k1; t->times = times; t->rows = 0;
+  trial_loop(t);
+  *status = t->status;
+  *finite = t->finite;
+  return t->rows;
+}
+int cpgsim_mj_trial_finite(void *p) { return ((cpgsim_mj_trial *)p)->finite; }
 
 /* Many trials, each its own mjData and controller context (models may be shared: mj_step only reads
    them), on min(nthreads, n) POSIX threads; each thread takes whole trials from an atomic counter and

@@ -81,8 +81,21 @@ def mujoco_paths() -> tuple[Path, Path]:
     return include, libs[0]
 
 
+_LIBRARY: list[ctypes.CDLL] = []
+_LIBRARY_LOCK = threading.Lock()
+
+
 def library() -> ctypes.CDLL:
-    """The compiled macro step (built once per source, flags and mujoco version; cached)."""
+    """The compiled macro step (built once per source, flags and mujoco version; cached), loaded once per process:
+    finding the compiler, hashing the source and checking the cached file took 3-4 ms of every MuJoCo plant's
+    set-up for the same library (a failed build is not kept: the next call tries again)."""
+    with _LIBRARY_LOCK:
+        if not _LIBRARY:
+            _LIBRARY.append(_load_library())
+        return _LIBRARY[0]
+
+
+def _load_library() -> ctypes.CDLL:
     include, lib = mujoco_paths()
     flags = (*optimization_flags(SOURCE), f"-I{include}", "-Wl,--no-as-needed", str(lib),
              f"-Wl,-rpath,{lib.parent}")

@@ -8,6 +8,7 @@ Every error names the blocks and ports involved.
 from __future__ import annotations
 
 import fnmatch
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -176,7 +177,14 @@ class Graph(_Declared):
 
     def set_param(self, path: str, value: Any) -> None:
         """Set one parameter by ``block.sub.param`` path; a glob (``*.eps``) sets every match."""
-        matches = [p for p in self.parameter_paths() if fnmatch.fnmatchcase(p, path)]
+        if not any(ch in path for ch in "*?["):  # a plain path matches itself only (fnmatchcase: equality)
+            matches = [path] if self._has_parameter(path) else []
+        else:
+            match = re.compile(fnmatch.translate(path)).match  # what fnmatchcase does per name, compiled once
+            head = re.split(r"[*?\[]", path, maxsplit=1)[0]  # the literal text before the first wildcard
+            tail = re.split(r"[*?\]]", path)[-1]  # and after the last one: every match starts / ends with them
+            matches = [p for p in self.parameter_paths()
+                       if p.startswith(head) and p.endswith(tail) and match(p) is not None]
         if not matches:
             raise ParameterError(f"graph {self.name!r} has no parameter matching {path!r}"
                                  f"{self._suggest_parameter(path)}")
@@ -211,16 +219,32 @@ class Graph(_Declared):
             out.update({f"{bname}.{p}": why for p, why in inner.items()})
         return out
 
+    def _has_parameter(self, path: str) -> bool:
+        """``path in self.parameter_paths()``, by walking the path instead of listing every parameter."""
+        head, _, rest = path.partition(".")
+        blk = self.blocks.get(head)
+        if blk is None or not rest:
+            return False
+        if isinstance(blk, Graph):
+            return blk._has_parameter(rest)
+        return rest in blk.parameters or rest in getattr(blk, "value_parameters", {})
+
     def parameter_paths(self) -> list[str]:
         """All parameter paths ``block.param`` (nested graphs: ``sub.block.param``)."""
         out: list[str] = []
+        self._parameter_paths_into("", out)
+        return out
+
+    def _parameter_paths_into(self, prefix: str, out: list[str]) -> None:
+        """:meth:`parameter_paths` with ``prefix`` before each, appended to ``out`` (each path's string built
+        once, not once per level of nesting)."""
         for bname, blk in self.blocks.items():
             if isinstance(blk, Graph):
-                out += [f"{bname}.{p}" for p in blk.parameter_paths()]
+                blk._parameter_paths_into(f"{prefix}{bname}.", out)
             else:
-                out += [f"{bname}.{p}" for p in blk.parameters]
-                out += [f"{bname}.{p}" for p in getattr(blk, "value_parameters", {})]  # arrays, strings
-        return out
+                head = f"{prefix}{bname}."
+                out += [head + p for p in blk.parameters]
+                out += [head + p for p in getattr(blk, "value_parameters", {})]  # arrays, strings
 
     def find(self, path: str) -> Node | Graph:
         """The block at hierarchical path ``a.b.c``."""

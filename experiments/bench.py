@@ -122,20 +122,36 @@ def cell_sets(suite: Mapping[str, Any], controller: str, terrain: str,
     return c["scenario"], sets
 
 
-def check_cells(suite: Mapping[str, Any], sets: Mapping[str, Any] | None = None) -> bool:
+def check_cells(suite: Mapping[str, Any], sets: Mapping[str, Any] | None = None,
+                built: dict[tuple[str, str, int], Any] | None = None) -> bool:
     """Build every cell's closed loop once: a bad key fails here, before any trial, naming the cell.
-    Returns whether every cell can run in a MuJoCo batch (:func:`cpgsim.experiments.sweep.batchable`)."""
+    Returns whether every cell can run in a MuJoCo batch (:func:`cpgsim.experiments.sweep.batchable`).
+    ``built`` gets each cell's set-up (its first seed's, ``(controller, terrain, base_seed)`` ->
+    :class:`~cpgsim.experiments.setup.RunSetup`), for that trial to run instead of building it again."""
     from cpgsim.experiments.runner import build_scenario
 
     ok = True
+    seed = int(suite["base_seed"])
     for c in suite["controllers"]:
         for t in suite["terrains"]:
             base, cell = cell_sets(suite, c, t, sets)
             try:
-                ok = batchable(build_scenario(base, cell, seed=int(suite["base_seed"]))) and ok
+                setup = build_scenario(base, cell, seed=seed)
             except ModelError as exc:
                 raise ScenarioError(f"suite cell {c} x {t}: {exc}") from None
+            ok = batchable(setup) and ok
+            if built is not None:
+                built[(c, t, seed)] = setup
     return ok
+
+
+def _trial_with(built: dict[tuple[str, str, int], Any], key: tuple[str, str, int]):
+    """:func:`run_trial` running the set-up :func:`check_cells` built for trial ``key`` (if any; taken out of
+    ``built`` when the trial starts, so that a finished trial's set-up is not kept)."""
+    def trial(*args: Any, **kw: Any) -> dict[str, Any]:
+        return run_trial(*args, setup=built.pop(key, None), **kw)
+
+    return trial
 
 
 def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = None, workers: int = 2,
@@ -156,7 +172,10 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
             suite[what] = {k: v for k, v in suite[what].items() if k in chosen}
     if seeds is not None:
         suite["seeds"] = int(seeds)
-    batched = use_batch(batch, check_cells(suite, sets), serial, scheduler, None)
+    built: dict[tuple[str, str, int], Any] = {}
+    batched = use_batch(batch, check_cells(suite, sets, built), serial, scheduler, None)
+    if not serial and not batched:
+        built.clear()  # Dask: the trials run elsewhere and build their own
     out = Path(out)
     seed_list = [int(suite["base_seed"]) + i for i in range(int(suite["seeds"]))]
     tasks = []
@@ -177,11 +196,11 @@ def run_bench(suite_spec: str | Path, out: str | Path, scheduler: str | None = N
     try:
         if serial:
             for key, args in tasks:
-                records[key] = run_trial(*args, save_results=False)
+                records[key] = _trial_with(built, key)(*args, save_results=False)
                 bar.update(1)
         elif batched:  # MuJoCo: the trials' fused loops advanced together on threads (robots/mujoco_batch.py)
-            records = run_in_batch({key: (run_trial, args, {"save_results": False}) for key, args in tasks},
-                                   int(workers), bar, info)
+            records = run_in_batch({key: (_trial_with(built, key), args, {"save_results": False})
+                                    for key, args in tasks}, int(workers), bar, info)
         else:  # the same Dask path as sweeps: the trials' files come back to this machine
             records = run_on_dask(client, {key: (run_trial, args, {"save_results": False}) for key, args in tasks},
                                   bar)

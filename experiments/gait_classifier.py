@@ -84,12 +84,27 @@ def shifted_deviation(lags: Sequence[float], tpl: Sequence[float]) -> tuple[floa
 def template_deviation(lags: Sequence[float], gait: str) -> tuple[float, float]:
     """(smallest deviation from the gait's templates after the best common shift, the best offset ``c``)."""
     lam, (c_lo, c_hi) = GAITS[gait]
-    best = (math.inf, c_lo)
-    for c in np.linspace(c_lo, c_hi, 1 + int(round((c_hi - c_lo) * 1200))):
-        dev, _ = shifted_deviation(lags, template(lam, float(c)))
-        if dev < best[0]:
-            best = (dev, float(c))
-    return best
+    cs = np.linspace(c_lo, c_hi, 1 + int(round((c_hi - c_lo) * 1200)))
+    devs = _deviations(lags, lam, cs)
+    devs = np.where(np.isnan(devs), math.inf, devs)  # a NaN deviation never wins (``dev < best`` is false)
+    k = int(np.argmin(devs))  # the first smallest, as a loop keeping strict improvements finds
+    return (float(devs[k]), float(cs[k])) if devs[k] < math.inf else (math.inf, c_lo)
+
+
+def _deviations(lags: Sequence[float], lam: float, cs: np.ndarray) -> np.ndarray:
+    """:func:`shifted_deviation`'s deviation of ``lags`` from ``template(lam, c)`` for every ``c`` in ``cs`` at
+    once (one row per ``c``): the same IEEE operations element by element (the remainders, the complex
+    exponentials, each row's mean of six summed in order, the angle), so the same values as the loop over
+    ``c`` it replaced (a Fukuhara trial's gait summary ran 401 template offsets x 2 classifications in numpy
+    calls on 6 numbers: about 15 ms)."""
+    cs = np.asarray(cs, dtype=float)[:, None]
+    tpl = np.concatenate([np.zeros_like(cs) + (0.0 % 1.0), np.zeros_like(cs) + ((-lam) % 1.0),
+                          np.zeros_like(cs) + ((-2 * lam) % 1.0), cs % 1.0, (cs - lam) % 1.0,
+                          (cs - 2 * lam) % 1.0], axis=1)
+    d = (np.asarray(lags, dtype=float)[None, :] - tpl) % 1.0
+    centre = np.angle(np.exp(2j * np.pi * d).mean(axis=1)) / (2 * np.pi)
+    r = (d - centre[:, None] + 0.5) % 1.0 - 0.5
+    return (r.max(axis=1) - r.min(axis=1)) / 2
 
 
 @dataclass

@@ -43,10 +43,12 @@ def tilt_deg(res: Results, robot: str) -> np.ndarray:
         return np.degrees(np.arccos(np.clip(np.cos(rpy[:, 0]) * np.cos(rpy[:, 1]), -1.0, 1.0)))
 
 
-def fall(res: Results, robot: str, fall_tilt_deg: float = FALL_TILT_DEG) -> tuple[bool, float | None, str]:
+def fall(res: Results, robot: str, fall_tilt_deg: float = FALL_TILT_DEG,
+         tilt: np.ndarray | None = None) -> tuple[bool, float | None, str]:
     """(fell, time, reason): the first sample :func:`cpgsim.robots.description.fallen` calls a fall (the body
-    touched anything or tilted past ``fall_tilt_deg``)."""
-    tilt = tilt_deg(res, robot)
+    touched anything or tilted past ``fall_tilt_deg``); ``tilt``: :func:`tilt_deg` of the run if already
+    computed."""
+    tilt = tilt_deg(res, robot) if tilt is None else tilt
     key = f"{robot}.body_contact"
     contact = res[key].ravel() > 0.5 if key in res else np.zeros(len(tilt), bool)
     bad = fallen(tilt, contact, fall_tilt_deg)
@@ -131,13 +133,14 @@ def _stable_xy(feet: list[tuple[float, float]], cx: float, cy: float) -> bool:
     return True
 
 
-def end_state(res: Results, robot: str, window_s: float = 5.0) -> dict[str, Any]:
+def end_state(res: Results, robot: str, window_s: float = 5.0, tilt: np.ndarray | None = None) -> dict[str, Any]:
     """``end_backslide_m``, ``end_tilt_deg`` and ``end_support_share`` of the run's final window (module
-    docstring)."""
+    docstring); ``tilt``: :func:`tilt_deg` of the run if already computed."""
     t = res.time
-    y = res[f"{robot}.body_position"][:, 1]
+    body = res[f"{robot}.body_position"]
+    y = body[:, 1]
     k0 = int(np.searchsorted(t, t[-1] - window_s)) if len(t) else 0
-    tilt = tilt_deg(res, robot)
+    tilt = tilt_deg(res, robot) if tilt is None else tilt
     out: dict[str, Any] = {"end_backslide_m": float(np.max(y[k0:]) - y[-1]) if len(t) else 0.0,
                            "end_tilt_deg": float(tilt[-1]) if len(t) else math.nan, "end_support_share": None}
     feet_key, force_key = f"{robot}.foot_position", f"{robot}.toe_force"
@@ -145,7 +148,7 @@ def end_state(res: Results, robot: str, window_s: float = 5.0) -> dict[str, Any]
         k1 = int(np.searchsorted(t, t[-1] - 1.0))
         feet = res[feet_key].reshape(len(t), 6, 3)[k1:, :, :2].tolist()
         loaded = (res[force_key].reshape(len(t), 6, 3)[k1:, :, 2] > SUPPORT_FORCE_N).tolist()
-        centre = res[f"{robot}.body_position"][k1:, :2].tolist()
+        centre = body[k1:, :2].tolist()
         stable = [_stable_xy([tuple(f) for f, on in zip(fk, lk, strict=True) if on], *ck)
                   for fk, lk, ck in zip(feet, loaded, centre, strict=True)]
         out["end_support_share"] = float(np.mean(stable)) if stable else None
@@ -173,8 +176,8 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
     pos = res[f"{robot}.body_position"]
     has_waits = waiting is not None
     waiting = np.zeros(len(t), bool) if waiting is None else np.asarray(waiting, bool).reshape(len(t))
-    fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", FALL_TILT_DEG)))
-    tilt = tilt_deg(res, robot)
+    tilt = tilt_deg(res, robot)  # once for the fall, the largest tilt and the end state
+    fell, fell_t, reason = fall(res, robot, float(criteria.get("fall_tilt_deg", FALL_TILT_DEG)), tilt)
     stalled, stall_t = stall(t, pos[:, 1], waiting, float(criteria.get("stall_window_s", 5.0)),
                              float(criteria.get("stall_progress_m", 0.01)))
     duration = float(t[-1] - t[0]) if len(t) > 1 else 0.0
@@ -189,7 +192,7 @@ def evaluate(res: Results, robot: str, criteria: Mapping[str, Any], waiting: np.
         failed.append("max_tilt_deg")
     if distance < float(criteria.get("min_distance_m", 0.0)):
         failed.append("min_distance_m")
-    end = end_state(res, robot, float(criteria.get("end_window_s", 5.0)))
+    end = end_state(res, robot, float(criteria.get("end_window_s", 5.0)), tilt)
     if end["end_backslide_m"] > float(criteria.get("end_backslide_m", 0.03)):
         failed.append("end_backslide_m")
     if not end["end_tilt_deg"] <= float(criteria.get("end_tilt_deg", 15.0)):

@@ -104,7 +104,8 @@ def fell_from(res: Results, robot: str,
 def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float | None = None,
                  sets: Mapping[str, Any] | None = None, progress: bool = True, plots: bool = True,
                  step_thread: bool | None = None, save_results: bool = True, csv: bool = False,
-                 prefault: bool = True, float32_results: bool = True, **kw: Any) -> dict[str, Any]:
+                 prefault: bool = True, float32_results: bool = True, setup: RunSetup | None = None,
+                 **kw: Any) -> dict[str, Any]:
     """Run a scenario (built-in name, ``.toml`` file or :class:`Scenario`); returns the summary (also
     written to ``out_dir/summary.json``, next to the resolved ``scenario.toml``).
 
@@ -112,9 +113,12 @@ def run_scenario(name: str | Path | Scenario, out_dir: str | Path, t_end: float 
     summary and the scenario (a benchmark of hundreds of trials). The results are streamed to
     ``results.arrow`` (Arrow IPC, :mod:`cpgsim.harness.results.arrow`); ``csv=True`` also writes
     ``results.csv`` at the end; ``float32_results=False`` stores the robot's measurements as float64 too
-    (docs/results.md)."""
+    (docs/results.md). ``setup``: the :class:`RunSetup` :func:`build_scenario` returns for exactly ``name``,
+    ``sets`` and ``kw``, already built and not run (``cpgsim bench`` hands over the one its check of the cell
+    built for the first seed instead of building it again); the summary's ``timing_s["build"]`` is then 0."""
     build_wall0 = time.perf_counter()
-    setup = build_scenario(name, sets, **kw)
+    if setup is None:
+        setup = build_scenario(name, sets, **kw)
     build_wall = time.perf_counter() - build_wall0
     t_end = float(t_end if t_end is not None else setup.t_end)
     label = setup.scenario.name if setup.scenario is not None else str(name)

@@ -60,15 +60,17 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
 
 
 def run_trial(scenario: str, seed: int, sets: dict[str, Any] | None, out_dir: str,
-              t_end: float | None = None, plots: bool = False, save_results: bool = True) -> dict[str, Any]:
-    """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``."""
+              t_end: float | None = None, plots: bool = False, save_results: bool = True,
+              setup: Any = None) -> dict[str, Any]:
+    """Run one trial into ``out_dir``; never raises: failures come back as ``status = "failed"``. ``setup``: its
+    :class:`~cpgsim.experiments.setup.RunSetup` already built from these arguments (``run_scenario``)."""
     from cpgsim.experiments.runner import run_scenario
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"seed": int(seed), "dir": str(out_dir), "status": "ok", "error": None, "outcome": {}}
     try:
         summary = run_scenario(scenario, out_dir, t_end=t_end, sets=dict(sets or {}), progress=False, plots=plots,
-                               step_thread=False, save_results=save_results, seed=int(seed))
+                               step_thread=False, save_results=save_results, seed=int(seed), setup=setup)
         record["outcome"] = {k: summary[k] for k in OUTCOME_KEYS if k in summary}
     except Exception as exc:  # noqa: BLE001 - a trial must never stop the sweep
         record["status"] = "failed"

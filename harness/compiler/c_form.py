@@ -534,7 +534,7 @@ def _c_member_local_step(tag: str, f_tag: str, d_tag: str, f: Group, d: Group, d
         write[last if signals else 0] = lambda j, k=k_into: f"{k}[{j}][b]"
         read = {0: lambda j: time, 1: lambda j, x=x_from: f"{x}[{j}][b]", 2: f"(z + {member('zo', d.z_off)})",
                 4: lambda j: f"pb[{j}][b]"}
-        lines = "\n".join("    " + line for line in c_kernel.body(fn, read, write))
+        lines = "\n".join("    " + line for line in c_kernel.body(fn, read, write, lazy=False))  # SIMD blocks
         return f"    for (b = 0; b < {block}; ++b) {{\n      const long m = mb[b];\n      (void)m;\n{lines}\n    }}"
 
     def axpy(out: str, c: float, k: str) -> str:

@@ -38,23 +38,29 @@ PARTS = ["build", "compile", "plant setup", "loop", "run other", "summary", "plo
 
 
 class Timers:
-    """Accumulated wall time per part while :meth:`installed` is active."""
+    """Accumulated time per part while :meth:`installed` is active: wall time by default, or any ``clock``
+    (``benchmarks/bench_trial_cpu.py`` passes ``time.thread_time`` for CPU)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock=time.perf_counter) -> None:
         self.t: dict[str, float] = defaultdict(float)
+        self.clock = clock
+
+    def timed(self, fn, part: str):
+        """``fn`` with its time added to ``part``."""
+        t, clock = self.t, self.clock
+
+        def timed(*args, **kw):
+            t0 = clock()
+            try:
+                return fn(*args, **kw)
+            finally:
+                t[part] += clock() - t0
+
+        return timed
 
     def wrap(self, owner, name: str, part: str, stack: contextlib.ExitStack) -> None:
         orig = getattr(owner, name)
-        t = self.t
-
-        def timed(*args, **kw):
-            t0 = time.perf_counter()
-            try:
-                return orig(*args, **kw)
-            finally:
-                t[part] += time.perf_counter() - t0
-
-        setattr(owner, name, timed)
+        setattr(owner, name, self.timed(orig, part))
         stack.callback(setattr, owner, name, orig)
 
     @contextlib.contextmanager

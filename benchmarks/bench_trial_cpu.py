@@ -25,6 +25,8 @@ import time
 from collections import defaultdict
 from collections.abc import Iterator
 
+from bench_short_run import Timers  # noqa: E402 - a sibling script (benchmarks/ is this script's path)
+
 from cpgsim.experiments import bench, runner
 from cpgsim.harness import simulate
 from cpgsim.harness.cosim import fused
@@ -36,28 +38,11 @@ SETS = {"robot.engine": "mujoco"}
 PARTS = ["build", "compile", "plant setup", "loop", "sim.run", "summarize", "extra", "judge", "total"]
 
 
-class CpuTimers:
+class CpuTimers(Timers):
     """CPU time of this thread per part while :meth:`installed` is active."""
 
     def __init__(self) -> None:
-        self.t: dict[str, float] = defaultdict(float)
-
-    def _timed(self, fn, part: str):
-        t = self.t
-
-        def timed(*args, **kw):
-            t0 = time.thread_time()
-            try:
-                return fn(*args, **kw)
-            finally:
-                t[part] += time.thread_time() - t0
-
-        return timed
-
-    def wrap(self, owner, name: str, part: str, stack: contextlib.ExitStack) -> None:
-        orig = getattr(owner, name)
-        setattr(owner, name, self._timed(orig, part))
-        stack.callback(setattr, owner, name, orig)
+        super().__init__(clock=time.thread_time)
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[None]:
@@ -67,10 +52,10 @@ class CpuTimers:
             def built(*args, **kw):
                 setup = build(*args, **kw)
                 if setup.extra is not None:
-                    setup.extra = self._timed(setup.extra, "extra")
+                    setup.extra = self.timed(setup.extra, "extra")
                 return setup
 
-            runner.build_scenario = self._timed(built, "build")
+            runner.build_scenario = self.timed(built, "build")
             stack.callback(setattr, runner, "build_scenario", build)
             self.wrap(simulate.Simulator, "__init__", "compile", stack)
             self.wrap(simulate.Simulator, "prepare", "compile", stack)

@@ -210,6 +210,16 @@ def numerics_grid(engines: tuple[str, ...] = ("dart", "mujoco")) -> Iterator[dic
             yield from ({"engine": "mujoco", "step": 1e-3, "solref": SOLREFS[0], "solver": s} for s in SOLVERS)
 
 
+def step_axis(ax: Any, right: float = 1.3) -> None:
+    """A plot's x axis as the plant's step: log scale, ticks at the studied 0.25 / 0.5 / 1 ms, no minor labels."""
+    from matplotlib.ticker import NullFormatter
+
+    ax.set_xscale("log")
+    ax.set_xticks([0.25, 0.5, 1.0], ["0.25", "0.5", "1"])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_xlim(0.2, right)
+
+
 def plot_elevator(rows: list[dict[str, Any]], path: str) -> None:
     """Each right leg's first elevator against the plant's step, one panel per leg: the collision peak (filled)
     and the trigger force (open) of DART and of MuJoCo with its 5 ms contact as lines, MuJoCo's 2 ms contact's
@@ -220,7 +230,6 @@ def plot_elevator(rows: list[dict[str, Any]], path: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
 
     from cpgsim.experiments.yu.scenarios import YU_HIT_PEAKS_N
 
@@ -263,10 +272,7 @@ def plot_elevator(rows: list[dict[str, Any]], path: str) -> None:
             ax.plot(*zip(*broken, strict=True), "o", ms=14, mfc="none", mec="red", ls="none",
                     label="run not R1, R2, R3 in order")
         ax.axhline(YU_HIT_PEAKS_N[leg], color="k", ls=":", label="Yu 2019 Fig. 14c")
-        ax.set_xscale("log")
-        ax.set_xticks([0.25, 0.5, 1.0], ["0.25", "0.5", "1"])
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlim(0.2, 1.3)
+        step_axis(ax)
         ax.set_ylim(0, 95)
         ax.set_xlabel("plant step (ms)")
         ax.set_title(f"leg {leg} (R{leg - 3}): first elevator")
@@ -294,7 +300,6 @@ def plot_gaits(rows: list[dict[str, Any]], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    from matplotlib.ticker import NullFormatter
 
     from cpgsim.experiments.gait_classifier import TOLERANCE
 
@@ -339,10 +344,7 @@ def plot_gaits(rows: list[dict[str, Any]], path: str) -> None:
             bottom.set_ylabel(f"deviation from {name}")
             bottom.set_ylim(0, max(0.16, max((r.get(key) or 0) for r in mine) * 1.1))
         for ax in (top, bottom):
-            ax.set_xscale("log")
-            ax.set_xticks([0.25, 0.5, 1.0], ["0.25", "0.5", "1"])
-            ax.xaxis.set_minor_formatter(NullFormatter())
-            ax.set_xlim(0.2, 1.25)
+            step_axis(ax, right=1.25)
             ax.grid(alpha=0.3)
         bottom.set_xlabel("plant step (ms)")
     axes[0][0].legend(title="leg (line style: engine)", fontsize=8, loc="best")
@@ -364,7 +366,6 @@ def plot_amputation(rows: list[dict[str, Any]], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    from matplotlib.ticker import NullFormatter
 
     rows = [r for r in rows if not r.get("error") and r.get("solver") != "capped"]
 
@@ -388,10 +389,7 @@ def plot_amputation(rows: list[dict[str, Any]], path: str) -> None:
                 label="other contacts, tight solver, detectors")
         if key == "no_progress_s":
             ax.axhline(5.0, color="r", lw=1, label="scenario's stall criterion (5 s)")
-        ax.set_xscale("log")
-        ax.set_xticks([0.25, 0.5, 1.0], ["0.25", "0.5", "1"])
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlim(0.2, 1.3)
+        step_axis(ax)
         ax.set_ylim(bottom=0)
         ax.set_xlabel("plant step (ms)")
         ax.set_ylabel(label)

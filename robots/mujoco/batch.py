@@ -8,7 +8,7 @@ when the master reaches the fused loop (:mod:`cpgsim.harness.cosim.fused`,
 instead of being run by the trial's own thread. The serving thread collects the chunks and advances them all
 in one ``cpgsim_mj_batch`` call: ``threads`` POSIX threads (default: the CPUs this process may use), each
 taking whole trials, each trial its own ``mjData`` and controller context, all running the very loop
-``cpgsim_mj_loop`` runs (``trial_loop`` in ``robots/mujoco/c/mujoco_loop.c``). The call releases
+a trial alone runs (``trial_loop`` in ``robots/mujoco/c/mujoco_loop.c``). The call releases
 the GIL, so the other trials' Python (setup, recording their last chunk, outcomes) goes on meanwhile.
 
 Between calls each trial records, streams and checks its chunk on its own thread, as alone; a trial whose
@@ -37,7 +37,7 @@ WAIT_S = 0.002
 """How long a round waits for trials that have not handed in their chunk yet (busy in Python)."""
 
 BATCH_CHUNK = 500
-"""Macro steps per chunk of a trial in a batch (a trial alone: ``harness/cosim/fused.py:CHUNK``, 100). Between
+"""Macro steps per chunk of a trial in a batch (a MuJoCo trial alone: ``native.CHUNK``, also 500). Between
 two rounds every trial records its chunk and hands in the next under the one GIL while the C threads wait;
 5x longer chunks make those hand-overs 5x fewer (the numbers do not depend on the chunk: the C loop keeps its
 state between chunks)."""

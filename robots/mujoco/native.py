@@ -51,14 +51,13 @@ SOURCE = c_source(__package__, "c/mujoco_loop.c")
 
 _vp, _int, _ip = ctypes.c_void_p, ctypes.c_int, ctypes.POINTER(ctypes.c_int)
 _dp, _lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)
-_LOOP_ARGS = [_vp, _vp, _int, _ip, _dp, _dp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _vp, _vp, _dp, _dp, _dp,
-              _dp, _int, _lp, _int, _lp, _dp, _dp, _int, _int, _dp, _ip]
+_TRIAL_ARGS = [_vp, _vp, _int, _ip, _dp, _dp, _vp, _vp, _int, _int, _dp, _dp, _int, _lp, _lp, _vp, _vp, _dp, _dp, _dp,
+               _dp, _int, _lp, _int, _lp, _dp, _dp]
 
 PROTOTYPES: Prototypes = {
     "cpgsim_mj_run": (_int, [_vp, _vp, _int, _ip, _dp, _dp, _dp, _int, _int, ctypes.c_double]),
     "cpgsim_mj_settle": (None, [_vp, _vp, _int, _ip, _dp, _dp]),
-    "cpgsim_mj_loop": (_int, _LOOP_ARGS),
-    "cpgsim_mj_trial_new": (_vp, _LOOP_ARGS[:27]),
+    "cpgsim_mj_trial_new": (_vp, _TRIAL_ARGS),
     "cpgsim_mj_trial_range": (None, [_vp, _int, _int, _dp]),
     "cpgsim_mj_trial_result": (_int, [_vp, _ip]),
     "cpgsim_mj_trial_free": (None, [_vp]),
@@ -138,7 +137,7 @@ class NativeMujocoStep:
 
     @property
     def library(self) -> ctypes.CDLL:
-        """The compiled library (``cpgsim_mj_loop`` and the batch's trial functions)."""
+        """The compiled library (the fused loop's trial functions, ``cpgsim_mj_batch``)."""
         return self._lib
 
     @property
@@ -169,8 +168,7 @@ def push_table(pushes) -> np.ndarray:
 
 class FusedLoop(FusedLoopBase):
     """The controller's bound compiled step and the plant in one C loop (``trial_loop`` in ``mujoco_loop.c``: the
-    loop's arguments kept in a C trial, ``cpgsim_mj_trial_step`` per chunk; ``cpgsim_mj_loop`` is the same loop
-    in one call).
+    loop's arguments kept in a C trial, ``cpgsim_mj_trial_step`` per chunk).
 
     Built by :meth:`cpgsim.robots.mujoco.plant.MujocoHexapod.fused_loop`; a
     :class:`~cpgsim.harness.cosim.fused.FusedLoopBase` (``run(k0, k1, times)`` returns ``(rows, status, Y, O)``; the

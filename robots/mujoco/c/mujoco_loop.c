@@ -48,7 +48,7 @@ typedef struct {
    (the plant was not stepped); EVALUATION_ERROR (the controller step failed: row not recorded; or the
    readout failed: row recorded); PLANT_DIVERGED: MuJoCo's state went non-finite or out of range in the
    sub-steps after the last recorded row (mj_step warns and resets its data then; the readout is not updated).
-   The one loop both entry points run: cpgsim_mj_loop (one trial) and cpgsim_mj_batch (many, threads). */
+   The one loop both entry points run: cpgsim_mj_trial_step (one trial) and cpgsim_mj_batch (many, threads). */
 
 static void trial_loop(cpgsim_mj_trial *t) {
   const mjModel *m = t->m;
@@ -87,21 +87,9 @@ static void trial_loop(cpgsim_mj_trial *t) {
   t->rows = t->k1 - k0;
 }
 
-int cpgsim_mj_loop(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
-                   void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
-                   int nmap, const long long *u_idx, const long long *o_idx,
-                   void *feval, void *rctx, double *rpos, double *rvel, double *rcontact, const double *O, int nO,
-                   const long long *qt_idx, int npick, const long long *yi, double *Yrec, double *Orec,
-                   int k0, int k1, const double *times, int *status) {
-  cpgsim_mj_trial t = {m, d, nsub, codes, force, flags, step_commit, sctx, nx, nz, u, y, nmap, u_idx, o_idx,
-                       feval, rctx, rpos, rvel, rcontact, O, nO, qt_idx, npick, yi, Yrec, Orec, k0, k1, times, 0, 0};
-  trial_loop(&t);
-  *status = t.status;
-  return t.rows;
-}
-
-/* A trial for cpgsim_mj_batch: the arguments of cpgsim_mj_loop up to Orec, kept (malloc'd; free with
-   cpgsim_mj_trial_free). cpgsim_mj_trial_range sets the chunk; cpgsim_mj_trial_result reads rows/status. */
+/* A trial: the loop's arguments up to Orec, kept (malloc'd; free with cpgsim_mj_trial_free). Alone,
+   cpgsim_mj_trial_step runs a chunk; in a batch, cpgsim_mj_trial_range sets the chunk, cpgsim_mj_batch runs it and
+   cpgsim_mj_trial_result reads rows/status. */
 void *cpgsim_mj_trial_new(const mjModel *m, mjData *d, int nsub, const int *codes, double *force, double *flags,
                           void *step_commit, void *sctx, int nx, int nz, double *u, const double *y,
                           int nmap, const long long *u_idx, const long long *o_idx,

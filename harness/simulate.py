@@ -313,6 +313,9 @@ class Simulator:
         keep: set[int] = set()
         for path, blk in self._cosim_blocks.items():
             for port in blk.float32_outputs:
+                if port not in blk.outputs:
+                    raise ModelError(f"block {path!r}: float32_outputs names {port!r}, which is not one of its "
+                                     f"outputs ({', '.join(blk.outputs) or 'none'})")
                 keep.update(j for j, _ in port_columns(columns, f"{path}.{port}"))
         return [columns[j] for j in sorted(keep)]
 

@@ -225,3 +225,31 @@ def test_a_run_whose_float32_output_leaves_float32s_range_stops_with_its_results
     kept = Results.load(tmp_path / "r.arrow")  # every whole second before it, marked incomplete
     assert not kept.complete and "beyond float32's range" in kept.message
     assert kept.time[-1] == pytest.approx(1.0) and kept["b.y"][-1] == pytest.approx(1.0)
+
+
+def test_float32_outputs_naming_no_output_is_an_error_naming_block_and_port(tmp_path):
+    from cpgsim.components.core import CoSimBlock, ModelError
+    from cpgsim.components.graph import Graph
+    from cpgsim.harness.simulate import Simulator
+
+    class Typo(CoSimBlock):
+        float32_outputs = frozenset({"yy"})
+
+        def declare(self) -> None:
+            self.add_output("y", 1, "m")
+
+        def get_outputs(self) -> dict:
+            return {"y": np.zeros(1)}
+
+        def set_inputs(self, values) -> None:
+            pass
+
+        def do_step(self, t: float, dt: float) -> None:
+            pass
+
+    g = Graph("g")
+    g.add(Typo("b"))
+    with pytest.raises(ModelError, match=r"block 'b': float32_outputs names 'yy', which is not one of its "
+                                         r"outputs \(y\)"):
+        Simulator(g, dt=0.1).run(0.3, stream=tmp_path / "r.arrow", progress=False)
+    assert not (tmp_path / "r.arrow").exists()  # refused before the stream opened
